@@ -1,0 +1,37 @@
+"""The interface every backend (mekf, smoother, single) implements.
+
+A backend consumes IMU samples and per-frame visual rotations in time order and returns one
+`Estimate` per frame. It also predicts `R_cm` for the next frame, which initialises the solver
+(paper Sec. 3.2: "the latest frame's rotation initialises the next frame").
+
+Relations used throughout: `R_wc = R_wm @ R_cm^T` and so `R_cm = R_wc^T @ R_wm`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from ..types import Estimate, VisualRotation
+
+
+class Backend(ABC):
+    """Streaming attitude estimator. Calls come in non-decreasing time order."""
+
+    name: str = "backend"
+
+    def process_imu(self, t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> None:
+        """Feed IMU samples: `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3) in the IMU frame.
+
+        Backends without IMU support ignore them.
+        """
+
+    @abstractmethod
+    def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
+        """Fuse one frame's visual rotation (None when the frame gave none) and return the estimate
+        at `t_s`."""
+
+    @abstractmethod
+    def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
+        """Best guess of `R_cm` at `t_s` to initialise the solver; None before any estimate."""

@@ -1,0 +1,8 @@
+"""Command-line interface: `uareme-fusion COMMAND ...` (see `uareme-fusion --help`)."""
+
+from .app import app, main
+
+# Each import registers its commands on `app`.
+from . import solve_cmd  # noqa: E402,F401
+
+__all__ = ["app", "main"]

@@ -1,0 +1,1 @@
+"""`uareme-fusion solve FILE`: bring your own normals (filled in below)."""

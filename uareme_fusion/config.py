@@ -1,0 +1,72 @@
+"""Loading YAML presets into pydantic models, with errors that name the file and the key.
+
+Each component owns its pydantic model (e.g. `MekfConfig` in `backends/mekf.py`); this module only
+reads files. Presets live in `configs/` (installed as `uareme_fusion.configs`) and are found by
+name: `load_config("vehicle", MekfConfig)` or by path: `load_config("my.yaml", MekfConfig)`.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+from typing import TypeVar
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from .errors import ConfigError
+
+ModelT = TypeVar("ModelT", bound=BaseModel)
+
+
+def preset_names() -> list[str]:
+    """Names of the YAML presets shipped with the package."""
+    return sorted(p.name[:-5] for p in resources.files("uareme_fusion.configs").iterdir() if p.name.endswith(".yaml"))
+
+
+def read_yaml(name_or_path: str | Path) -> tuple[dict, str]:
+    """The mapping in a preset (by name) or a YAML file (by path), and where it came from."""
+    path = Path(name_or_path)
+    if path.suffix.lower() not in (".yaml", ".yml") and not path.exists():
+        preset = resources.files("uareme_fusion.configs") / f"{name_or_path}.yaml"
+        if not preset.is_file():
+            raise ConfigError(f"Unknown preset '{name_or_path}'; presets are: {', '.join(preset_names())}")
+        text, where = preset.read_text(), f"preset '{name_or_path}'"
+    else:
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise ConfigError(f"Cannot read config file {path}: {exc.strerror or exc}") from None
+        where = str(path)
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{where} is not valid YAML: {exc}") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where} must hold a mapping of keys to values, got {type(data).__name__}")
+    return data, where
+
+
+def validate_config(data: dict, model: type[ModelT], where: str = "config") -> ModelT:
+    """`model(**data)` with pydantic's errors turned into one ConfigError naming each bad key."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in err['loc']) or '(top level)'}: {err['msg']}" for err in exc.errors()
+        )
+        raise ConfigError(f"{where}: {problems}") from None
+
+
+def load_config(name_or_path: str | Path, model: type[ModelT], section: str | None = None) -> ModelT:
+    """Read a preset or file and validate it (or its `section`, when given) against `model`.
+
+    Models should set `model_config = ConfigDict(extra="forbid")` so unknown keys are errors.
+    """
+    data, where = read_yaml(name_or_path)
+    if section is not None:
+        data = data.get(section, {}) or {}
+        where = f"{where} [{section}]"
+    return validate_config(data, model, where)

@@ -1,0 +1,141 @@
+"""Rotation helpers on top of scipy's `Rotation`.
+
+Conventions (see DESIGN.md):
+- `R_ab` maps coordinates in frame b to frame a: `v_a = R_ab @ v_b`.
+- Perturbations are on the right: `R = R_hat @ Exp(delta)`; a covariance is that of `delta` (rad^2).
+- Every function accepts a single (3, 3) matrix or a stack (..., 3, 3) where it says so.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+WORLD_UP = np.array([0.0, 0.0, 1.0])
+"""The world frame's up direction (z up; gravity is -9.81 m/s^2 along it)."""
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix: `skew(a) @ b == np.cross(a, b)`. Works on (..., 3)."""
+    v = np.asarray(v, dtype=float)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+def exp_so3(phi: np.ndarray) -> np.ndarray:
+    """Exp: rotation vector (..., 3) in rad to rotation matrix (..., 3, 3)."""
+    return Rotation.from_rotvec(np.asarray(phi, dtype=float)).as_matrix()
+
+
+def log_so3(R: np.ndarray) -> np.ndarray:
+    """Log: rotation matrix (..., 3, 3) to rotation vector (..., 3) in rad, angle in [0, pi]."""
+    return Rotation.from_matrix(np.asarray(R, dtype=float)).as_rotvec()
+
+
+def angle_between(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
+    """Geodesic angle (rad) of `R_a^T R_b`, stack-wise; numerically safe near 0 and pi."""
+    R_a, R_b = np.asarray(R_a, float), np.asarray(R_b, float)
+    tr = np.einsum("...ji,...ji->...", R_a, R_b)  # trace(R_a^T R_b)
+    return np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
+
+
+def project_to_so3(M: np.ndarray) -> np.ndarray:
+    """Nearest rotation matrix (Frobenius) to a 3x3 matrix or stack of them, via SVD."""
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=float))
+    d = np.sign(np.linalg.det(U @ Vt))
+    D = np.ones(U.shape[:-2] + (3,))
+    D[..., 2] = d
+    return (U * D[..., None, :]) @ Vt
+
+
+@lru_cache(maxsize=1)
+def _symmetry_group() -> np.ndarray:
+    group = np.rint(Rotation.create_group("O").as_matrix())
+    # Put the identity first so that index 0 means "no relabelling".
+    order = np.argsort(-np.einsum("gii->g", group), kind="stable")
+    group = group[order]
+    group.setflags(write=False)
+    return group
+
+
+def manhattan_symmetries() -> np.ndarray:
+    """The 24 signed permutation matrices with det +1, shape (24, 3, 3); index 0 is identity.
+
+    `R_cm` and `R_cm @ P` describe the same Manhattan scene for each P of this group.
+    """
+    return _symmetry_group()
+
+
+def nearest_symmetric(R_cm: np.ndarray, R_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The symmetric equivalent `R_cm @ P` closest to `R_ref` (geodesic distance).
+
+    Returns `(R_cm @ P, P)`. Works on a single (3, 3) pair or stacks (..., 3, 3).
+    """
+    R_cm, R_ref = np.asarray(R_cm, float), np.asarray(R_ref, float)
+    G = manhattan_symmetries()
+    # trace(R_ref^T R_cm P) for every P; the largest trace is the smallest angle.
+    A = np.swapaxes(R_ref, -1, -2) @ R_cm  # (..., 3, 3)
+    traces = np.einsum("...ij,gji->...g", A, G)
+    P = G[np.argmax(traces, axis=-1)]
+    return R_cm @ P, P
+
+
+def align_constant(R_est: np.ndarray, R_gt: np.ndarray) -> np.ndarray:
+    """Constant rotation `A` minimising sum_i ||R_gt_i - A @ R_est_i||_F^2 (chordal least squares).
+
+    Both inputs are stacks (N, 3, 3) of `R_wc`; `A` maps the estimate's world to the true world.
+    """
+    M = np.einsum("nij,nkj->ik", np.asarray(R_gt, float), np.asarray(R_est, float))
+    return project_to_so3(M)
+
+
+def are_deg(R_est: np.ndarray, R_gt: np.ndarray, align: bool = True) -> np.ndarray:
+    """Absolute rotation error per frame in degrees, after one constant alignment (paper's ARE).
+
+    `R_est`, `R_gt`: (N, 3, 3) camera-to-world rotations `R_wc`. With `align=False` the frames are
+    compared as they are.
+    """
+    R_est, R_gt = np.asarray(R_est, float), np.asarray(R_gt, float)
+    if align:
+        R_est = align_constant(R_est, R_gt) @ R_est
+    return np.degrees(angle_between(R_gt, R_est))
+
+
+def up_in_camera(R_wc: np.ndarray) -> np.ndarray:
+    """World up expressed in the camera frame, `up_c = R_wc^T @ [0, 0, 1]`; (..., 3, 3) -> (..., 3)."""
+    return np.swapaxes(np.asarray(R_wc, float), -1, -2) @ WORLD_UP
+
+
+def tilt_error_deg(up_est_c: np.ndarray, up_true_c: np.ndarray) -> np.ndarray:
+    """Angle in degrees between estimated and true up vectors in the camera frame, (..., 3)."""
+    a = np.asarray(up_est_c, float)
+    b = np.asarray(up_true_c, float)
+    cos = np.sum(a * b, axis=-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def nees(R_est: np.ndarray, R_true: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Normalised estimation error squared of a rotation estimate, stack-wise.
+
+    `delta = Log(R_est^T R_true)` is the error in the right-perturbation convention
+    `R_true = R_est @ Exp(delta)`, and `cov` (..., 3, 3) is its covariance in rad^2.
+    A consistent estimator averages 3.
+    """
+    delta = log_so3(np.swapaxes(np.asarray(R_est, float), -1, -2) @ np.asarray(R_true, float))
+    sol = np.linalg.solve(np.asarray(cov, float), delta[..., None])[..., 0]
+    return np.sum(delta * sol, axis=-1)
+
+
+def quat_xyzw(R: np.ndarray) -> np.ndarray:
+    """Rotation matrix (..., 3, 3) to unit quaternion (..., 4), order x y z w, w >= 0."""
+    return Rotation.from_matrix(np.asarray(R, float)).as_quat(canonical=True)
+
+
+def matrix_from_quat_xyzw(q: np.ndarray) -> np.ndarray:
+    """Unit quaternion (..., 4) in order x y z w to rotation matrix (..., 3, 3)."""
+    return Rotation.from_quat(np.asarray(q, float)).as_matrix()

@@ -1,0 +1,127 @@
+"""Typed values that cross stage boundaries (see DESIGN.md "Data flow").
+
+Conventions: camera frame `c` is OpenCV (x right, y down, z forward); world `w` is z up; `m` is the
+Manhattan frame. `R_ab` maps b-coordinates to a-coordinates. Covariances are of the right
+perturbation `delta` in `R = R_hat @ Exp(delta)`, in rad^2. Times are float seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .rotations import nearest_symmetric, up_in_camera
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One camera image. `rgb` (H, W, 3) uint8 in RGB order; `depth` (H, W) float32 metres with 0 or
+    NaN where missing; `K` (3, 3) intrinsics in pixels, None when unknown."""
+
+    t: float
+    rgb: np.ndarray | None = None
+    depth: np.ndarray | None = None
+    K: np.ndarray | None = None
+    index: int = -1
+
+
+@dataclass(frozen=True)
+class ImuSample:
+    """One IMU reading in the IMU frame `i`: gyro in rad/s, specific force in m/s^2 (an accelerometer
+    at rest reads +9.81 along up)."""
+
+    t: float
+    gyro_rad_s: np.ndarray
+    accel_m_s2: np.ndarray
+
+
+@dataclass(frozen=True)
+class NormalMap:
+    """Per-pixel unit normals (H, W, 3) in the camera frame and confidence kappa (H, W) >= 0
+    (0 means "ignore this pixel")."""
+
+    normals: np.ndarray
+    kappa: np.ndarray
+    t: float = float("nan")
+
+
+@dataclass(frozen=True)
+class VisualRotation:
+    """The Manhattan solver's answer for one normal map.
+
+    `R_cm` maps Manhattan coordinates to camera coordinates; its columns are the scene's three axes
+    seen from the camera. `cov` (3, 3, rad^2) is the covariance of `delta` in
+    `R_cm_true = R_cm @ Exp(delta)`: absolute and calibrated, usable by a filter as it is.
+    """
+
+    R_cm: np.ndarray
+    cov: np.ndarray
+    cost: float
+    """Weighted mean cost sum_i w_i (1 - sum_k (n_i . r_k)^4) / sum_i w_i, in [0, 1]; 0 is a perfect
+    Manhattan map, 0.4 is what isotropic random normals give."""
+    iterations: int
+    n_valid: int
+    n_invalid: int = 0
+    quality: float = 0.0
+    """1 - cost / 0.4, clipped to [0, 1]: how Manhattan the view looks."""
+    converged: bool = True
+    t: float = float("nan")
+    timing_ms: dict = field(default_factory=dict)
+
+    def symmetric_to(self, R_cm_ref: np.ndarray) -> "VisualRotation":
+        """The same measurement expressed with the Manhattan labelling nearest `R_cm_ref`.
+
+        The covariance is rotated with it: `delta' = P^T delta` for `R_cm' = R_cm @ P`.
+        """
+        R_new, P = nearest_symmetric(self.R_cm, R_cm_ref)
+        return dataclasses.replace(self, R_cm=R_new, cov=P.T @ self.cov @ P)
+
+
+class Status(enum.IntFlag):
+    """Why an estimate is what it is; several flags may be set at once."""
+
+    OK = 0
+    ACCEL_DOWNWEIGHTED = enum.auto()
+    """The accelerometer disagreed with gravity and was trusted less."""
+    VISUAL_REJECTED = enum.auto()
+    """The visual rotation failed the Mahalanobis gate."""
+    VISUAL_MISSING = enum.auto()
+    """No usable visual rotation for this frame (dropped, blank, no valid normals)."""
+    REINITIALISED = enum.auto()
+    """The Manhattan frame was re-initialised after persistent disagreement."""
+    IMU_GAP = enum.auto()
+    """A gap in IMU data longer than the configured limit; the covariance was inflated instead."""
+    GYRO_SATURATED = enum.auto()
+    """A gyro reading at or above the configured range."""
+    IMU_DROPPED = enum.auto()
+    """Non-finite or out-of-order IMU samples were dropped."""
+    NOT_INITIALISED = enum.auto()
+    """The filter has not seen enough data to know its attitude."""
+    OPTIMISER_FAILED = enum.auto()
+    """A smoother optimisation failed; the window restarted from the last good estimate."""
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A backend's output at time `t`.
+
+    `R_wc` maps camera coordinates to the world (z up); `cov` (3, 3, rad^2) is the covariance of the
+    right perturbation of `R_wc`. `up_c` is world up in the camera frame. `R_wm` is the Manhattan
+    frame's attitude in the world and `gyro_bias_rad_s` the estimated gyro bias, when the backend has
+    them.
+    """
+
+    t: float
+    R_wc: np.ndarray
+    cov: np.ndarray
+    status: Status = Status.OK
+    R_wm: np.ndarray | None = None
+    gyro_bias_rad_s: np.ndarray | None = None
+
+    @property
+    def up_c(self) -> np.ndarray:
+        return up_in_camera(self.R_wc)
+
