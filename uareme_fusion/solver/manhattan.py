@@ -183,3 +183,18 @@ def solve_manhattan(normals, kappa=None, R_init=None, config: SolverConfig | Non
     """
     solver = _DEFAULT_SOLVER if config is None else ManhattanSolver(config)
     return solver.solve_arrays(normals, kappa, R_init)
+
+
+IMAGE_UP_C = np.array([0.0, -1.0, 0.0])
+"""Up in an upright OpenCV camera (y points down)."""
+
+
+def up_candidate(R_cm: np.ndarray, up_hint_c: np.ndarray = IMAGE_UP_C) -> tuple[int, np.ndarray]:
+    """The signed Manhattan axis (a column of `R_cm`, camera frame) nearest `up_hint_c`.
+
+    Without gravity this is the best guess of "up": by default the axis nearest image up.
+    Returns `(column index, unit vector in the camera frame)`.
+    """
+    dots = np.asarray(R_cm, float).T @ np.asarray(up_hint_c, float)
+    k = int(np.argmax(np.abs(dots)))
+    return k, np.sign(dots[k]) * np.asarray(R_cm, float)[:, k]
