@@ -1,0 +1,375 @@
+"""GTSAM sliding-window smoother: the paper's multi-frame factor graph (Sec. 3.2) and a gyro-aided mode.
+
+Variables. One `Rot3` per frame, `X(k) = R_wc` at frame k (camera to world, z up in gyro mode).
+The paper writes its graph over the single-frame rotations; with `R_wc = R_wm @ R_cm^T` and an
+isotropic smoothness noise the two parametrisations give exactly the same cost (the prior residual
+changes by a rotation, `Log(Z^-1 R)` for `R_wc` equals `-R_cm Log(R_cm_meas^T R_cm)`, and its
+covariance is rotated with it). `R_wc` is chosen because gyro preintegration (`AHRSFactor`) and the
+gravity factor (`AttitudeFactorRot3`) are written for a body-to-navigation rotation.
+
+GTSAM's `Rot3` tangent convention is the project's: `retract(R, xi) = R @ Exp(xi)` (right
+perturbation; checked in tests/test_smoother.py), and `Marginals.marginalCovariance(X(k))` is the
+covariance of that `xi` in rad^2. So the `Estimate.cov` returned here is the right-perturbation
+covariance of `R_wc`, as DESIGN.md requires.
+
+Paper mode (`mode: paper`), exactly the paper's graph: `BatchFixedLagSmoother` over the last
+`window_frames` frames; per frame a `PriorFactorRot3` on `X(k)` at `R_cm^T` with the visual
+covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`huber_k`) kernel (paper eq. 7, f^z); an
+identity `BetweenFactorRot3` with isotropic `between_sigma_rad` between consecutive frames (f^s); the
+oldest frame's marginal prior (f^p) is what the fixed-lag smoother leaves when it marginalises.
+The world is the Manhattan frame as labelled on the first frame: `R_wm = I`.
+
+Gyro-aided mode (`mode: gyro`): the between factors are `AHRSFactor`s from gyro preintegration
+(`PreintegratedAhrsMeasurements`) with one gyro-bias variable `B(k)` per frame linked by a random
+walk; an `AttitudeFactorRot3` per frame from the mean accelerometer direction since the previous
+frame, with a noise inflated by how far |a| is from gravity and how much it varied. The world is
+gravity aligned, so `R_wm` is no longer the identity: it is a variable `M` kept in the window
+(its timestamp is refreshed every frame), and each visual rotation enters as a
+`BetweenFactorRot3(M, X(k), R_cm^T)` (the measurement `R_mc = R_wm^T R_wc`). `R_wm` gets a prior at
+the identity that pins the world's yaw (a gauge: world x is the Manhattan x axis) and lets its tilt
+move by `manhattan_tilt_sigma_rad` (in a building the Manhattan axis nearest up is vertical). On the
+first frame the visual rotation is relabelled so that its z axis is the Manhattan axis nearest the
+measured up. The Manhattan frame is constant (a building), not a vehicle.
+
+Frames without a visual rotation add no prior; the graph carries on along the between factors. An
+optimiser failure (a GTSAM exception or a non-finite result) is logged with the frame time and the
+window restarts from the last good estimate (`Status.OPTIMISER_FAILED`).
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import B, M, X
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from ..errors import InputError
+from ..rotations import WORLD_UP, manhattan_symmetries
+from ..types import Estimate, Status, VisualRotation
+from .base import Backend
+
+try:  # BatchFixedLagSmoother moved from gtsam_unstable into gtsam in 4.3/5.0.
+    from gtsam import BatchFixedLagSmoother
+except ImportError:  # pragma: no cover - depends on the installed gtsam
+    from gtsam_unstable import BatchFixedLagSmoother
+
+log = logging.getLogger(__name__)
+
+MANHATTAN_KEY = M(0)
+
+
+class SmootherMode(str, enum.Enum):
+    """Which between-frame and gravity factors the graph uses."""
+
+    PAPER = "paper"
+    """Identity between factors, no IMU, `R_wm = I` (the paper's graph)."""
+    GYRO = "gyro"
+    """Gyro preintegration between frames, accelerometer gravity factors, gravity-aligned world."""
+
+
+class SmootherConfig(BaseModel):
+    """Parameters of `Smoother`; defaults are the paper's values (configs/paper.yaml, section `smoother`)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    mode: SmootherMode = SmootherMode.PAPER
+    window_frames: int = Field(30, ge=2)
+    """Frames kept in the sliding window (the paper's n)."""
+    huber_k: float | None = Field(0.1, gt=0)
+    """Huber threshold on the whitened visual residual; None for a plain Gaussian prior."""
+    between_sigma_rad: float = Field(0.1, gt=0)
+    """Isotropic sigma of the identity smoothness factor (paper's lambda = sigma^2)."""
+    missing_variance_rad2: float = Field(1.0, gt=0)
+    """Variance reported per axis before the first visual rotation."""
+    # Gyro-aided mode.
+    gyro_noise_rad_s_sqrt_hz: float = Field(2e-3, gt=0)
+    """Gyro white-noise density (continuous time)."""
+    gyro_bias_walk_rad_s2_sqrt_hz: float = Field(1e-4, gt=0)
+    """Gyro bias random-walk density."""
+    gyro_bias_prior_sigma_rad_s: float = Field(0.02, gt=0)
+    """Prior sigma of the gyro bias on the first frame."""
+    accel_sigma_rad: float = Field(0.03, gt=0)
+    """Sigma of the gravity direction from the mean accelerometer reading when the camera is still."""
+    accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0)
+    """Added to `accel_sigma_rad` per m/s^2 of | |a_mean| - g | plus the RMS spread of the samples."""
+    gravity_huber_k: float | None = Field(1.345, gt=0)
+    """Huber threshold on the whitened gravity residual; None for Gaussian."""
+    gravity_m_s2: float = Field(9.81, gt=0)
+    manhattan_tilt_sigma_rad: float = Field(0.02, gt=0)
+    """Prior sigma of the Manhattan frame's tilt away from vertical (gyro mode)."""
+    world_yaw_sigma_rad: float = Field(1e-3, gt=0)
+    """Prior sigma fixing the world's yaw (a gauge) through `R_wm` (gyro mode)."""
+    R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
+    """Camera-from-IMU rotation (3x3): `gyro_c = R_ci @ gyro_i`."""
+
+    @field_validator("R_ci")
+    @classmethod
+    def _check_rotation(cls, value):
+        R = np.asarray(value, dtype=float)
+        if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) <= 0:
+            raise ValueError("R_ci must be a 3x3 rotation matrix (orthonormal rows, det +1)")
+        return value
+
+
+class OptimiserFailure(RuntimeError):
+    """The smoother's optimisation raised or returned a non-finite estimate."""
+
+
+def _robust(kernel_k: float | None, base: gtsam.noiseModel.Base) -> gtsam.noiseModel.Base:
+    if kernel_k is None:
+        return base
+    return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(kernel_k), base)
+
+
+def visual_R_wc_covariance(visual: VisualRotation) -> np.ndarray:
+    """Covariance (rad^2) of the right perturbation of `R_mc = R_cm^T` given `visual.cov` of `R_cm`.
+
+    `(R_cm Exp(d))^T = R_cm^T Exp(-R_cm d)`, so the right error of `R_mc` (and of `R_wc = R_wm R_mc`)
+    is `-R_cm d` with covariance `R_cm cov R_cm^T`.
+    """
+    cov = visual.R_cm @ visual.cov @ visual.R_cm.T
+    return 0.5 * (cov + cov.T)
+
+
+def label_up_as_z(R_cm: np.ndarray, up_c: np.ndarray) -> np.ndarray:
+    """The symmetric relabelling `R_cm @ P` whose Manhattan z axis is nearest `up_c` (camera frame)."""
+    candidates = R_cm @ manhattan_symmetries()  # (24, 3, 3)
+    # Manhattan z in the camera is column 2; among the ties, keep the one closest to R_cm itself.
+    score = candidates[:, :, 2] @ up_c + 1e-6 * np.einsum("ij,gij->g", R_cm, candidates)
+    return candidates[int(np.argmax(score))]
+
+
+class Smoother(Backend):
+    """Sliding-window factor-graph smoother over camera attitudes (see module docstring).
+
+    Estimates carry `R_wc` (camera to world) and the smoother's marginal covariance of its right
+    perturbation (rad^2); `R_wm` is the identity in paper mode and estimated in gyro mode.
+    """
+
+    def __init__(self, config: SmootherConfig | None = None):
+        self.config = config or SmootherConfig()
+        self.name = "smoother" if self.config.mode is SmootherMode.PAPER else "smoother-gyro"
+        self._gyro = self.config.mode is SmootherMode.GYRO
+        self._R_ci = np.asarray(self.config.R_ci, dtype=float)
+        self._between_noise = gtsam.noiseModel.Isotropic.Sigma(3, self.config.between_sigma_rad)
+        self._pim_params = gtsam.PreintegratedRotationParams()
+        self._pim_params.setGyroscopeCovariance(self.config.gyro_noise_rad_s_sqrt_hz**2 * np.eye(3))
+        self._smoother: BatchFixedLagSmoother | None = None
+        self._k = -1  # index of the latest frame in the graph
+        self._t_frame = float("nan")
+        self._last: Estimate | None = None  # last successfully optimised estimate
+        self._R_wm = np.eye(3)
+        self._bias = np.zeros(3)
+        self._t_imu: float | None = None
+        self._dropped_imu = 0
+        self._reset_interval()
+
+    # ----------------------------------------------------------------------------- IMU
+    def _reset_interval(self) -> None:
+        self._pim = gtsam.PreintegratedAhrsMeasurements(self._pim_params, self._bias)
+        self._accel_c: list[np.ndarray] = []
+
+    def process_imu(self, t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> None:
+        """Preintegrate gyro samples and collect accelerometer samples (gyro mode; ignored in paper mode).
+
+        `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3) in the IMU frame, rotated to the camera
+        by `R_ci`. Non-finite or out-of-order samples are dropped and counted (`Status.IMU_DROPPED`).
+        """
+        if not self._gyro:
+            return
+        t_s = np.atleast_1d(np.asarray(t_s, dtype=float))
+        gyro = np.atleast_2d(np.asarray(gyro_rad_s, dtype=float))
+        accel = np.atleast_2d(np.asarray(accel_m_s2, dtype=float))
+        if t_s.ndim != 1 or gyro.shape != (len(t_s), 3) or accel.shape != (len(t_s), 3):
+            raise InputError(
+                f"Expected IMU arrays t_s (N,), gyro_rad_s (N, 3), accel_m_s2 (N, 3), got "
+                f"{t_s.shape}, {gyro.shape}, {accel.shape}"
+            )
+        finite = np.isfinite(t_s) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1)
+        gyro_c, accel_c = gyro @ self._R_ci.T, accel @ self._R_ci.T
+        for t, w_c, a_c, ok in zip(t_s, gyro_c, accel_c, finite):
+            if not ok or (self._t_imu is not None and t <= self._t_imu):
+                self._dropped_imu += 1
+                continue
+            if self._t_imu is not None:
+                self._pim.integrateMeasurement(w_c, t - self._t_imu)
+            self._t_imu = t
+            self._accel_c.append(a_c)
+
+    def _gravity_factor(self, key: int) -> gtsam.NonlinearFactor | None:
+        """Paper-free addition: accelerometer up direction since the last frame, noise inflated by motion."""
+        if not self._accel_c:
+            return None
+        accel = np.asarray(self._accel_c)
+        mean = accel.mean(axis=0)
+        norm = np.linalg.norm(mean)
+        if norm < 1e-6:
+            return None
+        spread = np.sqrt(np.mean(np.sum((accel - mean) ** 2, axis=1)))
+        cfg = self.config
+        sigma = cfg.accel_sigma_rad + cfg.accel_inflation_rad_per_m_s2 * (abs(norm - cfg.gravity_m_s2) + spread)
+        noise = _robust(cfg.gravity_huber_k, gtsam.noiseModel.Isotropic.Sigma(2, sigma))
+        # Error: up_w (x) R_wc @ up_c, with up_c the measured specific-force direction.
+        return gtsam.AttitudeFactorRot3(key, gtsam.Unit3(WORLD_UP), noise, gtsam.Unit3(mean / norm))
+
+    # ----------------------------------------------------------------------------- frames
+    def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
+        """`R_cm` of the latest estimate (paper: it initialises the next frame's solver); in gyro mode
+        propagated by the gyro preintegrated since that frame. None before the first visual rotation."""
+        if self._last is None:
+            return None
+        return self._predicted_R_wc().T @ self._R_wm
+
+    def _predicted_R_wc(self) -> np.ndarray:
+        R_wc = self._last.R_wc
+        if self._gyro and self._pim.deltaTij() > 0:
+            R_wc = R_wc @ self._pim.deltaRij().matrix()
+        return R_wc
+
+    def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
+        """Add frame `t_s` (its visual rotation, or None) to the window, optimise, and return the
+        estimate of `R_wc` with its marginal covariance (right perturbation, rad^2)."""
+        status = Status.OK if visual is not None else Status.VISUAL_MISSING
+        if self._dropped_imu:
+            status |= Status.IMU_DROPPED
+            self._dropped_imu = 0
+        if self._last is None:
+            if visual is None:
+                self._reset_interval()
+                return Estimate(t_s, np.eye(3), self.config.missing_variance_rad2 * np.eye(3),
+                                status | Status.NOT_INITIALISED)
+            return self._start_window(t_s, visual, status)
+
+        k = self._k + 1
+        graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
+        R_wc_pred = self._predicted_R_wc()
+        try:
+            if visual is not None:
+                visual = visual.symmetric_to(R_wc_pred.T @ self._R_wm)
+                graph.add(self._visual_factor(k, visual))
+            self._add_motion_factors(graph, values, stamps, k, t_s)
+            values.insert(X(k), gtsam.Rot3(R_wc_pred))
+            stamps[X(k)] = float(k)
+            if self._gyro:
+                stamps[MANHATTAN_KEY] = float(k)  # keep R_wm inside the window
+            self._optimise(graph, values, stamps)
+            self._k, self._t_frame = k, t_s
+            est = self._estimate(t_s, status)
+        except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
+            log.warning("smoother optimisation failed at t=%.6f s (%s); window restarted from the last "
+                        "good estimate", t_s, exc)
+            est = self._restart_window(t_s, k, R_wc_pred, status | Status.OPTIMISER_FAILED)
+        self._reset_interval()
+        self._last = est
+        return est
+
+    def _visual_factor(self, k: int, visual: VisualRotation) -> gtsam.NonlinearFactor:
+        """f^z of paper eq. 7: the single-frame rotation as a robust prior on X(k) (or relative to M)."""
+        R_mc = gtsam.Rot3(visual.R_cm.T)
+        noise = _robust(self.config.huber_k, gtsam.noiseModel.Gaussian.Covariance(visual_R_wc_covariance(visual)))
+        if self._gyro:
+            return gtsam.BetweenFactorRot3(MANHATTAN_KEY, X(k), R_mc, noise)
+        return gtsam.PriorFactorRot3(X(k), R_mc, noise)
+
+    def _add_motion_factors(self, graph, values, stamps, k: int, t_s: float) -> None:
+        """f^s of paper eq. 7 (identity between, isotropic sigma), or gyro preintegration + gravity."""
+        if not self._gyro:
+            graph.add(gtsam.BetweenFactorRot3(X(k - 1), X(k), gtsam.Rot3(), self._between_noise))
+            return
+        if self._pim.deltaTij() > 0:
+            graph.add(gtsam.AHRSFactor(X(k - 1), X(k), B(k - 1), self._pim))
+        else:  # no gyro sample between the frames: fall back to the paper's smoothness factor
+            graph.add(gtsam.BetweenFactorRot3(X(k - 1), X(k), gtsam.Rot3(), self._between_noise))
+        dt = max(t_s - self._t_frame, 1e-3)
+        walk = gtsam.noiseModel.Isotropic.Sigma(3, self.config.gyro_bias_walk_rad_s2_sqrt_hz * np.sqrt(dt))
+        graph.add(gtsam.BetweenFactorVector(B(k - 1), B(k), np.zeros(3), walk))
+        values.insert(B(k), self._bias)
+        stamps[B(k)] = float(k)
+        gravity = self._gravity_factor(X(k))
+        if gravity is not None:
+            graph.add(gravity)
+
+    def _new_smoother(self) -> BatchFixedLagSmoother:
+        # Timestamps are frame indices; keys older than k - lag are marginalised, so lag = window - 1.
+        return BatchFixedLagSmoother(float(self.config.window_frames - 1), gtsam.LevenbergMarquardtParams())
+
+    def _start_window(self, t_s: float, visual: VisualRotation, status: Status) -> Estimate:
+        """First visual rotation: X(0) (and M, B(0) in gyro mode) with their priors."""
+        self._smoother = self._new_smoother()
+        graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
+        if self._gyro:
+            if self._accel_c:
+                up_c = np.mean(self._accel_c, axis=0)
+                visual = visual.symmetric_to(label_up_as_z(visual.R_cm, up_c / np.linalg.norm(up_c)))
+            self._add_world_priors(graph, values, stamps, 0, np.eye(3), self._bias,
+                                   self.config.gyro_bias_prior_sigma_rad_s**2 * np.eye(3))
+            gravity = self._gravity_factor(X(0))
+            if gravity is not None:
+                graph.add(gravity)
+        graph.add(self._visual_factor(0, visual))
+        values.insert(X(0), gtsam.Rot3(self._R_wm @ visual.R_cm.T))
+        stamps[X(0)] = 0.0
+        self._smoother.update(graph, values, stamps)
+        self._k, self._t_frame = 0, t_s
+        est = self._estimate(t_s, status)
+        self._reset_interval()
+        self._last = est
+        return est
+
+    def _add_world_priors(self, graph, values, stamps, k: int, R_wm: np.ndarray, bias: np.ndarray,
+                          bias_cov: np.ndarray) -> None:
+        """Gyro mode: R_wm (gauge on yaw, loose tilt) and the gyro bias B(k)."""
+        cfg = self.config
+        sig = [cfg.manhattan_tilt_sigma_rad, cfg.manhattan_tilt_sigma_rad, cfg.world_yaw_sigma_rad]
+        graph.add(gtsam.PriorFactorRot3(MANHATTAN_KEY, gtsam.Rot3(R_wm), gtsam.noiseModel.Diagonal.Sigmas(sig)))
+        graph.add(gtsam.PriorFactorVector(B(k), bias, gtsam.noiseModel.Gaussian.Covariance(bias_cov)))
+        values.insert(MANHATTAN_KEY, gtsam.Rot3(R_wm))
+        values.insert(B(k), bias)
+        stamps[MANHATTAN_KEY] = float(k)
+        stamps[B(k)] = float(k)
+
+    def _restart_window(self, t_s: float, k: int, R_wc_pred: np.ndarray, status: Status) -> Estimate:
+        """After a failure: a fresh window holding X(k) at the last good estimate (propagated by the
+        gyro in gyro mode) with its covariance; this frame's measurements are dropped."""
+        last = self._last
+        cov = last.cov + self.config.between_sigma_rad**2 * np.eye(3)
+        self._smoother = self._new_smoother()
+        graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
+        graph.add(gtsam.PriorFactorRot3(X(k), gtsam.Rot3(R_wc_pred), gtsam.noiseModel.Gaussian.Covariance(cov)))
+        values.insert(X(k), gtsam.Rot3(R_wc_pred))
+        stamps[X(k)] = float(k)
+        if self._gyro:
+            self._add_world_priors(graph, values, stamps, k, self._R_wm, self._bias,
+                                   self.config.gyro_bias_prior_sigma_rad_s**2 * np.eye(3))
+        try:
+            self._smoother.update(graph, values, stamps)
+            self._k, self._t_frame = k, t_s
+            return self._estimate(t_s, status)
+        except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:  # pragma: no cover - defensive
+            log.error("smoother restart failed at t=%.6f s (%s); holding the last estimate", t_s, exc)
+            self._smoother, self._last = None, None
+            return Estimate(t_s, R_wc_pred, cov, status | Status.NOT_INITIALISED, R_wm=self._R_wm)
+
+    def _optimise(self, graph, values, stamps) -> None:
+        self._smoother.update(graph, values, stamps)
+
+    def _estimate(self, t_s: float, status: Status) -> Estimate:
+        """Latest frame's `R_wc` and its marginal covariance (right perturbation, rad^2)."""
+        values = self._smoother.calculateEstimate()
+        R_wc = values.atRot3(X(self._k)).matrix()
+        cov = gtsam.Marginals(self._smoother.getFactors(), values).marginalCovariance(X(self._k))
+        if self._gyro:
+            R_wm = values.atRot3(MANHATTAN_KEY).matrix()
+            bias = np.asarray(values.atVector(B(self._k)), dtype=float)
+        else:
+            R_wm, bias = np.eye(3), None
+        if not (np.all(np.isfinite(R_wc)) and np.all(np.isfinite(cov)) and np.all(np.isfinite(R_wm))):
+            raise OptimiserFailure("non-finite estimate")
+        self._R_wm = R_wm
+        if bias is not None:
+            self._bias = bias
+        return Estimate(t_s, R_wc, 0.5 * (cov + cov.T), status, R_wm=R_wm.copy(),
+                        gyro_bias_rad_s=None if bias is None else bias.copy())
