@@ -38,10 +38,9 @@ def log_so3(R: np.ndarray) -> np.ndarray:
 
 
 def angle_between(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
-    """Geodesic angle (rad) of `R_a^T R_b`, stack-wise; numerically safe near 0 and pi."""
-    R_a, R_b = np.asarray(R_a, float), np.asarray(R_b, float)
-    tr = np.einsum("...ji,...ji->...", R_a, R_b)  # trace(R_a^T R_b)
-    return np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
+    """Geodesic angle (rad) of `R_a^T R_b`, stack-wise; accurate near 0 (unlike the trace formula)."""
+    R_rel = np.swapaxes(np.asarray(R_a, float), -1, -2) @ np.asarray(R_b, float)
+    return np.linalg.norm(log_so3(R_rel), axis=-1)
 
 
 def project_to_so3(M: np.ndarray) -> np.ndarray:

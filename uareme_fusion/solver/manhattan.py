@@ -40,7 +40,7 @@ class SolverConfig:
     independent_regions: float = 120.0
     """Effective number of independent pixels in a fully valid map: normal errors are spatially
     correlated, so the covariance shrinks with this rather than with the pixel count."""
-    covariance_scale: float = 1.0
+    covariance_scale: float = 0.85
     """Fitted so that NEES averages 3 on synthetic maps with correlated noise (tools/calibrate_solver.py)."""
     min_std_rad: float = 1e-4
     max_variance_rad2: float = 1.0

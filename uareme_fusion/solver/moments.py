@@ -101,6 +101,7 @@ def normal_moments(normals, kappa=None) -> NormalMoments:
         np.divide(1.0 if k is None else k, weight, out=weight)
         valid = np.isfinite(weight)
         valid &= sq_norm > _MIN_SQUARED_NORM
+        valid &= np.isfinite(sq_norm)
         valid &= weight >= 0
     n_invalid = valid.size - int(np.count_nonzero(valid))
     if n_invalid:
