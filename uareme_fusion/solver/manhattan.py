@@ -32,7 +32,7 @@ class SolverConfig:
     """Parameters of `ManhattanSolver` (units in the names)."""
 
     max_iterations: int = 50
-    step_tolerance_rad: float = 1e-10
+    step_tolerance_rad: float = 1e-8
     global_candidates: int = 400
     """Rotations tried inside one of the 24 symmetric cells of SO(3) when no prior is given."""
     global_refinements: int = 3
@@ -76,10 +76,9 @@ class ManhattanSolver:
                 f"{moments.n_invalid + moments.n_valid} pixels are NaN, zero-length, or have kappa <= 0"
             )
         if R_init is None:
-            R_cm, iterations = self._solve_global(moments)
+            R_cm, iterations, converged = self._solve_global(moments)
         else:
-            R0 = _check_rotation(R_init)
-            R_cm, iterations, _ = self._refine(moments, R0)
+            R_cm, iterations, _, converged = self._refine(moments, _check_rotation(R_init))
         cost = float(normalised_cost(moments.G, moments.total_weight, R_cm))
         cov = self._covariance(moments, R_cm, cost, n_pixels=moments.n_valid + moments.n_invalid)
         t2 = time.perf_counter()
@@ -91,12 +90,12 @@ class ManhattanSolver:
             n_valid=moments.n_valid,
             n_invalid=moments.n_invalid,
             quality=float(np.clip(1.0 - cost / RANDOM_NORMALS_COST, 0.0, 1.0)),
-            converged=iterations < self.config.max_iterations,
+            converged=converged,
             t=t,
             timing_ms={"moments": 1e3 * (t1 - t0), "optimise": 1e3 * (t2 - t1)},
         )
 
-    def _solve_global(self, moments: NormalMoments) -> tuple[np.ndarray, int]:
+    def _solve_global(self, moments: NormalMoments) -> tuple[np.ndarray, int, bool]:
         """No identity assumption: score rotations over one symmetric cell, refine the best few."""
         cfg = self.config
         candidates = _cell_candidates(cfg.global_candidates)
@@ -104,14 +103,14 @@ class ManhattanSolver:
         best = None
         total_iterations = 0
         for i in np.argsort(costs)[: cfg.global_refinements]:
-            R, iterations, cost = self._refine(moments, candidates[i])
+            R, iterations, cost, converged = self._refine(moments, candidates[i])
             total_iterations += iterations
             if best is None or cost < best[1]:
-                best = (R, cost)
+                best = (R, cost, converged)
         R_cm, _ = nearest_symmetric(best[0], R_CM_UPRIGHT)
-        return R_cm, total_iterations
+        return R_cm, total_iterations, best[2]
 
-    def _refine(self, moments: NormalMoments, R0: np.ndarray) -> tuple[np.ndarray, int, float]:
+    def _refine(self, moments: NormalMoments, R0: np.ndarray) -> tuple[np.ndarray, int, float, bool]:
         """Levenberg-Marquardt on SO(3) with right increments; each iteration is O(1) in pixels."""
         cfg = self.config
         G, W, T = moments.G, moments.total_weight, moments.tensor()
@@ -127,17 +126,18 @@ class ManhattanSolver:
             mu = max(damping, 1e-9 - eig_min)
             step = np.linalg.solve(hess + mu * np.eye(3), -grad)
             R_new = R @ exp_so3(step)
+            if np.linalg.norm(step) < cfg.step_tolerance_rad:
+                # Converged: below this the cost change is under double precision anyway.
+                return R_new, iterations, float(normalised_cost(G, W, R_new)), True
             cost_new = float(normalised_cost(G, W, R_new))
             if cost_new <= cost:
                 R, cost = R_new, cost_new
                 damping = max(damping / 4.0, 1e-9)
-                if np.linalg.norm(step) < cfg.step_tolerance_rad:
-                    break
             else:
                 damping = mu * 8.0
                 if damping > 1e8:
                     break
-        return R, iterations, cost
+        return R, iterations, cost, False
 
     def _covariance(self, moments: NormalMoments, R_cm: np.ndarray, cost: float, n_pixels: int) -> np.ndarray:
         """Absolute covariance of delta: scale * residual / N_eff * H^-1, eigenvalues capped.

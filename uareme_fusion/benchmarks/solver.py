@@ -1,0 +1,48 @@
+"""Speed of the Manhattan solver (issue 2: <= 3 ms median for 640x480 on one core).
+
+The reference is the authors' released solver: about 55 ms for one 640x480 map on one CPU thread.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from ..rotations import exp_so3
+from ..sim.normal_maps import manhattan_normal_map
+from ..solver import ManhattanSolver
+from ..solver.moments import normal_moments
+from .common import pin_to_one_core, summary, time_ms
+
+AUTHORS_SOLVER_MS = 55.0
+
+
+def run(repeats: int = 100, sizes: tuple[tuple[int, int], ...] = ((640, 480), (320, 240)), console: Console | None = None) -> dict:
+    """Time moments and optimisation per map size; returns the figures and prints a table."""
+    console = console or Console()
+    note = pin_to_one_core()
+    solver = ManhattanSolver()
+    rng = np.random.default_rng(0)
+    R_true = exp_so3([0.3, -0.2, 0.4])
+    results = {}
+    table = Table(title=f"Manhattan solver, one core ({note}), ms over {repeats} runs")
+    for col in ("map", "stage", "median ms", "p90 ms", "vs authors' 55 ms"):
+        table.add_column(col)
+    for width, height in sizes:
+        nm = manhattan_normal_map(R_true, rng, height=height, width=width, noise_deg=8.0, correlation_px=4.0)
+        R_prior = R_true @ exp_so3([0.03, -0.02, 0.04])  # the previous frame's estimate
+        stages = {
+            "moments": time_ms(lambda: normal_moments(nm.normals, nm.kappa), repeats),
+            "solve, prior given (total)": time_ms(lambda: solver.solve(nm, R_init=R_prior), repeats),
+            "solve, global init (total)": time_ms(lambda: solver.solve(nm), max(repeats // 4, 5)),
+        }
+        stages["optimisation, prior given"] = stages["solve, prior given (total)"] - np.median(stages["moments"])
+        for stage, values in stages.items():
+            med = float(np.median(values))
+            results[f"{width}x{height} {stage}"] = {"median_ms": med, "p90_ms": float(np.percentile(values, 90))}
+            table.add_row(f"{width}x{height}", stage, f"{med:.3f}", f"{np.percentile(values, 90):.3f}",
+                          f"{AUTHORS_SOLVER_MS / med:.0f}x faster" if "total" in stage else "")
+            console.log(f"{width}x{height} {stage}: {summary(values)}")
+    console.print(table)
+    return results
