@@ -73,13 +73,13 @@ class ManhattanSolver:
         if moments.n_valid == 0 or not moments.total_weight > 0:
             raise InputError(
                 f"No valid normals in a map of shape {np.shape(normals)}: all "
-                f"{moments.n_invalid + moments.n_valid} pixels are NaN, zero-length, or have kappa <= 0"
+                f"{int(np.prod(np.shape(normals)[:-1]))} pixels are NaN, zero-length, or have kappa <= 0"
             )
         if R_init is None:
             R_cm, iterations, converged = self._solve_global(moments)
         else:
             R_cm, iterations, _, converged = self._refine(moments, _check_rotation(R_init))
-        cost = float(normalised_cost(moments.G, moments.total_weight, R_cm))
+        cost = float(np.clip(normalised_cost(moments.G, moments.total_weight, R_cm), 0.0, 1.0))
         cov = self._covariance(moments, R_cm, cost, n_pixels=moments.n_valid + moments.n_invalid)
         t2 = time.perf_counter()
         return VisualRotation(

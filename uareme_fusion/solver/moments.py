@@ -97,8 +97,8 @@ def normal_moments(normals, kappa=None) -> NormalMoments:
     sq_norm += Q[2]
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # w_i / |n_i|^4 turns the monomials of n_i into those of the unit normal.
-        weight = np.square(sq_norm)
-        np.divide(1.0 if k is None else k, weight, out=weight)
+        weight = np.divide(1.0 if k is None else k, sq_norm)
+        weight /= sq_norm  # two divisions: |n|^4 itself would overflow float32 for |n| > 1e9
         valid = np.isfinite(weight)
         valid &= sq_norm > _MIN_SQUARED_NORM
         valid &= np.isfinite(sq_norm)
