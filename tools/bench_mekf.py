@@ -1,0 +1,240 @@
+"""Benchmark of the multiplicative EKF (issue 5): accuracy, consistency and cost, peers in the same run.
+
+    python tools/bench_mekf.py [--seeds 5] [--quick]
+
+Prints, per scenario, absolute figures:
+- bus (camera fixed in a city bus): fused tilt error p95 / max (deg) over 5 seeds, beside vqf 6D,
+  imufusion and ahrs Madgwick / Mahony run on the same IMU data;
+- handheld walk in a room with 20 % dropped frames (visual=None): max and mean ARE (deg) of mekf
+  and of the `single` backend;
+- mean NEES of the fused attitude (after one constant alignment of the world) on those runs;
+- BROAD (IMU-only, movement samples): inclination RMSE of mekf and vqf 6D per trial and their ratio;
+- cost: us per IMU sample (IMU-only on BROAD, and amortised in the fused runs) and ms per visual
+  update (the filter only, not the solver). Timings are medians of repeated runs on a shared machine.
+
+Visual rotations come from the real solver on synthetic normal maps:
+`solve_manhattan(manhattan_normal_map(R_cm_true, rng, 120, 160, noise_deg, correlation_px), R_init=
+backend.predicted_R_cm(t))`, so their covariance is the solver's own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from uareme_fusion.backends.mekf import Mekf, MekfConfig
+from uareme_fusion.backends.single import SingleFrame
+from uareme_fusion.config import load_config
+from uareme_fusion.rotations import are_deg, align_constant, nees, tilt_error_deg, up_in_camera
+from uareme_fusion.sim.imu import simulate_imu
+from uareme_fusion.sim.normal_maps import manhattan_normal_map
+from uareme_fusion.sim.trajectory import make_trajectory
+from uareme_fusion.solver import solve_manhattan
+
+BROAD_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "broad_subset"
+VISUAL_NOISE_DEG = 8.0
+VISUAL_CORRELATION_PX = 4.0
+
+
+@dataclass
+class RunResult:
+    """Per-frame arrays of one simulated run: `R_wc_est`/`R_wc_true` (N, 3, 3), `cov` (N, 3, 3)."""
+
+    t_s: np.ndarray
+    R_wc_est: np.ndarray
+    R_wc_true: np.ndarray
+    cov: np.ndarray
+    status: list = field(default_factory=list)
+    imu: tuple = ()
+    imu_time_s: float = 0.0
+    visual_time_s: float = 0.0
+    n_visual: int = 0
+
+    @property
+    def tilt_deg(self) -> np.ndarray:
+        return tilt_error_deg(up_in_camera(self.R_wc_est), up_in_camera(self.R_wc_true))
+
+    @property
+    def are_deg(self) -> np.ndarray:
+        return are_deg(self.R_wc_est, self.R_wc_true)
+
+    def nees(self) -> np.ndarray:
+        """NEES after aligning the estimate's world (yaw gauge) to the truth with one rotation."""
+        A = align_constant(self.R_wc_est, self.R_wc_true)
+        return nees(A @ self.R_wc_est, self.R_wc_true, self.cov)
+
+
+def run_scenario(
+    trajectory: str,
+    seed: int,
+    duration_s: float,
+    backend_factory,
+    fps: float = 30.0,
+    imu_rate_hz: float = 200.0,
+    drop_fraction: float = 0.0,
+    use_imu: bool = True,
+) -> RunResult:
+    """Simulate a trajectory, its IMU and per-frame solver outputs, and run one backend on it."""
+    traj = make_trajectory(trajectory, duration_s=duration_s, seed=seed)
+    t_imu, gyro, accel = simulate_imu(traj, rate_hz=imu_rate_hz, seed=seed + 1000)
+    rng = np.random.default_rng(seed + 2000)
+    t_frames = np.arange(0.1, duration_s - 1e-6, 1.0 / fps)
+    R_wc_true = traj.sample(t_frames).R_wc
+    R_cm_true = np.swapaxes(R_wc_true, -1, -2) @ traj.R_wm(t_frames)
+    dropped = rng.random(t_frames.size) < drop_fraction
+    backend = backend_factory()
+    est_R, est_cov, status = [], [], []
+    imu_time = visual_time = 0.0
+    n_visual = 0
+    k = 0
+    for i, t in enumerate(t_frames):
+        k_next = int(np.searchsorted(t_imu, t, side="right"))
+        if use_imu and k_next > k:
+            t0 = time.perf_counter()
+            backend.process_imu(t_imu[k:k_next], gyro[k:k_next], accel[k:k_next])
+            backend.propagate_to(t) if hasattr(backend, "propagate_to") else None
+            imu_time += time.perf_counter() - t0
+        k = k_next
+        visual = None
+        if not dropped[i]:
+            normal_map = manhattan_normal_map(R_cm_true[i], rng, 120, 160, noise_deg=VISUAL_NOISE_DEG,
+                                              correlation_px=VISUAL_CORRELATION_PX)
+            visual = solve_manhattan(normal_map.normals, normal_map.kappa, R_init=backend.predicted_R_cm(t))
+            n_visual += 1
+        t0 = time.perf_counter()
+        est = backend.process_frame(t, visual)
+        visual_time += time.perf_counter() - t0
+        est_R.append(est.R_wc)
+        est_cov.append(est.cov)
+        status.append(est.status)
+    return RunResult(t_frames, np.array(est_R), R_wc_true, np.array(est_cov), status,
+                     (t_imu, gyro, accel, traj), imu_time, visual_time, n_visual)
+
+
+def mekf_factory(preset: str, **overrides):
+    config = load_config(preset, MekfConfig).model_copy(update=overrides)
+    return lambda: Mekf(config)
+
+
+def peer_tilt_errors(t_imu, gyro, accel, traj, rate_hz: float) -> dict[str, np.ndarray]:
+    """Tilt error (deg) per IMU sample of IMU-only peers (IMU frame = camera frame here)."""
+    import ahrs
+    import imufusion
+    from vqf import VQF
+
+    up_true = up_in_camera(traj.sample(t_imu).R_wc)
+    out = {}
+    quat_wxyz = VQF(1.0 / rate_hz).updateBatch(np.ascontiguousarray(gyro), np.ascontiguousarray(accel))["quat6D"]
+    out["vqf 6D"] = quat_wxyz
+    out["madgwick"] = ahrs.filters.Madgwick(gyr=gyro, acc=accel, frequency=rate_hz).Q
+    out["mahony"] = ahrs.filters.Mahony(gyr=gyro, acc=accel, frequency=rate_hz).Q
+    fusion = imufusion.Ahrs()
+    settings = imufusion.AhrsSettings()
+    settings.sample_rate = int(rate_hz)
+    fusion.settings = settings
+    q = np.empty((t_imu.size, 4))
+    for i in range(t_imu.size):
+        fusion.update_no_magnetometer(gyro[i], accel[i], 1.0 / rate_hz)
+        w = fusion.quaternion
+        q[i] = (w.w, w.x, w.y, w.z)
+    out["imufusion"] = q
+    errors = {}
+    for name, q in out.items():
+        R_wi = Rotation.from_quat(q, scalar_first=True).as_matrix()
+        errors[name] = tilt_error_deg(up_in_camera(R_wi), up_true)
+    return errors
+
+
+def read_broad_trial(path: Path):
+    from uareme_fusion.drivers.broad import read_broad
+
+    return read_broad(path)
+
+
+def broad_inclination(trial, config: MekfConfig) -> tuple[float, float, float]:
+    """(mekf RMSE deg, vqf 6D RMSE deg, mekf us/sample) of inclination over the movement samples."""
+    from vqf import VQF
+
+    filt = Mekf(config.model_copy(update={"mode": "imu_only", "record_imu_estimates": True}))
+    t0 = time.perf_counter()
+    filt.process_imu(trial.t_s, trial.gyro_rad_s, trial.accel_m_s2)
+    filt.flush()
+    us = 1e6 * (time.perf_counter() - t0) / trial.t_s.size
+    t_rec, R_rec = filt.imu_trajectory()
+    idx = np.searchsorted(trial.t_s, t_rec)
+    R_ref = trial.R_ref_imu
+    ok = trial.movement[idx] & np.all(np.isfinite(R_ref[idx]), axis=(1, 2))
+    err_mekf = tilt_error_deg(up_in_camera(R_rec[ok]), up_in_camera(R_ref[idx][ok]))
+    q = VQF(1.0 / trial.sampling_rate_hz).updateBatch(
+        np.ascontiguousarray(trial.gyro_rad_s), np.ascontiguousarray(trial.accel_m_s2))["quat6D"]
+    R_vqf = Rotation.from_quat(q, scalar_first=True).as_matrix()
+    ok_v = trial.movement & np.all(np.isfinite(R_ref), axis=(1, 2))
+    err_vqf = tilt_error_deg(up_in_camera(R_vqf[ok_v]), up_in_camera(R_ref[ok_v]))
+    rmse = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
+    return rmse(err_mekf), rmse(err_vqf), us
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--quick", action="store_true", help="shorter runs (not the reported figures)")
+    args = parser.parse_args()
+    seeds = range(args.seeds)
+    bus_s, room_s = (40.0, 20.0) if args.quick else (90.0, 40.0)
+    nees_all, imu_us, vis_ms = [], [], []
+
+    print(f"== bus ({bus_s:.0f} s, 15 fps, IMU 200 Hz), tilt error deg ==")
+    peers: dict[str, list] = {}
+    fused = []
+    for seed in seeds:
+        res = run_scenario("bus", seed, bus_s, mekf_factory("vehicle"), fps=15.0)
+        fused.append(res.tilt_deg)
+        nees_all.append(res.nees())
+        imu_us.append(1e6 * res.imu_time_s / res.imu[0].size)
+        vis_ms.append(1e3 * res.visual_time_s / max(res.n_visual, 1))
+        e = res.tilt_deg
+        print(f"  seed {seed}: mekf p95 {np.percentile(e, 95):.2f} max {e.max():.2f} mean NEES {res.nees().mean():.2f}")
+        for name, err in peer_tilt_errors(*res.imu[:3], res.imu[3], 200.0).items():
+            peers.setdefault(name, []).append(err)
+    e = np.concatenate(fused)
+    print(f"  mekf (fused)  p95 {np.percentile(e, 95):6.2f}  max {e.max():6.2f}   [goal p95 <= 1.0, max <= 2.0]")
+    for name, errs in peers.items():
+        e = np.concatenate(errs)
+        print(f"  {name:13s} p95 {np.percentile(e, 95):6.2f}  max {e.max():6.2f}")
+
+    print(f"== handheld walk in a room ({room_s:.0f} s, 30 fps, 20 % frames dropped), ARE deg ==")
+    for seed in seeds:
+        res = run_scenario("walk", seed, room_s, mekf_factory("handheld"), drop_fraction=0.2)
+        single = run_scenario("walk", seed, room_s, SingleFrame, drop_fraction=0.2, use_imu=False)
+        nees_all.append(res.nees())
+        imu_us.append(1e6 * res.imu_time_s / res.imu[0].size)
+        vis_ms.append(1e3 * res.visual_time_s / max(res.n_visual, 1))
+        a, b = res.are_deg, single.are_deg
+        print(f"  seed {seed}: mekf max {a.max():5.2f} mean {a.mean():5.3f} | single max {b.max():6.2f} "
+              f"mean {b.mean():5.3f} | NEES {res.nees().mean():.2f}   [goal max <= 10, mean <= single]")
+
+    n = np.concatenate(nees_all)
+    print(f"== consistency: mean NEES {n.mean():.2f} over {n.size} frames [goal 1.5 .. 6]")
+
+    if BROAD_DIR.is_dir():
+        print("== BROAD IMU-only, inclination RMSE deg over movement samples [goal mekf <= 1.2 x vqf] ==")
+        config = load_config("handheld", MekfConfig)
+        for path in sorted(BROAD_DIR.glob("*.hdf5")):
+            trial = read_broad_trial(path)
+            mekf_rmse, vqf_rmse, us = broad_inclination(trial, config)
+            imu_us.append(us)
+            print(f"  {path.stem:36s} mekf {mekf_rmse:5.2f}  vqf6D {vqf_rmse:5.2f}  ratio {mekf_rmse / vqf_rmse:4.2f}"
+                  f"  ({us:.1f} us/sample)")
+    else:
+        print(f"== BROAD skipped: {BROAD_DIR} not found ==")
+    print(f"== cost (median over runs, shared 2-core machine): {np.median(imu_us):.1f} us per IMU sample "
+          f"[goal <= 15], {np.median(vis_ms):.3f} ms per frame update incl. propagation [goal <= 0.3] ==")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,552 @@
+"""Multiplicative (error-state) EKF fusing visual Manhattan rotations with a gyro and accelerometer.
+
+See DESIGN.md "Backends: mekf". Conventions:
+- Nominal state: `R_wc` (camera to world, world z up), gyro bias `b_c` (rad/s, held in the camera
+  frame, reported in the IMU frame), the Manhattan frame's attitude `R_wm`, and (visual-only mode)
+  the camera's angular rate `omega_c` (rad/s, camera frame).
+- Error state (12,): `[dtheta_c, db_c, dtheta_m, domega_c]` with RIGHT perturbations,
+  `R_wc = R_wc_hat @ Exp(dtheta_c)`, `R_wm = R_wm_hat @ Exp(dtheta_m)`; covariance `P` in rad^2,
+  (rad/s)^2. filterpy's `predict`/`update` (Joseph form) do the covariance algebra; the nominal
+  rotations live in scipy/numpy and take the correction after each update (error reset with its
+  Jacobian `I - skew(dtheta)/2`).
+- World yaw is a gauge: it is the camera's heading at initialisation (its yaw variance starts at 0).
+  With an IMU, world z is up from the accelerometer; without one, the world is the first Manhattan
+  frame labelled with its z the axis nearest image up (`R_wm = I`).
+- Visual measurement: `R_cm = R_wc^T R_wm`, covariance from the solver; Manhattan labelling resolved
+  against the prediction. The IMU: `omega_c = R_ci (gyro_i - b_i)`, `accel_c = R_ci accel_i`; an
+  IMU sample stamped `t` measures the camera time `t - imu_time_offset_s`.
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+from filterpy.kalman import predict as kf_predict
+from filterpy.kalman import update as kf_update
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+from scipy.spatial.transform import Rotation
+
+from ..rotations import WORLD_UP, exp_so3, log_so3, skew
+from ..solver.manhattan import R_CM_UPRIGHT
+from ..types import Estimate, Status, VisualRotation
+from .base import Backend
+from .imu_stream import ImuBatch, ImuStream
+
+TH, BG, MF, RATE = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
+"""Blocks of the 12-dimensional error state."""
+N_STATE = 12
+I3 = np.eye(3)
+
+
+class MekfMode(str, enum.Enum):
+    """Which inputs the filter uses. `auto`: visual + IMU when IMU samples arrived before the first
+    frame, else visual only."""
+
+    AUTO = "auto"
+    VISUAL_IMU = "visual_imu"
+    IMU_ONLY = "imu_only"
+    VISUAL_ONLY = "visual_only"
+
+
+class MekfConfig(BaseModel):
+    """Noise model and robustness settings of `Mekf`; SI units and radians, unit in every name."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    mode: MekfMode = MekfMode.AUTO
+    gyro_noise_rad_s_sqrt_hz: float = Field(2e-3, gt=0)
+    """Gyro white-noise density (angle random walk), rad/s/sqrt(Hz)."""
+    gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-4, ge=0)
+    """Gyro bias random-walk density, rad/s^2/sqrt(Hz)."""
+    gyro_bias_initial_std_rad_s: float = Field(0.01, ge=0)
+    """Prior standard deviation of each gyro bias component, rad/s."""
+    gyro_range_rad_s: float = Field(34.9, gt=0)
+    """Gyro full scale, rad/s (34.9 = 2000 deg/s); readings at or beyond it are flagged."""
+    unknown_rate_std_rad_s: float = Field(2.0, gt=0)
+    """Angular-rate uncertainty assumed over IMU gaps and saturated samples, rad/s: the attitude
+    variance grows by (this * duration)^2 instead of integrating garbage."""
+    imu_gap_limit_s: float = Field(0.1, gt=0)
+    """A step between IMU samples (or to a frame) longer than this is a gap, s."""
+    reorder_window_s: float = Field(0.02, ge=0)
+    """IMU samples arriving out of order by less than this are put back in place, s."""
+    accel_tilt_noise_rad_sqrt_s: float = Field(0.02, gt=0)
+    """Accelerometer direction noise density, rad*sqrt(s): one update over T seconds of averaged
+    samples has std `this / sqrt(T)` per tilt axis before inflation."""
+    accel_update_period_s: float = Field(0.04, gt=0)
+    """Accelerometer samples are averaged (in a common camera frame) over this long per update, s."""
+    accel_norm_inflation_rad: float = Field(1.0, ge=0)
+    """Extra tilt std (rad) per unit of rms relative deviation of |a| from gravity."""
+    accel_innovation_inflation: float = Field(1.0, ge=0)
+    """Extra tilt std per rad of innovation angle between measured and predicted up (dimensionless)."""
+    accel_downweight_flag_ratio: float = Field(2.0, gt=1)
+    """ACCEL_DOWNWEIGHTED is set when the inflated std exceeds this many times the nominal one."""
+    initial_tilt_std_rad: float = Field(0.03, gt=0)
+    """Tilt std after initialisation from the first accelerometer samples, rad."""
+    init_accel_window_s: float = Field(0.05, gt=0)
+    """Accelerometer samples averaged for the initial tilt, s."""
+    manhattan_yaw_rw_rad_sqrt_s: float = Field(0.0, ge=0)
+    """Random walk of the Manhattan frame's yaw about world up, rad/sqrt(s) (0 in a building; a
+    vehicle's turns need about 0.5)."""
+    manhattan_tilt_rw_rad_sqrt_s: float = Field(0.0, ge=0)
+    """Random walk of the Manhattan frame's tilt, rad/sqrt(s) (vehicle body sway)."""
+    manhattan_vertical_std_rad: float = Field(0.02, gt=0)
+    """How far the Manhattan z axis may lean from world up (std, rad): a pseudo-measurement applied
+    with each visual update ("walls are vertical"); skipped when m's z is far from up."""
+    manhattan_vertical_max_rad: float = Field(0.35, gt=0)
+    """The vertical pseudo-measurement is skipped when m's z is farther than this from up, rad."""
+    rate_rw_rad_s2_sqrt_hz: float = Field(3.0, gt=0)
+    """Visual-only constant-rate model: angular-rate random walk, rad/s^2/sqrt(Hz)."""
+    rate_initial_std_rad_s: float = Field(1.0, gt=0)
+    """Visual-only: prior std of the angular rate, rad/s."""
+    visual_gate_chi2: float = Field(16.27, gt=0)
+    """Mahalanobis gate on the 3-dof visual residual (16.27 = chi-square 99.9 %)."""
+    visual_huber_sigma: float = Field(2.0, gt=0)
+    """Huber threshold on the Mahalanobis distance: beyond it the visual covariance is scaled by d/k."""
+    reinit_after_rejections: int = Field(8, ge=1)
+    """Consecutive gated-out frames after which the Manhattan frame is re-initialised."""
+    R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
+    """Camera-from-IMU rotation (`v_c = R_ci v_i`), 3x3 row-major."""
+    imu_time_offset_s: float = 0.0
+    """The IMU clock runs this far ahead of the camera clock, s."""
+    gravity_m_s2: float = Field(9.81, gt=0)
+    record_imu_estimates: bool = False
+    """Keep `R_wc` after every IMU sample (see `Mekf.imu_trajectory`)."""
+
+    @field_validator("R_ci")
+    @classmethod
+    def _rotation(cls, value):
+        R = np.asarray(value, float)
+        if R.shape != (3, 3) or not np.allclose(R.T @ R, I3, atol=1e-6) or np.linalg.det(R) <= 0:
+            raise ValueError(f"must be a 3x3 rotation matrix, got {value}")
+        return value
+
+
+def _orthonormal(R: np.ndarray) -> np.ndarray:
+    """Nearest rotation (scipy re-normalises through the quaternion)."""
+    return Rotation.from_matrix(R).as_matrix()
+
+
+def _prefix_products(M: np.ndarray) -> np.ndarray:
+    """C_k = M_0 @ M_1 @ ... @ M_k for a stack (N, 3, 3), by a log-depth (Hillis-Steele) scan."""
+    C = M.copy()
+    shift = 1
+    while shift < C.shape[0]:
+        C[shift:] = C[:-shift] @ C[shift:]
+        shift *= 2
+    return C
+
+
+def _direction_update_jacobian(u: np.ndarray) -> np.ndarray:
+    """d/d(dtheta) of `Exp(-dtheta) u` at 0 (a world direction seen in a right-perturbed frame)."""
+    return skew(u)
+
+
+class Mekf(Backend):
+    """The multiplicative EKF; see the module docstring for state and conventions."""
+
+    name = "mekf"
+
+    def __init__(self, config: MekfConfig | None = None):
+        self.config = cfg = config or MekfConfig()
+        self.R_ci = np.asarray(cfg.R_ci, float)
+        self.stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
+        self.mode = cfg.mode
+        self.R_wc = np.eye(3)
+        self.R_wm = np.eye(3)
+        self.b_c = np.zeros(3)
+        self.omega_c = np.zeros(3)
+        self.P = np.zeros((N_STATE, N_STATE))
+        self.t_state: float | None = None
+        self.initialised = False
+        self.manhattan_initialised = False
+        self.counters = dict(visual_rejected=0, reinitialised=0, accel_downweighted=0, accel_skipped=0,
+                             imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0)
+        self._flags = Status.OK
+        self._last_gyro_c: np.ndarray | None = None
+        self._pending: list[ImuBatch] = []
+        self._pending_span_s = 0.0
+        self._init_samples: list[ImuBatch] = []
+        self._rejections = 0
+        self._dropped_reported = 0
+        # Accelerometer average since the last update, expressed in the current camera frame.
+        self._acc_sum_c = np.zeros(3)
+        self._acc_time_s = 0.0
+        self._acc_norm_dev2_s = 0.0
+        self._record_t: list[np.ndarray] = []
+        self._record_R: list[np.ndarray] = []
+
+    # ------------------------------------------------------------------ public API
+    def process_imu(self, t_s, gyro_rad_s, accel_m_s2) -> None:
+        """Feed IMU samples (IMU frame, IMU clock); see `Backend.process_imu`. Non-finite, duplicate
+        and late samples are dropped and counted in `self.stream.counts`."""
+        if self.mode == MekfMode.VISUAL_ONLY:
+            self.counters["imu_ignored"] += int(np.size(t_s))
+            return
+        t = np.atleast_1d(np.asarray(t_s, float)) - self.config.imu_time_offset_s
+        batch = self.stream.push(t, gyro_rad_s, accel_m_s2)
+        self._queue(batch)
+        if self._pending_span_s >= self.config.accel_update_period_s:
+            self._integrate_pending()
+
+    def flush(self) -> None:
+        """Release and integrate every buffered IMU sample (end of an IMU-only stream)."""
+        self._queue(self.stream.flush())
+        self._integrate_pending()
+
+    def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
+        """Propagate to `t_s`, fuse `visual` (None for a dropped frame) and return the estimate.
+
+        `Estimate.R_wc` maps camera to world (z up); `cov` (3, 3, rad^2) is that of the right
+        perturbation of `R_wc`; `gyro_bias_rad_s` is in the IMU frame; `R_wm` is None until a
+        Manhattan frame was seen.
+        """
+        t_s = float(t_s)
+        if self.mode == MekfMode.AUTO:
+            seen_imu = self.initialised or self._pending or len(self.stream._held) or self._init_samples
+            self.mode = MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY
+        self.propagate_to(t_s)
+        if visual is None or self.mode == MekfMode.IMU_ONLY:
+            if self.mode != MekfMode.IMU_ONLY:
+                self._flags |= Status.VISUAL_MISSING
+        elif not self.initialised:
+            self._initialise_from_visual(t_s, visual)
+        elif not self.manhattan_initialised:
+            self._initialise_manhattan(visual)
+        else:
+            self._visual_update(visual)
+        return self._estimate(t_s)
+
+    def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
+        """`R_cm = R_wc^T R_wm` predicted at `t_s` (propagates the filter to `t_s`); None before a
+        Manhattan frame is known."""
+        if not self.manhattan_initialised:
+            return None
+        self.propagate_to(float(t_s))
+        return self.R_wc.T @ self.R_wm
+
+    def propagate_to(self, t_s: float) -> None:
+        """Integrate IMU samples up to `t_s` (then hold the last rate), or run the constant-rate
+        model in visual-only mode."""
+        if self.mode in (MekfMode.VISUAL_IMU, MekfMode.IMU_ONLY, MekfMode.AUTO):
+            self._queue(self.stream.release_until(t_s))
+            self._integrate_pending()
+            if self.initialised and t_s > self.t_state:
+                self._extrapolate_gyro(t_s)
+        elif self.initialised and t_s > self.t_state:
+            self._propagate_constant_rate(t_s - self.t_state)
+            self.t_state = t_s
+
+    def imu_trajectory(self) -> tuple[np.ndarray, np.ndarray]:
+        """`(t_s (N,), R_wc (N, 3, 3))` after every integrated IMU sample (camera clock), before the
+        accelerometer update that may follow it; needs `record_imu_estimates`."""
+        if not self._record_t:
+            return np.zeros(0), np.zeros((0, 3, 3))
+        return np.concatenate(self._record_t), np.concatenate(self._record_R)
+
+    def estimate(self, t_s: float | None = None) -> Estimate:
+        """Current estimate (at the state time) without consuming status flags."""
+        return self._make_estimate(self.t_state if t_s is None else t_s, self._flags)
+
+    # ------------------------------------------------------------------ IMU propagation
+    def _queue(self, batch: ImuBatch) -> None:
+        if len(batch):
+            self._pending.append(batch)
+            self._pending_span_s += float(batch.t_s[-1] - batch.t_s[0]) + 1e-12
+            if len(self._pending) > 1:
+                self._pending_span_s = float(batch.t_s[-1] - self._pending[0].t_s[0])
+
+    def _integrate_pending(self) -> None:
+        if not self._pending:
+            return
+        batches, self._pending, self._pending_span_s = self._pending, [], 0.0
+        t = np.concatenate([b.t_s for b in batches])
+        gyro_c = np.concatenate([b.gyro_rad_s for b in batches]) @ self.R_ci.T
+        accel_c = np.concatenate([b.accel_m_s2 for b in batches]) @ self.R_ci.T
+        saturated = np.concatenate([b.saturated for b in batches])
+        if not self.initialised:
+            t, gyro_c, accel_c, saturated = self._initialise_from_accel(t, gyro_c, accel_c, saturated)
+            if t.size == 0:
+                return
+        # Split at accelerometer-update boundaries so each chunk ends with at most one update.
+        period = self.config.accel_update_period_s
+        elapsed = self._acc_time_s + (t - self.t_state)
+        chunk_id = np.floor(elapsed / period).astype(int)
+        cuts = np.flatnonzero(np.diff(chunk_id)) + 1
+        for idx in np.split(np.arange(t.size), cuts):
+            self._integrate_chunk(t[idx], gyro_c[idx], accel_c[idx], saturated[idx])
+            if self._acc_time_s >= period:
+                self._accel_update()
+
+    def _integrate_chunk(self, t, gyro_c, accel_c, saturated) -> None:
+        """Integrate samples (camera frame) over (t_state, t[-1]]: sample k covers (t_{k-1}, t_k]
+        with the mean of its rate and the previous one (trapezoid)."""
+        cfg = self.config
+        dt = np.diff(t, prepend=self.t_state)
+        prev = np.vstack([self._last_gyro_c[None], gyro_c[:-1]])
+        rate_c = 0.5 * (prev + gyro_c) - self.b_c
+        unknown = (dt > cfg.imu_gap_limit_s) | saturated
+        if unknown.any():
+            self._flags |= Status.IMU_GAP if (dt > cfg.imu_gap_limit_s).any() else Status.OK
+            self._flags |= Status.GYRO_SATURATED if saturated.any() else Status.OK
+            self.counters["imu_gaps"] += int((dt > cfg.imu_gap_limit_s).sum())
+        dt_used = np.where(dt > cfg.imu_gap_limit_s, 0.0, dt)
+        M = exp_so3(rate_c * dt_used[:, None])
+        C = _prefix_products(M)
+        C_N = C[-1]
+        if cfg.record_imu_estimates:
+            self._record_t.append(t.copy())
+            self._record_R.append(self.R_wc @ C)
+        self.R_wc = _orthonormal(self.R_wc @ C_N)
+        T = float(dt_used.sum())
+        # Error transition over the chunk (paper-independent MEKF algebra, right perturbations):
+        # dtheta_N = C_N^T dtheta_0 - C_N^T sum_k dt_k C_k db.
+        F = np.eye(N_STATE)
+        F[TH, TH] = C_N.T
+        F[TH, BG] = -C_N.T @ np.einsum("k,kij->ij", dt_used, C)
+        Q = np.zeros((N_STATE, N_STATE))
+        q_g, q_b = cfg.gyro_noise_rad_s_sqrt_hz**2, cfg.gyro_bias_rw_rad_s2_sqrt_hz**2
+        unknown_var = float(np.sum((cfg.unknown_rate_std_rad_s * dt[unknown]) ** 2))
+        Q[TH, TH] = (q_g * T + q_b * T**3 / 3.0 + unknown_var) * I3
+        Q[TH, BG] = Q[BG, TH] = -q_b * T**2 / 2.0 * I3
+        Q[BG, BG] = q_b * T * I3
+        self._add_manhattan_noise(Q, float(t[-1] - self.t_state))
+        _, self.P = kf_predict(np.zeros(N_STATE), self.P, F, Q)
+        # Accelerometer: time-weighted sum of specific force, rotated into the chunk's end frame.
+        acc_end = np.einsum("ji,kjl,kl->i", C_N, C, accel_c * dt_used[:, None])
+        self._acc_sum_c = C_N.T @ self._acc_sum_c + acc_end
+        g = cfg.gravity_m_s2
+        self._acc_norm_dev2_s += float(np.sum(dt_used * ((np.linalg.norm(accel_c, axis=1) - g) / g) ** 2))
+        self._acc_time_s += T
+        self._last_gyro_c = gyro_c[-1]
+        self.t_state = float(t[-1])
+
+    def _extrapolate_gyro(self, t_s: float) -> None:
+        """Hold the last gyro rate from the last IMU sample to a frame time (no accelerometer)."""
+        dt = t_s - self.t_state
+        if dt > self.config.imu_gap_limit_s:
+            self._flags |= Status.IMU_GAP
+            self.counters["imu_gaps"] += 1
+            self.P[TH, TH] += (self.config.unknown_rate_std_rad_s * dt) ** 2 * I3
+            self._add_manhattan_noise_to_P(dt)
+            self.t_state = t_s
+            return
+        rate = self._last_gyro_c - self.b_c
+        M = exp_so3(rate * dt)
+        self.R_wc = _orthonormal(self.R_wc @ M)
+        F = np.eye(N_STATE)
+        F[TH, TH] = M.T
+        F[TH, BG] = -dt * M.T
+        Q = np.zeros((N_STATE, N_STATE))
+        Q[TH, TH] = self.config.gyro_noise_rad_s_sqrt_hz**2 * dt * I3
+        self._add_manhattan_noise(Q, dt)
+        _, self.P = kf_predict(np.zeros(N_STATE), self.P, F, Q)
+        self._acc_sum_c = M.T @ self._acc_sum_c
+        self.t_state = t_s
+
+    def _add_manhattan_noise(self, Q: np.ndarray, dt: float) -> None:
+        """Manhattan-frame random walk: yaw about world up and tilt, in m's right-perturbation."""
+        cfg = self.config
+        if not self.manhattan_initialised or dt <= 0:
+            return
+        u = self.R_wm.T @ WORLD_UP
+        uu = np.outer(u, u)
+        Q[MF, MF] += dt * (cfg.manhattan_yaw_rw_rad_sqrt_s**2 * uu + cfg.manhattan_tilt_rw_rad_sqrt_s**2 * (I3 - uu))
+
+    def _add_manhattan_noise_to_P(self, dt: float) -> None:
+        Q = np.zeros((N_STATE, N_STATE))
+        self._add_manhattan_noise(Q, dt)
+        self.P += Q
+
+    def _propagate_constant_rate(self, dt: float) -> None:
+        """Visual-only motion model: `R_wc <- R_wc Exp(omega_c dt)`, omega a random walk."""
+        M = exp_so3(self.omega_c * dt)
+        self.R_wc = _orthonormal(self.R_wc @ M)
+        F = np.eye(N_STATE)
+        F[TH, TH] = M.T
+        F[TH, RATE] = dt * I3
+        q = self.config.rate_rw_rad_s2_sqrt_hz**2
+        Q = np.zeros((N_STATE, N_STATE))
+        Q[TH, TH] = q * dt**3 / 3.0 * I3
+        Q[TH, RATE] = Q[RATE, TH] = q * dt**2 / 2.0 * I3
+        Q[RATE, RATE] = q * dt * I3
+        _, self.P = kf_predict(np.zeros(N_STATE), self.P, F, Q)
+
+    # ------------------------------------------------------------------ updates
+    def _accel_update(self) -> None:
+        """Tilt from the averaged accelerometer direction, noise inflated continuously by how far
+        |a| and the innovation are from pure gravity."""
+        cfg = self.config
+        T = self._acc_time_s
+        acc_c = self._acc_sum_c
+        norm_dev = np.sqrt(self._acc_norm_dev2_s / T) if T > 0 else 0.0
+        self._acc_sum_c, self._acc_time_s, self._acc_norm_dev2_s = np.zeros(3), 0.0, 0.0
+        norm = np.linalg.norm(acc_c)
+        if not norm > 0.1 * cfg.gravity_m_s2 * T:  # near free fall: no direction
+            self.counters["accel_skipped"] += 1
+            return
+        z = acc_c / norm
+        h = self.R_wc.T @ WORLD_UP
+        angle = float(np.arccos(np.clip(z @ h, -1.0, 1.0)))
+        std0 = cfg.accel_tilt_noise_rad_sqrt_s / np.sqrt(T)
+        extra = cfg.accel_norm_inflation_rad * norm_dev + cfg.accel_innovation_inflation * angle
+        var = std0**2 + extra**2
+        if var > (cfg.accel_downweight_flag_ratio * std0) ** 2:
+            self._flags |= Status.ACCEL_DOWNWEIGHTED
+            self.counters["accel_downweighted"] += 1
+        H = np.zeros((3, N_STATE))
+        H[:, TH] = _direction_update_jacobian(h)
+        self._kalman_update(z - h, var * I3, H)
+        self.counters["accel_updates"] += 1
+
+    def _visual_update(self, visual: VisualRotation) -> None:
+        """Paper's per-frame rotation as a measurement of `R_cm = R_wc^T R_wm` (right perturbation)."""
+        cfg = self.config
+        R_cm_pred = self.R_wc.T @ self.R_wm
+        visual = visual.symmetric_to(R_cm_pred)
+        r = log_so3(R_cm_pred.T @ visual.R_cm)
+        H = np.zeros((3, N_STATE))
+        H[:, TH] = -R_cm_pred.T
+        H[:, MF] = I3
+        R_vis = 0.5 * (visual.cov + visual.cov.T)
+        S = H @ self.P @ H.T + R_vis
+        d2 = float(r @ np.linalg.solve(S, r))
+        if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
+            self._flags |= Status.VISUAL_REJECTED
+            self.counters["visual_rejected"] += 1
+            self._rejections += 1
+            if self._rejections >= cfg.reinit_after_rejections:
+                self._reinitialise_manhattan(visual)
+            return
+        self._rejections = 0
+        d = np.sqrt(d2)
+        if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
+            R_vis = R_vis * (d / cfg.visual_huber_sigma)
+        self._kalman_update(r, R_vis, H)
+        self.counters["visual_updates"] += 1
+        self._manhattan_vertical_update()
+
+    def _manhattan_vertical_update(self) -> None:
+        """Pseudo-measurement: the Manhattan z axis is (nearly) world up (DESIGN.md "Conventions")."""
+        if self.mode == MekfMode.VISUAL_ONLY:
+            return  # the world is the Manhattan frame there
+        h = self.R_wm.T @ WORLD_UP
+        e_z = np.array([0.0, 0.0, 1.0])
+        if np.arccos(np.clip(h[2], -1.0, 1.0)) > self.config.manhattan_vertical_max_rad:
+            return
+        H = np.zeros((3, N_STATE))
+        H[:, MF] = _direction_update_jacobian(h)
+        self._kalman_update(e_z - h, self.config.manhattan_vertical_std_rad**2 * I3, H)
+
+    def _kalman_update(self, residual: np.ndarray, R: np.ndarray, H: np.ndarray) -> None:
+        """filterpy update (Joseph form) of the zero-mean error state, then inject and reset."""
+        dx, P = kf_update(np.zeros(N_STATE), self.P, residual, R, H)
+        if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(P))):
+            return
+        self.R_wc = _orthonormal(self.R_wc @ exp_so3(dx[TH]))
+        self.R_wm = _orthonormal(self.R_wm @ exp_so3(dx[MF]))
+        self.b_c = self.b_c + dx[BG]
+        self.omega_c = self.omega_c + dx[RATE]
+        # Reset Jacobian of the right-perturbation error: G = I - skew(dtheta)/2 on rotation blocks.
+        G = np.eye(N_STATE)
+        G[TH, TH] -= 0.5 * skew(dx[TH])
+        G[MF, MF] -= 0.5 * skew(dx[MF])
+        P = G @ P @ G.T
+        self.P = 0.5 * (P + P.T)
+
+    # ------------------------------------------------------------------ initialisation
+    def _initialise_from_accel(self, t, gyro_c, accel_c, saturated):
+        """Tilt from the mean of the first `init_accel_window_s` of accelerometer samples; yaw is the
+        gauge (variance 0). Returns the samples still to integrate."""
+        cfg = self.config
+        self._init_samples.append(ImuBatch(t, gyro_c, accel_c, saturated))
+        t_all = np.concatenate([b.t_s for b in self._init_samples])
+        if t_all[-1] - t_all[0] < cfg.init_accel_window_s:
+            return t[:0], gyro_c[:0], accel_c[:0], saturated[:0]
+        g_all = np.concatenate([b.gyro_rad_s for b in self._init_samples])
+        a_all = np.concatenate([b.accel_m_s2 for b in self._init_samples])
+        s_all = np.concatenate([b.saturated for b in self._init_samples])
+        self._init_samples = []
+        window = t_all <= t_all[0] + cfg.init_accel_window_s
+        mean_acc = a_all[window].mean(axis=0)
+        if not np.linalg.norm(mean_acc) > 0:
+            mean_acc = np.array([0.0, -1.0, 0.0])
+        up_c = mean_acc / np.linalg.norm(mean_acc)
+        rot, _ = Rotation.align_vectors(WORLD_UP[None], up_c[None])
+        self.R_wc = rot.as_matrix()
+        self.P = np.zeros((N_STATE, N_STATE))
+        self.P[TH, TH] = cfg.initial_tilt_std_rad**2 * (I3 - np.outer(up_c, up_c))
+        self.P[BG, BG] = cfg.gyro_bias_initial_std_rad_s**2 * I3
+        self.t_state = float(t_all[0])
+        self._last_gyro_c = g_all[0]
+        self.initialised = True
+        if self.mode == MekfMode.AUTO:
+            self.mode = MekfMode.VISUAL_IMU
+        return t_all[1:], g_all[1:], a_all[1:], s_all[1:]
+
+    def _initialise_from_visual(self, t_s: float, visual: VisualRotation) -> None:
+        """No IMU: the world is the Manhattan frame labelled with z nearest image up (`R_wm = I`)."""
+        if self.mode != MekfMode.VISUAL_ONLY:
+            self._flags |= Status.VISUAL_MISSING  # waiting for the accelerometer to give gravity
+            return
+        visual = visual.symmetric_to(R_CM_UPRIGHT)
+        self.R_wm = np.eye(3)
+        self.R_wc = visual.R_cm.T
+        self.P = np.zeros((N_STATE, N_STATE))
+        self.P[TH, TH] = visual.R_cm @ visual.cov @ visual.R_cm.T
+        self.P[RATE, RATE] = self.config.rate_initial_std_rad_s**2 * I3
+        self.omega_c = np.zeros(3)
+        self.t_state = t_s
+        self.initialised = self.manhattan_initialised = True
+
+    def _initialise_manhattan(self, visual: VisualRotation, R_wm_ref: np.ndarray | None = None) -> None:
+        """`R_wm = R_wc R_cm`, labelled nearest `R_wm_ref` (identity: m's z nearest up), with its
+        covariance from the camera's and the measurement's: `dtheta_m = R_cm^T dtheta_c + delta`."""
+        R_wm_ref = np.eye(3) if R_wm_ref is None else R_wm_ref
+        visual = visual.symmetric_to(self.R_wc.T @ R_wm_ref)
+        A = visual.R_cm.T
+        self.R_wm = _orthonormal(self.R_wc @ visual.R_cm)
+        T = np.eye(N_STATE)
+        T[MF, MF] = 0.0
+        T[MF, TH] = A
+        P = T @ self.P @ T.T
+        P[MF, MF] += visual.cov
+        self.P = 0.5 * (P + P.T)
+        self.manhattan_initialised = True
+        self._rejections = 0
+
+    def _reinitialise_manhattan(self, visual: VisualRotation) -> None:
+        """Persistent disagreement: the camera sees a differently aligned scene (or lost track)."""
+        self._flags |= Status.REINITIALISED
+        self.counters["reinitialised"] += 1
+        if self.mode == MekfMode.VISUAL_ONLY:
+            visual = visual.symmetric_to(self.R_wc.T @ self.R_wm)
+            self.R_wc = self.R_wm @ visual.R_cm.T
+            self.P = np.zeros((N_STATE, N_STATE))
+            self.P[TH, TH] = visual.R_cm @ visual.cov @ visual.R_cm.T
+            self.P[RATE, RATE] = self.config.rate_initial_std_rad_s**2 * I3
+            self.omega_c = np.zeros(3)
+            self._rejections = 0
+            return
+        self._initialise_manhattan(visual, R_wm_ref=self.R_wm)
+
+    # ------------------------------------------------------------------ output
+    def _estimate(self, t_s: float) -> Estimate:
+        dropped = self.stream.counts.dropped
+        if dropped > self._dropped_reported:
+            self._flags |= Status.IMU_DROPPED
+            self._dropped_reported = dropped
+        est = self._make_estimate(t_s, self._flags)
+        self._flags = Status.OK
+        return est
+
+    def _make_estimate(self, t_s, flags: Status) -> Estimate:
+        if not self.initialised:
+            return Estimate(t_s, np.eye(3), np.eye(3), flags | Status.NOT_INITIALISED)
+        cov = 0.5 * (self.P[TH, TH] + self.P[TH, TH].T)
+        bias_i = None if self.mode == MekfMode.VISUAL_ONLY else self.R_ci.T @ self.b_c
+        return Estimate(
+            t_s, self.R_wc.copy(), cov, flags,
+            R_wm=self.R_wm.copy() if self.manhattan_initialised else None,
+            gyro_bias_rad_s=bias_i,
+        )
