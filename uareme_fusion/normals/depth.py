@@ -1,0 +1,276 @@
+"""Surface normals and their confidence kappa from a depth map and pinhole intrinsics.
+
+Each pixel gets the plane fitted to the valid depth in a square window around it. Depth sensors
+(structured light, stereo, the noise models of rendered RGB-D datasets) measure along the pixel's
+ray with fixed image coordinates, so we fit the plane as a linear regression in inverse depth:
+a plane n . p = d seen through the ray p = z (x_bar, y_bar, 1) satisfies
+    1/z = (n_x x_bar + n_y y_bar + n_z) / d,
+which is affine in the pixel offsets (du, dv) from the window centre:
+    1/z = c + a du + b dv,   n ~ -(a fx, b fy, c - a (u - cx) - b (v - cy)).
+The 3x3 normal equations need only ten window sums, each one separable filter of the image by
+centred offset kernels (no cancellation between large sums), and are solved per pixel in closed
+form: no eigen-decomposition and no loop over pixels.
+
+kappa is 1 / trace of the fitted normal's angular covariance (so that exp(-kappa theta^2) has the
+fitted per-axis variance, the small-angle form of the paper's eq. 3), with the inverse-depth noise
+the larger of the fit residual and a sensor model sigma_z = noise_quadratic_m_per_m2 * z^2 +
+noise_floor_m (structured light and stereo both grow with z^2; in inverse depth that is nearly
+constant). Windows across depth edges or on curved surfaces have large residuals and low kappa.
+
+Conventions: camera frame OpenCV (x right, y down, z forward); normals are unit vectors in it,
+oriented towards the camera (n . p < 0). Depth in metres, 0 or NaN where missing; intrinsics K in
+pixels with fx, fy > 0. Datasets published with a negative fy (ICL-NUIM: fy = -480, a y-up camera
+frame) must pass |fy| here and convert their ground truth with `flip_y_rotation` (see below).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import ConfigError, InputError
+from ..types import Frame, NormalMap
+
+ICL_NUIM_DEPTH_UNIT_M = 1.0 / 5000.0
+"""ICL-NUIM and TUM RGB-D store depth PNGs in units of 1/5000 m."""
+MILLIMETRE_DEPTH_UNIT_M = 1e-3
+"""Asus Xtion / Kinect v2 / OAK / ICSL corridor depth PNGs are in millimetres."""
+
+ICL_NUIM_K_PUBLISHED = np.array([[481.20, 0.0, 319.50], [0.0, -480.00, 239.50], [0.0, 0.0, 1.0]])
+"""ICL-NUIM intrinsics as published: fy < 0 means the dataset's camera y axis points UP."""
+ICL_NUIM_K_OPENCV = np.array([[481.20, 0.0, 319.50], [0.0, 480.00, 239.50], [0.0, 0.0, 1.0]])
+"""The same pixels in the OpenCV camera frame (y down): fy = +480. Its rotations need `flip_y_rotation`."""
+ICSL_CORRIDOR_K = np.array([[537.60, 0.0, 316.15], [0.0, 539.03, 245.52], [0.0, 0.0, 1.0]])
+
+FLIP_Y = np.diag([1.0, -1.0, 1.0])
+"""The reflection between a y-up camera frame (negative published fy) and OpenCV's y-down frame."""
+
+
+@dataclass(frozen=True)
+class DepthNormalsConfig:
+    """Parameters of `DepthNormals` (units in the names)."""
+
+    window_px: int = 9
+    """Side of the square fitting window (odd)."""
+    min_valid_fraction: float = 0.5
+    """Windows with fewer valid depth pixels than this fraction of window_px^2 give kappa 0."""
+    stride_px: int = 1
+    """Fit every stride_px-th pixel in each direction and repeat the result (1 = every pixel)."""
+    min_depth_m: float = 0.1
+    max_depth_m: float = 20.0
+    noise_quadratic_m_per_m2: float = 1.5e-3
+    """Sensor model sigma_z = this * z^2 + noise_floor_m. 1.5e-3 suits structured light (Kinect v1,
+    Asus Xtion); an OAK-D stereo pair (7.5 cm baseline, ~0.1 px disparity noise) is ~3e-3."""
+    noise_floor_m: float = 1e-3
+    """Depth-independent part of the sensor noise (quantisation, rendering noise)."""
+    max_residual_ratio: float = 9.0
+    """Windows whose residual variance exceeds the sensor model's by more than this factor are not
+    planes (a depth edge fits as a steep, confidently wrong plane): kappa 0."""
+    kappa_max: float = 100.0
+    """Cap on kappa (the paper caps at 100); flat noiseless planes would otherwise go to infinity."""
+
+    def __post_init__(self):
+        if self.window_px < 3 or self.window_px % 2 == 0:
+            raise ConfigError(f"window_px must be an odd integer >= 3, got {self.window_px}")
+        if not 0.0 < self.min_valid_fraction <= 1.0:
+            raise ConfigError(f"min_valid_fraction must be in (0, 1], got {self.min_valid_fraction}")
+        if self.stride_px < 1:
+            raise ConfigError(f"stride_px must be >= 1, got {self.stride_px}")
+        if not 0.0 <= self.min_depth_m < self.max_depth_m:
+            raise ConfigError(
+                f"need 0 <= min_depth_m < max_depth_m, got {self.min_depth_m} and {self.max_depth_m}"
+            )
+        if self.noise_quadratic_m_per_m2 < 0 or self.noise_floor_m < 0:
+            raise ConfigError("noise_quadratic_m_per_m2 and noise_floor_m must be >= 0")
+        if self.noise_quadratic_m_per_m2 == 0 and self.noise_floor_m == 0:
+            raise ConfigError("the sensor noise model needs noise_quadratic_m_per_m2 or noise_floor_m > 0")
+        if not self.max_residual_ratio >= 1:
+            raise ConfigError(f"max_residual_ratio must be >= 1, got {self.max_residual_ratio}")
+        if not self.kappa_max > 0:
+            raise ConfigError(f"kappa_max must be > 0, got {self.kappa_max}")
+
+
+def check_intrinsics(K, source: str = "depth map") -> tuple[float, float, float, float]:
+    """(fx, fy, cx, cy) from a (3, 3) pinhole matrix; `InputError` naming `source` if unusable."""
+    if K is None:
+        raise InputError(f"{source}: depth normals need camera intrinsics K (fx, fy, cx, cy), got none")
+    K = np.asarray(K, dtype=float)
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+        raise InputError(f"{source}: expected intrinsics K as a finite (3, 3) matrix, got shape {K.shape}")
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    if fy < 0:
+        raise InputError(
+            f"{source}: K has fy = {fy:g} < 0 (a y-up camera convention, as ICL-NUIM publishes); "
+            "normals here are in the OpenCV frame (y down): pass |fy| and convert the dataset's "
+            "rotations with uareme_fusion.normals.depth.flip_y_rotation"
+        )
+    if not (fx > 0 and fy > 0):
+        raise InputError(f"{source}: K needs fx > 0 and fy > 0, got fx = {fx:g}, fy = {fy:g}")
+    return float(fx), float(fy), float(cx), float(cy)
+
+
+def flip_y_rotation(R_wc_published: np.ndarray) -> np.ndarray:
+    """Camera-to-world rotations of a dataset with negative published fy, in the OpenCV camera frame.
+
+    A negative fy means the dataset's camera frame c' has y up: `p_c = FLIP_Y p_c'` with FLIP_Y =
+    diag(1, -1, 1), a reflection. `R_wc' @ FLIP_Y` has det -1, so the world must be reflected too:
+    we return `FLIP_Y @ R_wc' @ FLIP_Y` (..., 3, 3), a proper rotation from the OpenCV camera frame
+    to the dataset's world mirrored in its y axis. Any constant proper rotation of that world is
+    absorbed by the ARE alignment, and rotation errors keep their size.
+    """
+    return FLIP_Y @ np.asarray(R_wc_published, dtype=float) @ FLIP_Y
+
+
+def read_depth_png(path, unit_m: float, expected_shape: tuple[int, int] | None = None) -> np.ndarray:
+    """A 16-bit single-channel depth PNG as float32 metres (0 where missing).
+
+    `unit_m`: metres per stored unit (`ICL_NUIM_DEPTH_UNIT_M`, `MILLIMETRE_DEPTH_UNIT_M`).
+    Raises `InputError` naming the file for a missing or unreadable file, a wrong dtype or channel
+    count, or a size other than `expected_shape` (H, W).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: depth image not found")
+    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if raw is None or raw.size == 0:
+        raise InputError(f"{path}: not a readable image")
+    if raw.ndim != 2:
+        raise InputError(f"{path}: expected a single-channel depth image, got shape {raw.shape}")
+    if raw.dtype != np.uint16:
+        raise InputError(f"{path}: expected 16-bit depth (uint16), got {raw.dtype}")
+    if expected_shape is not None and raw.shape != tuple(expected_shape):
+        raise InputError(f"{path}: expected depth of size {tuple(expected_shape)} (H, W), got {raw.shape}")
+    if not unit_m > 0:
+        raise InputError(f"{path}: depth unit must be > 0 metres, got {unit_m}")
+    return raw.astype(np.float32) * np.float32(unit_m)
+
+
+def _offset_kernels(window_px: int) -> dict[int, np.ndarray]:
+    o = np.arange(window_px, dtype=np.float32) - window_px // 2
+    return {0: np.ones_like(o), 1: o, 2: o * o}
+
+
+class DepthNormals:
+    """Normal estimator for RGB-D frames: `estimate(depth_m, K) -> NormalMap` (OpenCV camera frame)."""
+
+    def __init__(self, config: DepthNormalsConfig | None = None):
+        self.config = config or DepthNormalsConfig()
+        self._kernels = _offset_kernels(self.config.window_px)
+
+    def estimate_frame(self, frame: Frame) -> NormalMap:
+        """Normals of a `Frame`'s depth with its own K; `InputError` if either is missing."""
+        source = f"frame {frame.index} (t = {frame.t:g} s)"
+        if frame.depth is None:
+            raise InputError(f"{source}: depth normals need a depth map, the frame has none")
+        result = self.estimate(frame.depth, frame.K, source=source)
+        return NormalMap(result.normals, result.kappa, t=frame.t)
+
+    def estimate(self, depth_m, K, source: str = "depth map") -> NormalMap:
+        """Unit normals (H, W, 3) float32 in the OpenCV camera frame, facing the camera, and kappa
+        (H, W) float32 in [0, kappa_max]; pixels without a normal have kappa 0 and normal (0, 0, 0).
+
+        `depth_m` (H, W) float metres, 0 or NaN where missing; `K` (3, 3) with fx, fy > 0.
+        """
+        fx, fy, cx, cy = check_intrinsics(K, source)
+        depth = np.asarray(depth_m)
+        if depth.ndim != 2 or min(depth.shape) < self.config.window_px:
+            raise InputError(
+                f"{source}: expected a depth map of shape (H, W) at least {self.config.window_px} px "
+                f"each way, got {depth.shape}"
+            )
+        if not np.issubdtype(depth.dtype, np.floating):
+            raise InputError(
+                f"{source}: expected depth as float metres, got {depth.dtype}; read 16-bit PNGs with "
+                "read_depth_png(path, unit_m)"
+            )
+        return self._fit(depth.astype(np.float32, copy=False), fx, fy, cx, cy)
+
+    def _fit(self, depth: np.ndarray, fx: float, fy: float, cx: float, cy: float) -> NormalMap:
+        cfg, ker = self.config, self._kernels
+        H, W = depth.shape
+        with np.errstate(invalid="ignore"):
+            valid = (depth > cfg.min_depth_m) & (depth < cfg.max_depth_m)  # NaN compares False
+        m = valid.astype(np.float32)
+        inv = np.zeros_like(depth)
+        np.divide(1.0, depth, out=inv, where=valid)
+
+        def window_sums(image, order_u, order_v):
+            # sum over offsets (du, dv) of image(v + dv, u + du) du^order_u dv^order_v; zero outside.
+            out = cv2.sepFilter2D(image, cv2.CV_32F, ker[order_u], ker[order_v], borderType=cv2.BORDER_CONSTANT)
+            return out if cfg.stride_px == 1 else np.ascontiguousarray(out[:: cfg.stride_px, :: cfg.stride_px])
+
+        n_pts, s_w, s_ww = (window_sums(x, 0, 0) for x in (m, inv, inv * inv))
+        s_u, s_wu = window_sums(m, 1, 0), window_sums(inv, 1, 0)
+        s_v, s_wv = window_sums(m, 0, 1), window_sums(inv, 0, 1)
+        s_uu, s_vv, s_uv = window_sums(m, 2, 0), window_sums(m, 0, 2), window_sums(m, 1, 1)
+
+        # Normal equations M (c, a, b) = (s_w, s_wu, s_wv), M = [[N, Su, Sv], [Su, Suu, Suv], [Sv, Suv, Svv]],
+        # solved with the adjugate A (symmetric) and determinant.
+        a00 = s_uu * s_vv - s_uv * s_uv
+        a01 = s_v * s_uv - s_u * s_vv
+        a02 = s_u * s_uv - s_uu * s_v
+        a11 = n_pts * s_vv - s_v * s_v
+        a12 = s_u * s_v - n_pts * s_uv
+        a22 = n_pts * s_uu - s_u * s_u
+        det = n_pts * a00 + s_u * a01 + s_v * a02
+        min_points = cfg.min_valid_fraction * cfg.window_px**2
+        # det scales like N^3 r^4; a collinear or tiny set of points makes it vanish.
+        ok = (n_pts >= min_points) & (det > 1e-3 * n_pts * a00.clip(min=0) + 1e-12)
+        inv_det = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
+        c = (a00 * s_w + a01 * s_wu + a02 * s_wv) * inv_det
+        a = (a01 * s_w + a11 * s_wu + a12 * s_wv) * inv_det
+        b = (a02 * s_w + a12 * s_wu + a22 * s_wv) * inv_det
+
+        # Unnormalised normal g = (a fx, b fy, c - a du0 - b dv0), du0 = u - cx, dv0 = v - cy.
+        rows = np.arange(0, H, cfg.stride_px, dtype=np.float32)
+        cols = np.arange(0, W, cfg.stride_px, dtype=np.float32)
+        du0 = (cols - np.float32(cx))[None, :]
+        dv0 = (rows - np.float32(cy))[:, None]
+        gx = a * np.float32(fx)
+        gy = b * np.float32(fy)
+        gz = c - a * du0 - b * dv0
+        g2 = gx * gx + gy * gy + gz * gz
+        ok &= g2 > 0
+
+        # Inverse-depth noise variance: the larger of the fit residual and the sensor model.
+        rss = s_ww - c * s_w - a * s_wu - b * s_wv
+        var_fit = np.maximum(rss, 0.0) / np.maximum(n_pts - 3.0, 1.0)
+        w_centre = c  # fitted 1/z at the window centre
+        sigma_model = np.float32(cfg.noise_quadratic_m_per_m2) + np.float32(cfg.noise_floor_m) * w_centre * w_centre
+        var_model = sigma_model * sigma_model
+        var_w = np.maximum(var_fit, var_model)
+        ok &= var_fit <= np.float32(cfg.max_residual_ratio) * var_model
+
+        # Covariance of g = J (c, a, b), J = [[0, fx, 0], [0, 0, fy], [1, -du0, -dv0]], is
+        # var_w J A J^T / det; kappa = |g|^2 / (var_w trace(P J A J^T P) / det), P = I - n n^T.
+        p0 = a01 - du0 * a11 - dv0 * a12  # (J A)[z, a]
+        q0 = a02 - du0 * a12 - dv0 * a22  # (J A)[z, b]
+        cxx = np.float32(fx * fx) * a11
+        cyy = np.float32(fy * fy) * a22
+        cxy = np.float32(fx * fy) * a12
+        cxz = np.float32(fx) * p0
+        cyz = np.float32(fy) * q0
+        czz = a00 - du0 * a01 - dv0 * a02 - du0 * p0 - dv0 * q0
+        # g^T C g = gx (gx cxx + 2 gy cxy + 2 gz cxz) + gy (gy cyy + 2 gz cyz) + gz^2 czz
+        g_c_g = gx * (gx * cxx + 2 * (gy * cxy + gz * cxz)) + gy * (gy * cyy + 2 * gz * cyz) + gz * gz * czz
+        inv_g2 = np.divide(1.0, g2, out=np.zeros_like(g2), where=ok)
+        trace_tangent = (cxx + cyy + czz - g_c_g * inv_g2) * inv_det * var_w
+        kappa = np.divide(g2, trace_tangent, out=np.zeros_like(g2), where=ok & (trace_tangent > 0))
+        np.minimum(kappa, np.float32(cfg.kappa_max), out=kappa)
+
+        scale = np.divide(-1.0, np.sqrt(g2), out=np.zeros_like(g2), where=ok)  # minus: face the camera
+        normals = cv2.merge([gx, gy, gz])
+        normals *= scale[..., None]
+        if cfg.stride_px > 1:
+            normals = _repeat(normals, cfg.stride_px, H, W)
+            kappa = _repeat(kappa, cfg.stride_px, H, W)
+        kappa[~valid] = 0.0  # no confidence where the pixel itself has no depth
+        return NormalMap(normals=normals.astype(np.float32, copy=False), kappa=kappa.astype(np.float32, copy=False))
+
+
+def _repeat(image: np.ndarray, stride: int, height: int, width: int) -> np.ndarray:
+    """Nearest-neighbour upsampling of a strided grid back to (height, width)."""
+    return np.repeat(np.repeat(image, stride, axis=0), stride, axis=1)[:height, :width]
