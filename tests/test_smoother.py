@@ -20,7 +20,7 @@ from uareme_fusion.backends.smoother import (
 )
 from uareme_fusion.config import load_config, validate_config
 from uareme_fusion.errors import ConfigError, InputError
-from uareme_fusion.rotations import are_deg, exp_so3, log_so3, manhattan_symmetries
+from uareme_fusion.rotations import are_deg, exp_so3, log_so3, manhattan_symmetries, nees
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.solver import solve_manhattan
 from uareme_fusion.types import Status, VisualRotation
@@ -261,3 +261,39 @@ def test_gyro_mode_estimates_the_bias_and_beats_paper_mode():
     # World is gravity aligned: the estimated up matches the truth without any alignment.
     up_err = np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", R_gyro[:, 2, :], R_true[:, 2, :]), -1, 1)))
     assert np.median(up_err) < 1.5
+
+
+def test_seeded_nees_of_the_marginal_covariance_is_consistent_without_kernel():
+    """Static camera, visual rotations drawn from their stated anisotropic covariance: with a Gaussian
+    prior (no Huber) the smoother's marginal covariance is the right-perturbation covariance of R_wc,
+    so NEES averages about 3 (slightly below: the smoothness model allows motion that never happens)."""
+    R_true = R_wc_at(0.0)[0]
+    cov_cm = np.diag([0.02, 0.01, 0.005]) ** 2
+    values, unrotated = [], []
+    for seed in range(8):
+        rng = np.random.default_rng(100 + seed)
+        sm = Smoother(SmootherConfig(huber_k=None))
+        for k in range(40):
+            delta = rng.multivariate_normal(np.zeros(3), cov_cm)
+            vis = VisualRotation(R_cm=R_true.T @ exp_so3(-delta), cov=cov_cm, cost=0.0, iterations=1, n_valid=1)
+            est = sm.process_frame(k / 15.0, vis)
+            if k >= 10:
+                values.append(float(nees(est.R_wc, R_true, est.cov)))
+                # The same covariance left in the R_cm convention (not rotated by R_cm) for comparison.
+                R_cm = R_true.T
+                unrotated.append(float(nees(est.R_wc, R_true, R_cm.T @ est.cov @ R_cm)))
+    assert 2.0 < np.mean(values) < 3.6
+    assert np.mean(unrotated) > 5.0  # the convention matters: the wrong frame is clearly inconsistent
+
+
+def test_gyro_mode_rotates_imu_samples_by_R_ci_and_reports_the_bias_in_the_imu_frame():
+    t = np.arange(60) / 15.0
+    R_true = R_wc_at(t)
+    rng = np.random.default_rng(7)
+    bias_c = np.array([0.02, -0.01, 0.015])
+    t_imu, gyro_c, accel_c = imu_for(t, rng, gyro_bias=bias_c, gyro_std=0.01, accel_std=0.05)
+    R_ci = exp_so3(np.array([0.3, -1.2, 2.0]))
+    sm = Smoother(SmootherConfig(mode="gyro", R_ci=R_ci.tolist()))
+    ests = feed(sm, t, [exact_visual(R, 0.01) for R in R_true], imu=(t_imu, gyro_c @ R_ci, accel_c @ R_ci))
+    np.testing.assert_allclose(ests[-1].gyro_bias_rad_s, R_ci.T @ bias_c, atol=0.005)
+    assert are_deg(np.array([e.R_wc for e in ests]), R_true).max() < 1.5

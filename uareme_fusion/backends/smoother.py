@@ -104,6 +104,8 @@ class SmootherConfig(BaseModel):
     """Prior sigma fixing the world's yaw (a gauge) through `R_wm` (gyro mode)."""
     R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
     """Camera-from-IMU rotation (3x3): `gyro_c = R_ci @ gyro_i`."""
+    imu_time_offset_s: float = 0.0
+    """IMU clock minus camera clock: a sample stamped `t` measures the camera time `t - offset`."""
 
     @field_validator("R_ci")
     @classmethod
@@ -146,7 +148,8 @@ class Smoother(Backend):
     """Sliding-window factor-graph smoother over camera attitudes (see module docstring).
 
     Estimates carry `R_wc` (camera to world) and the smoother's marginal covariance of its right
-    perturbation (rad^2); `R_wm` is the identity in paper mode and estimated in gyro mode.
+    perturbation (rad^2); `R_wm` is the identity in paper mode and estimated in gyro mode, where
+    `gyro_bias_rad_s` is the bias of the latest frame in the IMU frame (estimated in the camera frame).
     """
 
     def __init__(self, config: SmootherConfig | None = None):
@@ -180,7 +183,7 @@ class Smoother(Backend):
         """
         if not self._gyro:
             return
-        t_s = np.atleast_1d(np.asarray(t_s, dtype=float))
+        t_s = np.atleast_1d(np.asarray(t_s, dtype=float)) - self.config.imu_time_offset_s
         gyro = np.atleast_2d(np.asarray(gyro_rad_s, dtype=float))
         accel = np.atleast_2d(np.asarray(accel_m_s2, dtype=float))
         if t_s.ndim != 1 or gyro.shape != (len(t_s), 3) or accel.shape != (len(t_s), 3):
@@ -372,4 +375,4 @@ class Smoother(Backend):
         if bias is not None:
             self._bias = bias
         return Estimate(t_s, R_wc, 0.5 * (cov + cov.T), status, R_wm=R_wm.copy(),
-                        gyro_bias_rad_s=None if bias is None else bias.copy())
+                        gyro_bias_rad_s=None if bias is None else self._R_ci.T @ bias)
