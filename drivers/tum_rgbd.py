@@ -1,0 +1,176 @@
+"""Reader for TUM RGB-D style sequences (TUM RGB-D, ICL-NUIM, and the simulator's output).
+
+Layout: `rgb.txt` and `depth.txt` (`timestamp filename` lines), or `associations.txt`
+(`t file t file`, rgb and depth in either order, as TUM's associate.py and ICL-NUIM write it);
+`groundtruth.txt` (`timestamp tx ty tz qx qy qz qw`); optional `accelerometer.txt`
+(`timestamp ax ay az`). Lines starting with `#` are comments. Depth PNGs are 16-bit with
+`depth_scale` units per metre (5000 for TUM and ICL-NUIM; the simulator states its own in
+scene.json and `load_tum_rgbd` reads it from there when present).
+
+    seq = load_tum_rgbd("/path/to/sequence")
+    for frame in seq.frames(): ...          # uareme_fusion.types.Frame (rgb uint8 RGB, depth m)
+    t, p_w, quat_xyzw = seq.groundtruth      # TUM order: quaternion x y z w
+
+Conventions: the ground-truth quaternion is whatever the file holds. For TUM and the simulator it
+is the camera-to-world rotation `R_wc`; ICL-NUIM's published camera has its y axis flipped with
+respect to OpenCV (fy < 0), which this reader does not change. Frames are paired by nearest
+timestamp within `max_dt_s`; unpaired images are counted in `n_unpaired`, never silently lost.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from uareme_fusion.errors import InputError
+from uareme_fusion.types import Frame
+
+TUM_DEPTH_SCALE = 5000.0
+"""Depth PNG units per metre in TUM RGB-D and ICL-NUIM."""
+
+
+def read_tum_list(path: Path) -> tuple[np.ndarray, list[str]]:
+    """`timestamp filename` lines -> (t_s (N,), filenames)."""
+    rows = _load_text(path, dtype=str, columns=2)
+    return rows[:, 0].astype(float), [str(f) for f in rows[:, 1]]
+
+
+def read_tum_trajectory(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`timestamp tx ty tz qx qy qz qw` -> (t_s (N,), p (N, 3) m, quat_xyzw (N, 4))."""
+    rows = _load_text(path, dtype=float, columns=8)
+    return rows[:, 0], rows[:, 1:4], rows[:, 4:8]
+
+
+def read_tum_accelerometer(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """`timestamp ax ay az` -> (t_s (N,), accel_m_s2 (N, 3))."""
+    rows = _load_text(path, dtype=float, columns=4)
+    return rows[:, 0], rows[:, 1:4]
+
+
+def _load_text(path: Path, dtype, columns: int) -> np.ndarray:
+    try:
+        with warnings.catch_warnings():  # blank lines are fine in these files
+            warnings.simplefilter("ignore", UserWarning)
+            rows = np.loadtxt(path, dtype=dtype, comments="#", ndmin=2)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot read {path}: {exc}") from None
+    if rows.size == 0:
+        return np.zeros((0, columns), dtype=rows.dtype)
+    if rows.shape[1] < columns:
+        raise InputError(f"{path}: expected {columns} columns per line, got {rows.shape[1]}")
+    return rows[:, :columns]
+
+
+def associate(t_a: np.ndarray, t_b: np.ndarray, max_dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (ia, ib) pairing each time in t_a with the nearest in t_b within max_dt_s
+    (both sorted ascending); each b is used at most once."""
+    t_a, t_b = np.asarray(t_a, float), np.asarray(t_b, float)
+    if len(t_a) == 0 or len(t_b) == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    right = np.searchsorted(t_b, t_a)
+    lo, hi = np.clip(right - 1, 0, len(t_b) - 1), np.clip(right, 0, len(t_b) - 1)
+    j = np.where(np.abs(t_b[lo] - t_a) <= np.abs(t_b[hi] - t_a), lo, hi)
+    ok = np.abs(t_b[j] - t_a) <= max_dt_s
+    ia, ib = np.flatnonzero(ok), j[ok]
+    _, first = np.unique(ib, return_index=True)
+    return ia[first], ib[first]
+
+
+@dataclass(frozen=True)
+class TumSequence:
+    """An RGB-D sequence: paired image paths, optional ground truth and accelerometer."""
+
+    root: Path
+    t_s: np.ndarray
+    """(N,) rgb timestamps of the paired frames, s."""
+    rgb_paths: list[Path]
+    depth_paths: list[Path | None]
+    depth_scale: float
+    groundtruth: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+    """(t_s, p_w (M, 3) m, quat_xyzw (M, 4)) or None."""
+    accelerometer: tuple[np.ndarray, np.ndarray] | None
+    """(t_s, accel_m_s2 (M, 3)) or None."""
+    K: np.ndarray | None
+    n_unpaired: int = 0
+    """rgb images without a depth image within max_dt_s (they are kept, with depth None)."""
+    n_missing: int = 0
+    """listed rgb images whose file does not exist (left out of the sequence)."""
+
+    def __len__(self) -> int:
+        return len(self.rgb_paths)
+
+    def read_frame(self, i: int) -> Frame:
+        """Frame i: rgb (H, W, 3) uint8 RGB order, depth (H, W) float32 m (0 = missing)."""
+        bgr = cv2.imread(str(self.rgb_paths[i]), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise InputError(f"cannot read image {self.rgb_paths[i]}")
+        depth = None
+        if self.depth_paths[i] is not None:
+            raw = cv2.imread(str(self.depth_paths[i]), cv2.IMREAD_UNCHANGED)
+            if raw is None or raw.ndim != 2:
+                raise InputError(f"cannot read 16-bit depth image {self.depth_paths[i]}")
+            depth = raw.astype(np.float32) / np.float32(self.depth_scale)
+        return Frame(float(self.t_s[i]), bgr[..., ::-1].copy(), depth, self.K, i)
+
+    def frames(self) -> Iterator[Frame]:
+        for i in range(len(self)):
+            yield self.read_frame(i)
+
+    def R_wc_at(self, t_s: np.ndarray) -> np.ndarray:
+        """Ground-truth rotations (N, 3, 3) at times t_s by slerp (as stored: R_wc for TUM/sim)."""
+        if self.groundtruth is None:
+            raise InputError(f"{self.root} has no groundtruth.txt")
+        t_gt, _, q = self.groundtruth
+        t = np.clip(np.asarray(t_s, float), t_gt[0], t_gt[-1])
+        return Slerp(t_gt, Rotation.from_quat(q))(t).as_matrix()
+
+
+def load_tum_rgbd(root: str | Path, depth_scale: float | None = None, max_dt_s: float = 0.02) -> TumSequence:
+    """Open a TUM RGB-D style folder (see the module docstring). `depth_scale` defaults to the
+    simulator's scene.json value when present, else 5000 units per metre."""
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(f"TUM RGB-D folder {root} does not exist")
+    K = None
+    scene_json = root / "scene.json"
+    if scene_json.is_file():
+        meta = json.loads(scene_json.read_text())
+        depth_scale = depth_scale or float(meta.get("depth_scale", TUM_DEPTH_SCALE))
+        K = np.asarray(meta["K"], float) if "K" in meta else None
+    depth_scale = depth_scale or TUM_DEPTH_SCALE
+
+    n_unpaired = 0
+    if (root / "rgb.txt").is_file():
+        t_rgb, rgb_files = read_tum_list(root / "rgb.txt")
+        t_dep, dep_files = read_tum_list(root / "depth.txt") if (root / "depth.txt").is_file() else (np.zeros(0), [])
+        ia, ib = associate(t_rgb, t_dep, max_dt_s)
+        depth_for = dict(zip(ia.tolist(), ib.tolist()))
+        depth_paths = [root / dep_files[depth_for[i]] if i in depth_for else None for i in range(len(t_rgb))]
+        n_unpaired = len(t_rgb) - len(ia) if len(dep_files) else 0
+    elif (root / "associations.txt").is_file():
+        rows = _load_text(root / "associations.txt", dtype=str, columns=4)
+        depth_first = len(rows) > 0 and "depth" in rows[0, 1] and "rgb" not in rows[0, 1]
+        c_rgb, c_dep = (2, 0) if depth_first else (0, 2)
+        t_rgb, rgb_files = rows[:, c_rgb].astype(float), list(rows[:, c_rgb + 1])
+        depth_paths = [root / f for f in rows[:, c_dep + 1]]
+    else:
+        raise InputError(f"{root} has neither rgb.txt nor associations.txt (TUM RGB-D layout)")
+    rgb_paths = [root / f for f in rgb_files]
+    exists = np.array([p.is_file() for p in rgb_paths], bool)
+    n_missing = int(np.sum(~exists))
+    if n_missing == len(rgb_paths):
+        raise InputError(f"{root}: none of the {len(rgb_paths)} listed rgb images exist")
+    keep = np.flatnonzero(exists)
+    t_rgb = np.asarray(t_rgb, float)[keep]
+    rgb_paths = [rgb_paths[i] for i in keep]
+    depth_paths = [depth_paths[i] for i in keep]
+    gt = read_tum_trajectory(root / "groundtruth.txt") if (root / "groundtruth.txt").is_file() else None
+    acc = read_tum_accelerometer(root / "accelerometer.txt") if (root / "accelerometer.txt").is_file() else None
+    return TumSequence(root, t_rgb, rgb_paths, depth_paths, float(depth_scale), gt, acc, K, n_unpaired, n_missing)
