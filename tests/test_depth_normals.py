@@ -146,7 +146,7 @@ def test_missing_depth_gets_kappa_zero():
 def test_stride_repeats_the_strided_fit():
     depth, _ = render_planes(K, np.array([[0.3, 0.2, -1.0]]), [-2.0], 101, 75)
     d = depth.astype(np.float32)
-    full = DepthNormals().estimate(d, K)
+    full = DepthNormals(DepthNormalsConfig(stride_px=1)).estimate(d, K)
     half = DepthNormals(DepthNormalsConfig(stride_px=2)).estimate(d, K)
     assert half.normals.shape == (101, 75, 3) and half.kappa.shape == (101, 75)
     np.testing.assert_allclose(half.normals[::2, ::2], full.normals[::2, ::2], atol=1e-6)
@@ -211,11 +211,11 @@ def icl_sequence():
     return root, gt[:, 0].astype(int), matrix_from_quat_xyzw(gt[:, 4:8])
 
 
-def icl_depth_rotations(stride_px=1):
+def icl_depth_rotations():
     """Single-frame rotations from depth normals on ICL-NUIM kt3 (each solve initialised from the
     previous frame), with the ground truth converted to the OpenCV camera frame."""
     root, index, R_wc_published = icl_sequence()
-    est = DepthNormals(DepthNormalsConfig(stride_px=stride_px))
+    est = DepthNormals()
     backend = SingleFrame()
     estimates = []
     for i in index:
