@@ -47,6 +47,10 @@ def facing(n, offset):
     return -np.sign(offset) * np.asarray(n)
 
 
+def unit(v):
+    return np.asarray(v, float) / np.linalg.norm(v)
+
+
 def angle_deg(a, b):
     return np.degrees(np.arccos(np.clip(np.sum(a * b, axis=-1), -1.0, 1.0)))
 
@@ -113,6 +117,30 @@ def test_depth_discontinuity_gets_low_kappa():
     assert flat > 20
     assert nm.kappa[40:80, 58:62].max() < 0.05 * flat and nm.kappa[38:42, 60:100].max() < 0.05 * flat
     np.testing.assert_allclose(nm.normals[50:70, 70:90], np.broadcast_to([0, 0, -1], (20, 20, 3)), atol=1e-6)
+
+
+def test_oak_like_stereo_depth_in_millimetres(tmp_path):
+    """A room seen by a stereo pair (640x400, f = 450 px, 7.5 cm baseline): disparity noise of 0.1 px,
+    1/8 px subpixel steps, stored as uint16 millimetres as OAK cameras do."""
+    rng = np.random.default_rng(3)
+    K_oak = np.array([[450.0, 0.0, 319.5], [0.0, 450.0, 199.5], [0.0, 0.0, 1.0]])
+    R_cm = matrix_from_quat_xyzw(unit([0.1, 0.25, -0.05, 0.96]))
+    axes = np.concatenate([R_cm.T, R_cm.T])
+    offsets = np.array([2.0, 1.4, 3.5, -2.5, -1.6, -1.0])
+    depth, _ = render_planes(K_oak, axes, offsets, 400, 640)
+    focal_baseline = 450.0 * 0.075
+    disparity = np.round((focal_baseline / depth + rng.normal(0.0, 0.1, depth.shape)) * 8.0) / 8.0
+    path = tmp_path / "oak_depth.png"
+    cv2.imwrite(str(path), np.round(1000.0 * focal_baseline / disparity).astype(np.uint16))
+    cfg = DepthNormalsConfig.for_stereo(focal_px=450.0, baseline_m=0.075, disparity_noise_px=0.1)
+    assert cfg.noise_quadratic_m_per_m2 == pytest.approx(0.1 / focal_baseline)
+    nm = DepthNormals(cfg).estimate(read_depth_png(path, MILLIMETRE_DEPTH_UNIT_M, (400, 640)), K_oak)
+    assert np.mean(nm.kappa > 0) > 0.8
+    v = solve_manhattan(nm.normals, nm.kappa)
+    R_est, _ = nearest_symmetric(v.R_cm, R_cm)
+    assert np.degrees(angle_between(R_est, R_cm)) < 1.0
+    with pytest.raises(ConfigError, match="for_stereo"):
+        DepthNormalsConfig.for_stereo(focal_px=450.0, baseline_m=0.0)
 
 
 def test_sensor_model_lowers_kappa_with_depth():

@@ -74,6 +74,18 @@ class DepthNormalsConfig:
     kappa_max: float = 100.0
     """Cap on kappa (the paper caps at 100); flat noiseless planes would otherwise go to infinity."""
 
+    @classmethod
+    def for_stereo(cls, focal_px: float, baseline_m: float, disparity_noise_px: float = 0.1, **kwargs):
+        """Sensor model of a stereo pair: z = f b / d, so sigma_z = sigma_d z^2 / (f b).
+
+        OAK-D at 640x400: focal_px ~ 450, baseline_m = 0.075 (0.1 px gives ~3e-3 m/m^2)."""
+        if not (focal_px > 0 and baseline_m > 0 and disparity_noise_px > 0):
+            raise ConfigError(
+                f"for_stereo needs focal_px, baseline_m and disparity_noise_px > 0, got "
+                f"{focal_px}, {baseline_m}, {disparity_noise_px}"
+            )
+        return cls(noise_quadratic_m_per_m2=disparity_noise_px / (focal_px * baseline_m), **kwargs)
+
     def __post_init__(self):
         if self.window_px < 3 or self.window_px % 2 == 0:
             raise ConfigError(f"window_px must be an odd integer >= 3, got {self.window_px}")
