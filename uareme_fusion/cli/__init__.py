@@ -5,5 +5,6 @@ from .app import app, main
 # Each import registers its commands on `app`.
 from . import bench_cmd, demo_cmd, solve_cmd  # noqa: E402,F401
 from . import compare_cmd  # noqa: E402,F401
+from . import simulate_cmd  # noqa: E402,F401
 
 __all__ = ["app", "main"]

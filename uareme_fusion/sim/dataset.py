@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import io
 import json
+import shutil
 import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -114,6 +115,9 @@ def prepare_out_dir(out_dir: Path, force: bool) -> None:
     if out_dir.exists() and any(out_dir.iterdir()) and not force:
         raise InputError(f"--out {out_dir} is not empty; pass --force to overwrite it")
     out_dir.mkdir(parents=True, exist_ok=True)
+    for sub in ("rgb", "depth", "normals", "imu0"):  # only what write_sequence itself writes
+        if force and (out_dir / sub).is_dir():
+            shutil.rmtree(out_dir / sub)
 
 
 def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
