@@ -88,14 +88,22 @@ class ImuStream:
         """Add samples; return those now older than the newest by more than the reorder window."""
         t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
         finite = np.isfinite(t) & np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)
-        self.counts.nonfinite += int((~finite).sum())
-        t, gyro, accel = t[finite], gyro[finite], accel[finite]
+        if not finite.all():
+            self.counts.nonfinite += int((~finite).sum())
+            t, gyro, accel = t[finite], gyro[finite], accel[finite]
+        held = self._held
+        newest = held.t_s[-1] if len(held) else self.watermark_s
+        if t.size and t[0] > newest and (t.size == 1 or bool((t[1:] > t[:-1]).all())):
+            # In order (the usual case): append.
+            saturated = (np.abs(gyro) >= self.gyro_range_rad_s).any(axis=1)
+            self._held = ImuBatch(np.concatenate([held.t_s, t]), np.concatenate([held.gyro_rad_s, gyro]),
+                                  np.concatenate([held.accel_m_s2, accel]), np.concatenate([held.saturated, saturated]))
+            return self.release_until(t[-1] - self.reorder_window_s, move_watermark=False)
         stale = t <= self.watermark_s
         self.counts.duplicate += int(np.sum(t == self.watermark_s))
         self.counts.late += int(np.sum(t < self.watermark_s))
         t, gyro, accel = t[~stale], gyro[~stale], accel[~stale]
         if t.size:
-            held = self._held
             t_all = np.concatenate([held.t_s, t])
             gyro_all = np.concatenate([held.gyro_rad_s, gyro])
             accel_all = np.concatenate([held.accel_m_s2, accel])

@@ -37,6 +37,11 @@ TH, BG, MF, RATE = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
 """Blocks of the 12-dimensional error state."""
 N_STATE = 12
 I3 = np.eye(3)
+_ZERO_STATE = np.zeros(N_STATE)
+_DIAG_TH = (np.arange(0, 3), np.arange(0, 3))
+_DIAG_BG = (np.arange(3, 6), np.arange(3, 6))
+_DIAG_TH_BG = (np.arange(0, 3), np.arange(3, 6))
+_DIAG_BG_TH = (np.arange(3, 6), np.arange(0, 3))
 
 
 class MekfMode(str, enum.Enum):
@@ -47,6 +52,14 @@ class MekfMode(str, enum.Enum):
     VISUAL_IMU = "visual_imu"
     IMU_ONLY = "imu_only"
     VISUAL_ONLY = "visual_only"
+
+
+class GyroSampling(str, enum.Enum):
+    """What a gyro sample stamped t_k measures: the rate at t_k (`instant`, integrated with the
+    trapezoid rule) or the mean rate over (t_{k-1}, t_k] (`interval`, as many IMUs output)."""
+
+    INSTANT = "instant"
+    INTERVAL = "interval"
 
 
 class MekfConfig(BaseModel):
@@ -61,6 +74,7 @@ class MekfConfig(BaseModel):
     """Gyro bias random-walk density, rad/s^2/sqrt(Hz)."""
     gyro_bias_initial_std_rad_s: float = Field(0.01, ge=0)
     """Prior standard deviation of each gyro bias component, rad/s."""
+    gyro_sampling: GyroSampling = GyroSampling.INSTANT
     gyro_range_rad_s: float = Field(34.9, gt=0)
     """Gyro full scale, rad/s (34.9 = 2000 deg/s); readings at or beyond it are flagged."""
     unknown_rate_std_rad_s: float = Field(2.0, gt=0)
@@ -75,10 +89,12 @@ class MekfConfig(BaseModel):
     samples has std `this / sqrt(T)` per tilt axis before inflation."""
     accel_update_period_s: float = Field(0.04, gt=0)
     """Accelerometer samples are averaged (in a common camera frame) over this long per update, s."""
-    accel_norm_inflation_rad: float = Field(1.0, ge=0)
-    """Extra tilt std (rad) per unit of rms relative deviation of |a| from gravity."""
-    accel_innovation_inflation: float = Field(1.0, ge=0)
-    """Extra tilt std per rad of innovation angle between measured and predicted up (dimensionless)."""
+    accel_norm_scale: float = Field(0.05, gt=0)
+    """Relative deviation of |mean a| from gravity (dimensionless) at which the update's variance
+    doubles: variance factor `1 + (dev / this)^2`."""
+    accel_innovation_scale_rad: float = Field(0.05, gt=0)
+    """Angle between measured and predicted up at which the update's variance doubles, rad:
+    variance factor `1 + (angle / this)^2` (continuous, no timeouts)."""
     accel_downweight_flag_ratio: float = Field(2.0, gt=1)
     """ACCEL_DOWNWEIGHTED is set when the inflated std exceeds this many times the nominal one."""
     initial_tilt_std_rad: float = Field(0.03, gt=0)
@@ -123,8 +139,9 @@ class MekfConfig(BaseModel):
 
 
 def _orthonormal(R: np.ndarray) -> np.ndarray:
-    """Nearest rotation (scipy re-normalises through the quaternion)."""
-    return Rotation.from_matrix(R).as_matrix()
+    """One Newton step of the polar decomposition, `R (3 I - R^T R) / 2`: removes the rounding drift
+    of a product of rotations (quadratic convergence; exact rotations are fixed points)."""
+    return 0.5 * R @ (3.0 * I3 - R.T @ R)
 
 
 def _prefix_products(M: np.ndarray) -> np.ndarray:
@@ -150,6 +167,11 @@ class Mekf(Backend):
     def __init__(self, config: MekfConfig | None = None):
         self.config = cfg = config or MekfConfig()
         self.R_ci = np.asarray(cfg.R_ci, float)
+        self._imu_is_camera = bool(np.array_equal(self.R_ci, I3))
+        self._q_gyro = cfg.gyro_noise_rad_s_sqrt_hz**2
+        self._q_bias = cfg.gyro_bias_rw_rad_s2_sqrt_hz**2
+        self._inv_g = 1.0 / cfg.gravity_m_s2
+        self._trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
         self.stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
         self.mode = cfg.mode
         self.R_wc = np.eye(3)
@@ -172,7 +194,6 @@ class Mekf(Backend):
         # Accelerometer average since the last update, expressed in the current camera frame.
         self._acc_sum_c = np.zeros(3)
         self._acc_time_s = 0.0
-        self._acc_norm_dev2_s = 0.0
         self._record_t: list[np.ndarray] = []
         self._record_R: list[np.ndarray] = []
 
@@ -192,7 +213,7 @@ class Mekf(Backend):
     def flush(self) -> None:
         """Release and integrate every buffered IMU sample (end of an IMU-only stream)."""
         self._queue(self.stream.flush())
-        self._integrate_pending()
+        self._integrate_pending(force_init=True)
 
     def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
         """Propagate to `t_s`, fuse `visual` (None for a dropped frame) and return the estimate.
@@ -230,9 +251,7 @@ class Mekf(Backend):
         model in visual-only mode."""
         if self.mode in (MekfMode.VISUAL_IMU, MekfMode.IMU_ONLY, MekfMode.AUTO):
             self._queue(self.stream.release_until(t_s))
-            self._integrate_pending()
-            if self.initialised and t_s > self.t_state:
-                self._extrapolate_gyro(t_s)
+            self._integrate_pending(extrapolate_to_s=t_s, force_init=True)
         elif self.initialised and t_s > self.t_state:
             self._propagate_constant_rate(t_s - self.t_state)
             self.t_state = t_s
@@ -256,107 +275,121 @@ class Mekf(Backend):
             if len(self._pending) > 1:
                 self._pending_span_s = float(batch.t_s[-1] - self._pending[0].t_s[0])
 
-    def _integrate_pending(self) -> None:
-        if not self._pending:
-            return
+    def _integrate_pending(self, extrapolate_to_s: float | None = None, force_init: bool = False) -> None:
+        """Integrate the released samples; with `extrapolate_to_s`, then hold the last gyro rate up
+        to that time (a synthetic sample that carries no accelerometer weight)."""
         batches, self._pending, self._pending_span_s = self._pending, [], 0.0
-        t = np.concatenate([b.t_s for b in batches])
-        gyro_c = np.concatenate([b.gyro_rad_s for b in batches]) @ self.R_ci.T
-        accel_c = np.concatenate([b.accel_m_s2 for b in batches]) @ self.R_ci.T
-        saturated = np.concatenate([b.saturated for b in batches])
+        if len(batches) == 1:
+            b = batches[0]
+            t, gyro_i, accel_i, saturated = b.t_s, b.gyro_rad_s, b.accel_m_s2, b.saturated
+        elif batches:
+            t = np.concatenate([b.t_s for b in batches])
+            gyro_i = np.concatenate([b.gyro_rad_s for b in batches])
+            accel_i = np.concatenate([b.accel_m_s2 for b in batches])
+            saturated = np.concatenate([b.saturated for b in batches])
+        else:
+            t, gyro_i, accel_i, saturated = np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, bool)
+        gyro_c, accel_c = (gyro_i, accel_i) if self._imu_is_camera else (gyro_i @ self.R_ci.T, accel_i @ self.R_ci.T)
         if not self.initialised:
-            t, gyro_c, accel_c, saturated = self._initialise_from_accel(t, gyro_c, accel_c, saturated)
             if t.size == 0:
                 return
+            t, gyro_c, accel_c, saturated = self._initialise_from_accel(t, gyro_c, accel_c, saturated, force_init)
+            if not self.initialised:
+                return
+        weight = None
+        last_t = t[-1] if t.size else self.t_state
+        if extrapolate_to_s is not None and extrapolate_to_s > last_t:
+            held = gyro_c[-1] if t.size else self._last_gyro_c
+            weight = np.ones(t.size + 1)
+            weight[-1] = 0.0
+            t = np.append(t, extrapolate_to_s)
+            gyro_c = np.vstack([gyro_c, held])
+            accel_c = np.vstack([accel_c, np.zeros(3)])
+            saturated = np.append(saturated, False)
+        if t.size == 0:
+            return
         # Split at accelerometer-update boundaries so each chunk ends with at most one update.
         period = self.config.accel_update_period_s
-        elapsed = self._acc_time_s + (t - self.t_state)
-        chunk_id = np.floor(elapsed / period).astype(int)
-        cuts = np.flatnonzero(np.diff(chunk_id)) + 1
+        if self._acc_time_s + (t[-1] - self.t_state) < period:
+            self._integrate_chunk(t, gyro_c, accel_c, saturated, weight)
+            return
+        # A sample belongs to the chunk in which its interval starts, so a chunk ends on the sample
+        # whose interval crosses the boundary.
+        elapsed_before = self._acc_time_s + (np.concatenate([[self.t_state], t[:-1]]) - self.t_state)
+        cuts = np.flatnonzero(np.diff(np.floor(elapsed_before / period))) + 1
         for idx in np.split(np.arange(t.size), cuts):
-            self._integrate_chunk(t[idx], gyro_c[idx], accel_c[idx], saturated[idx])
+            self._integrate_chunk(t[idx], gyro_c[idx], accel_c[idx], saturated[idx],
+                                  None if weight is None else weight[idx])
             if self._acc_time_s >= period:
                 self._accel_update()
 
-    def _integrate_chunk(self, t, gyro_c, accel_c, saturated) -> None:
+    def _integrate_chunk(self, t, gyro_c, accel_c, saturated, weight) -> None:
         """Integrate samples (camera frame) over (t_state, t[-1]]: sample k covers (t_{k-1}, t_k]
-        with the mean of its rate and the previous one (trapezoid)."""
+        with the mean of its rate and the previous one (trapezoid); `weight` (0 or 1) says whether
+        its accelerometer reading counts. One scipy call integrates the chunk; the transition
+        matrices are composed in closed form."""
         cfg = self.config
-        dt = np.diff(t, prepend=self.t_state)
-        prev = np.vstack([self._last_gyro_c[None], gyro_c[:-1]])
-        rate_c = 0.5 * (prev + gyro_c) - self.b_c
-        unknown = (dt > cfg.imu_gap_limit_s) | saturated
-        if unknown.any():
-            self._flags |= Status.IMU_GAP if (dt > cfg.imu_gap_limit_s).any() else Status.OK
-            self._flags |= Status.GYRO_SATURATED if saturated.any() else Status.OK
-            self.counters["imu_gaps"] += int((dt > cfg.imu_gap_limit_s).sum())
-        dt_used = np.where(dt > cfg.imu_gap_limit_s, 0.0, dt)
-        M = exp_so3(rate_c * dt_used[:, None])
+        n = t.size
+        dt = np.empty(n)
+        dt[0] = t[0] - self.t_state
+        dt[1:] = t[1:] - t[:-1]
+        if self._trapezoid:
+            rate_c = np.empty((n, 3))
+            rate_c[0] = self._last_gyro_c
+            rate_c[1:] = gyro_c[:-1]
+            rate_c += gyro_c
+            rate_c *= 0.5
+            rate_c -= self.b_c
+        else:
+            rate_c = gyro_c - self.b_c
+        unknown_var = 0.0
+        gap = dt > cfg.imu_gap_limit_s
+        if gap.any() or saturated.any():
+            # Do not integrate garbage: skip gaps, and grow the attitude variance by an unknown rate.
+            unknown = gap | saturated
+            unknown_var = float(np.sum((cfg.unknown_rate_std_rad_s * dt[unknown]) ** 2))
+            if gap.any():
+                self._flags |= Status.IMU_GAP
+                self.counters["imu_gaps"] += int(gap.sum())
+            if saturated.any():
+                self._flags |= Status.GYRO_SATURATED
+            dt = np.where(gap, 0.0, dt)
+        M = exp_so3(rate_c * dt[:, None])
         C = _prefix_products(M)
         C_N = C[-1]
         if cfg.record_imu_estimates:
             self._record_t.append(t.copy())
             self._record_R.append(self.R_wc @ C)
         self.R_wc = _orthonormal(self.R_wc @ C_N)
-        T = float(dt_used.sum())
-        # Error transition over the chunk (paper-independent MEKF algebra, right perturbations):
-        # dtheta_N = C_N^T dtheta_0 - C_N^T sum_k dt_k C_k db.
+        T = float(t[-1] - self.t_state) if unknown_var == 0.0 else float(dt.sum())
+        # Error transition over the chunk (right perturbations), per sample
+        # dtheta_{k+1} = M_k^T dtheta_k - dt_k db, composed: dtheta_N = C_N^T dtheta_0 - C_N^T sum_k dt_k C_k db.
         F = np.eye(N_STATE)
         F[TH, TH] = C_N.T
-        F[TH, BG] = -C_N.T @ np.einsum("k,kij->ij", dt_used, C)
+        F[TH, BG] = -C_N.T @ np.einsum("k,kij->ij", dt, C)
+        # White gyro noise is isotropic, so its rotated sum is q_g T I; bias random walk to 2nd order.
+        q_g, q_b = self._q_gyro, self._q_bias
         Q = np.zeros((N_STATE, N_STATE))
-        q_g, q_b = cfg.gyro_noise_rad_s_sqrt_hz**2, cfg.gyro_bias_rw_rad_s2_sqrt_hz**2
-        unknown_var = float(np.sum((cfg.unknown_rate_std_rad_s * dt[unknown]) ** 2))
-        Q[TH, TH] = (q_g * T + q_b * T**3 / 3.0 + unknown_var) * I3
-        Q[TH, BG] = Q[BG, TH] = -q_b * T**2 / 2.0 * I3
-        Q[BG, BG] = q_b * T * I3
+        Q[_DIAG_TH] = q_g * T + q_b * T**3 / 3.0 + unknown_var
+        Q[_DIAG_TH_BG] = Q[_DIAG_BG_TH] = -q_b * T**2 / 2.0
+        Q[_DIAG_BG] = q_b * T
         self._add_manhattan_noise(Q, float(t[-1] - self.t_state))
-        _, self.P = kf_predict(np.zeros(N_STATE), self.P, F, Q)
+        _, self.P = kf_predict(_ZERO_STATE, self.P, F, Q)
         # Accelerometer: time-weighted sum of specific force, rotated into the chunk's end frame.
-        acc_end = np.einsum("ji,kjl,kl->i", C_N, C, accel_c * dt_used[:, None])
-        self._acc_sum_c = C_N.T @ self._acc_sum_c + acc_end
-        g = cfg.gravity_m_s2
-        self._acc_norm_dev2_s += float(np.sum(dt_used * ((np.linalg.norm(accel_c, axis=1) - g) / g) ** 2))
-        self._acc_time_s += T
+        w_dt = dt if weight is None else dt * weight
+        self._acc_sum_c = C_N.T @ (self._acc_sum_c + np.einsum("kjl,kl,k->j", C, accel_c, w_dt))
+        self._acc_time_s += float(w_dt.sum())
         self._last_gyro_c = gyro_c[-1]
         self.t_state = float(t[-1])
-
-    def _extrapolate_gyro(self, t_s: float) -> None:
-        """Hold the last gyro rate from the last IMU sample to a frame time (no accelerometer)."""
-        dt = t_s - self.t_state
-        if dt > self.config.imu_gap_limit_s:
-            self._flags |= Status.IMU_GAP
-            self.counters["imu_gaps"] += 1
-            self.P[TH, TH] += (self.config.unknown_rate_std_rad_s * dt) ** 2 * I3
-            self._add_manhattan_noise_to_P(dt)
-            self.t_state = t_s
-            return
-        rate = self._last_gyro_c - self.b_c
-        M = exp_so3(rate * dt)
-        self.R_wc = _orthonormal(self.R_wc @ M)
-        F = np.eye(N_STATE)
-        F[TH, TH] = M.T
-        F[TH, BG] = -dt * M.T
-        Q = np.zeros((N_STATE, N_STATE))
-        Q[TH, TH] = self.config.gyro_noise_rad_s_sqrt_hz**2 * dt * I3
-        self._add_manhattan_noise(Q, dt)
-        _, self.P = kf_predict(np.zeros(N_STATE), self.P, F, Q)
-        self._acc_sum_c = M.T @ self._acc_sum_c
-        self.t_state = t_s
 
     def _add_manhattan_noise(self, Q: np.ndarray, dt: float) -> None:
         """Manhattan-frame random walk: yaw about world up and tilt, in m's right-perturbation."""
         cfg = self.config
-        if not self.manhattan_initialised or dt <= 0:
+        if not self.manhattan_initialised or dt <= 0 or not (cfg.manhattan_yaw_rw_rad_sqrt_s or cfg.manhattan_tilt_rw_rad_sqrt_s):
             return
         u = self.R_wm.T @ WORLD_UP
         uu = np.outer(u, u)
         Q[MF, MF] += dt * (cfg.manhattan_yaw_rw_rad_sqrt_s**2 * uu + cfg.manhattan_tilt_rw_rad_sqrt_s**2 * (I3 - uu))
-
-    def _add_manhattan_noise_to_P(self, dt: float) -> None:
-        Q = np.zeros((N_STATE, N_STATE))
-        self._add_manhattan_noise(Q, dt)
-        self.P += Q
 
     def _propagate_constant_rate(self, dt: float) -> None:
         """Visual-only motion model: `R_wc <- R_wc Exp(omega_c dt)`, omega a random walk."""
@@ -379,18 +412,20 @@ class Mekf(Backend):
         cfg = self.config
         T = self._acc_time_s
         acc_c = self._acc_sum_c
-        norm_dev = np.sqrt(self._acc_norm_dev2_s / T) if T > 0 else 0.0
-        self._acc_sum_c, self._acc_time_s, self._acc_norm_dev2_s = np.zeros(3), 0.0, 0.0
+        self._acc_sum_c, self._acc_time_s = np.zeros(3), 0.0
         norm = np.linalg.norm(acc_c)
+        # |mean specific force| against gravity: the mean is taken in a common (rotating) camera
+        # frame, so it is the inertial-frame average and translational accelerations cancel in it.
+        norm_dev = abs(norm / T * self._inv_g - 1.0) if T > 0 else 0.0
         if not norm > 0.1 * cfg.gravity_m_s2 * T:  # near free fall: no direction
             self.counters["accel_skipped"] += 1
             return
         z = acc_c / norm
         h = self.R_wc.T @ WORLD_UP
         angle = float(np.arccos(np.clip(z @ h, -1.0, 1.0)))
-        std0 = cfg.accel_tilt_noise_rad_sqrt_s / np.sqrt(T)
-        extra = cfg.accel_norm_inflation_rad * norm_dev + cfg.accel_innovation_inflation * angle
-        var = std0**2 + extra**2
+        var0 = cfg.accel_tilt_noise_rad_sqrt_s**2 / T
+        var = var0 * (1.0 + (norm_dev / cfg.accel_norm_scale) ** 2) * (1.0 + (angle / cfg.accel_innovation_scale_rad) ** 2)
+        std0 = np.sqrt(var0)
         if var > (cfg.accel_downweight_flag_ratio * std0) ** 2:
             self._flags |= Status.ACCEL_DOWNWEIGHTED
             self.counters["accel_downweighted"] += 1
@@ -440,28 +475,30 @@ class Mekf(Backend):
 
     def _kalman_update(self, residual: np.ndarray, R: np.ndarray, H: np.ndarray) -> None:
         """filterpy update (Joseph form) of the zero-mean error state, then inject and reset."""
-        dx, P = kf_update(np.zeros(N_STATE), self.P, residual, R, H)
-        if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(P))):
+        dx, P = kf_update(_ZERO_STATE, self.P, residual, R, H)
+        if not (np.isfinite(dx).all() and np.isfinite(P).all()):
             return
-        self.R_wc = _orthonormal(self.R_wc @ exp_so3(dx[TH]))
-        self.R_wm = _orthonormal(self.R_wm @ exp_so3(dx[MF]))
-        self.b_c = self.b_c + dx[BG]
-        self.omega_c = self.omega_c + dx[RATE]
         # Reset Jacobian of the right-perturbation error: G = I - skew(dtheta)/2 on rotation blocks.
         G = np.eye(N_STATE)
+        self.R_wc = _orthonormal(self.R_wc @ exp_so3(dx[TH]))
         G[TH, TH] -= 0.5 * skew(dx[TH])
-        G[MF, MF] -= 0.5 * skew(dx[MF])
+        if self.manhattan_initialised:
+            self.R_wm = _orthonormal(self.R_wm @ exp_so3(dx[MF]))
+            G[MF, MF] -= 0.5 * skew(dx[MF])
+        self.b_c = self.b_c + dx[BG]
+        if self.mode == MekfMode.VISUAL_ONLY:
+            self.omega_c = self.omega_c + dx[RATE]
         P = G @ P @ G.T
         self.P = 0.5 * (P + P.T)
 
     # ------------------------------------------------------------------ initialisation
-    def _initialise_from_accel(self, t, gyro_c, accel_c, saturated):
+    def _initialise_from_accel(self, t, gyro_c, accel_c, saturated, force: bool = False):
         """Tilt from the mean of the first `init_accel_window_s` of accelerometer samples; yaw is the
         gauge (variance 0). Returns the samples still to integrate."""
         cfg = self.config
         self._init_samples.append(ImuBatch(t, gyro_c, accel_c, saturated))
         t_all = np.concatenate([b.t_s for b in self._init_samples])
-        if t_all[-1] - t_all[0] < cfg.init_accel_window_s:
+        if t_all[-1] - t_all[0] < cfg.init_accel_window_s and not force:
             return t[:0], gyro_c[:0], accel_c[:0], saturated[:0]
         g_all = np.concatenate([b.gyro_rad_s for b in self._init_samples])
         a_all = np.concatenate([b.accel_m_s2 for b in self._init_samples])
