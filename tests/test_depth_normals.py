@@ -67,7 +67,7 @@ def test_tilted_plane_gives_its_normal_everywhere():
 
 
 def test_room_corner_normals_and_rotation():
-    R_cm = matrix_from_quat_xyzw(np.array([0.2, -0.3, 0.1, 0.93]) / np.linalg.norm([0.2, -0.3, 0.1, 0.93]))
+    R_cm = matrix_from_quat_xyzw(unit([0.2, -0.3, 0.1, 0.93]))
     axes = np.concatenate([R_cm.T, R_cm.T])  # walls r_k . p = h_k on both sides of the camera
     offsets = np.array([1.5, 2.0, 2.5, -1.8, -2.2, -1.2])
     depth, wall = render_planes(K, axes, offsets)
@@ -247,7 +247,8 @@ def icl_depth_rotations():
     backend = SingleFrame()
     estimates = []
     for i in index:
-        nm = est.estimate(read_depth_png(root / "depth" / f"{i}.png", ICL_NUIM_DEPTH_UNIT_M, (480, 640)), ICL_NUIM_K_OPENCV)
+        depth = read_depth_png(root / "depth" / f"{i}.png", ICL_NUIM_DEPTH_UNIT_M, (480, 640))
+        nm = est.estimate(depth, ICL_NUIM_K_OPENCV)
         visual = solve_manhattan(nm.normals, nm.kappa, R_init=backend.predicted_R_cm(float(i)))
         estimates.append(backend.process_frame(float(i), visual))
     return np.array([e.R_wc for e in estimates]), R_wc_published

@@ -23,7 +23,9 @@ def sphere_integral(fn, kappa):
     density changes form (pi/4) and at its width near theta = 0 (independent of the module's rule)."""
     width = min(np.pi / 4, 10.0 / np.sqrt(kappa + 1e-12))
     parts = [(0.0, width), (width, np.pi / 4), (np.pi / 4, np.pi)]
-    total = sum(quad(lambda t: fn(t) * np.sin(t), a, b, epsabs=0, epsrel=1e-12, limit=200)[0] for a, b in parts if b > a)
+    total = sum(
+        quad(lambda t: fn(t) * np.sin(t), a, b, epsabs=0, epsrel=1e-12, limit=200)[0] for a, b in parts if b > a
+    )
     return 2.0 * np.pi * total
 
 
@@ -90,11 +92,6 @@ def test_torch_log_normaliser_matches_numpy_and_its_derivative():
     np.testing.assert_allclose(grad.numpy(), expected, rtol=2e-3, atol=1e-6)
 
 
-def unit(v):
-    v = np.asarray(v, float)
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
 def normals_at_angles(theta_deg):
     """(1, 3, 1, N) predicted normals at the given angles from the true normal (0, 0, -1)."""
     t = np.radians(np.asarray(theta_deg, float))
@@ -133,7 +130,8 @@ def test_loss_is_finite_at_the_ends_and_gradients_reach_the_normals():
     # At theta = 10 deg with kappa = 1e5 the energy term dominates and pulls the normal to the truth.
     assert pred_t.grad[0, 0, 0, 4] > 0
     # kappa = 0 is the uniform density on the sphere: the loss is log(4 pi) whatever the error.
-    single = kappa_nll(torch.tensor(pred[..., :1]), torch.zeros(1, 1, 1, dtype=torch.float64), torch.tensor(true[..., :1]))
+    zero = torch.zeros(1, 1, 1, dtype=torch.float64)
+    single = kappa_nll(torch.tensor(pred[..., :1]), zero, torch.tensor(true[..., :1]))
     assert float(single) == pytest.approx(np.log(4 * np.pi), abs=1e-6)
 
 

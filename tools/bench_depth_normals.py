@@ -116,7 +116,8 @@ def main() -> None:
             )
             print(
                 f"  solver covariance NEES mean {e.mean():.3f} median {np.median(e):.3f} (3 = calibrated); "
-                f"in this loop DepthNormals {np.median(normals_ms):.2f} and solver {np.median(solve_ms):.2f} ms/frame (median)"
+                f"in this loop DepthNormals {np.median(normals_ms):.2f} and solver "
+                f"{np.median(solve_ms):.2f} ms/frame (median)"
             )
 
     corridor = sorted((args.data / "icsl_corridor" / "depth").glob("*.png"))
