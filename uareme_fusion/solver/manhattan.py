@@ -42,7 +42,9 @@ class SolverConfig:
     correlated, so the covariance shrinks with this rather than with the pixel count."""
     covariance_scale: float = 0.85
     """Fitted so that NEES averages 3 on synthetic maps with correlated noise (tools/calibrate_solver.py)."""
-    min_std_rad: float = 1e-4
+    floor_std_rad: float = 1.75e-3
+    """Error floor (0.1 deg) added in quadrature for what the model leaves out (intrinsics, rendering,
+    sensor calibration): a perfect synthetic map does not claim a 0.001-degree answer."""
     max_variance_rad2: float = 1.0
     """Cap on any variance: an unobservable axis (one visible Manhattan direction) gets this."""
 
@@ -140,7 +142,7 @@ class ManhattanSolver:
         return R, iterations, cost, False
 
     def _covariance(self, moments: NormalMoments, R_cm: np.ndarray, cost: float, n_pixels: int) -> np.ndarray:
-        """Absolute covariance of delta: scale * residual / N_eff * H^-1, eigenvalues capped.
+        """Absolute covariance of delta: scale * residual / N_eff * H^-1 plus a floor, eigenvalues capped.
 
         Treating the cost as sum_i w_i theta_i^2 with errors of variance proportional to 1/w_i gives
         cov = (E / N) H^-1 for the normalised cost E and Hessian H; correlated errors replace N with
@@ -154,8 +156,8 @@ class ManhattanSolver:
         eigval, eigvec = np.linalg.eigh(0.5 * (hess + hess.T))
         residual = cfg.covariance_scale * cost / n_eff
         with np.errstate(divide="ignore"):
-            var = np.where(eigval > 0, residual / eigval, np.inf)
-        var = np.clip(var, cfg.min_std_rad**2, cfg.max_variance_rad2)
+            var = np.where(eigval > 0, residual / eigval, np.inf) + cfg.floor_std_rad**2
+        var = np.minimum(var, cfg.max_variance_rad2)
         return (eigvec * var) @ eigvec.T
 
 
