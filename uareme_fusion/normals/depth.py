@@ -184,7 +184,9 @@ class DepthNormals:
 
     def estimate(self, depth_m, K, source: str = "depth map") -> NormalMap:
         """Unit normals (H, W, 3) float32 in the OpenCV camera frame, facing the camera, and kappa
-        (H, W) float32 in [0, kappa_max]; pixels without a normal have kappa 0 and normal (0, 0, 0).
+        (H, W) float32 in [0, kappa_max]. kappa is 0 where the pixel's own depth is missing (its
+        normal, fitted to the neighbours, is kept for display), and kappa is 0 with normal (0, 0, 0)
+        where the window has too few valid points or is not a plane (residual gate).
 
         `depth_m` (H, W) float metres, 0 or NaN where missing; `K` (3, 3) with fx, fy > 0.
         """
