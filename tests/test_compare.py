@@ -74,7 +74,7 @@ def write_dataset(root, n=20, fps=10.0, with_imu=True):
         ti, gyro, accel = simulate_imu(traj, rate_hz=100.0, seed=0)
         (root / "imu0").mkdir()
         np.savetxt(root / "imu0" / "data.csv", np.column_stack([np.rint(ti * 1e9), gyro, accel]), delimiter=",",
-                   header="timestamp [ns],w_x,w_y,w_z,a_x,a_y,a_z", fmt="%.9g")
+                   header="timestamp [ns],w_x,w_y,w_z,a_x,a_y,a_z", fmt=["%d"] + ["%.9g"] * 6)  # EuRoC: integer ns
     return traj, t
 
 

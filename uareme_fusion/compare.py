@@ -31,6 +31,8 @@ from .backends.base import Backend
 from .backends.single import SingleFrame
 from .backends.smoother import Smoother, SmootherConfig, SmootherMode
 from .config import load_config
+from .drivers.euroc_imu import read_euroc_imu
+from .drivers.tum_rgbd import read_tum_list, read_tum_trajectory
 from .errors import InputError
 from .rotations import align_constant, are_deg, nees, tilt_error_deg, up_in_camera
 from .sim.normal_maps import manhattan_normal_map
@@ -187,56 +189,38 @@ def load_sequence(source: str | Path) -> VisualSequence:
     else:
         raise InputError(f"{root}: no normals (expected normals.npz or a normals/ folder of .npz files)")
     if t_frame is None:
-        t_frame = _tum_times(root / "rgb.txt", len(maps))
+        if not (root / "rgb.txt").is_file():
+            raise InputError(f"{root / 'rgb.txt'}: missing (needed for the frame times of the normal maps)")
+        t_frame, _ = read_tum_list(root / "rgb.txt")
     t_frame = np.asarray(t_frame, dtype=float)
     if len(t_frame) != len(maps):
         raise InputError(f"{root}: {len(maps)} normal maps but {len(t_frame)} frame times")
     visuals, invalid = solve_frames(maps, t_frame)
     if invalid:
         notes.append(f"{invalid} normal maps had no valid normals and gave no visual rotation")
-    R_wc_true = _tum_groundtruth(root / "groundtruth.txt", t_frame, notes)
-    imu = _euroc_imu(root / "imu0" / "data.csv", notes)
+    R_wc_true = _groundtruth_at(root / "groundtruth.txt", t_frame, notes)
+    imu = _imu(root / "imu0" / "data.csv", notes)
     return VisualSequence(root.name, t_frame, visuals, *imu, R_wc_true, notes)
 
 
-def _loadtxt(path: Path, ncols: int, **kw) -> np.ndarray:
-    try:
-        data = np.loadtxt(path, comments="#", ndmin=2, **kw)
-    except ValueError as exc:
-        raise InputError(f"{path}: not a numeric table ({exc})") from None
-    if data.shape[1] < ncols:
-        raise InputError(f"{path}: expected at least {ncols} columns, got {data.shape[1]}")
-    return data
-
-
-def _tum_times(path: Path, count: int) -> np.ndarray:
-    if not path.is_file():
-        raise InputError(f"{path}: missing (needed for the frame times of the normal maps)")
-    times = _loadtxt(path, 1, usecols=0, dtype=float)[:, 0]
-    if len(times) != count:
-        raise InputError(f"{path}: {len(times)} frames listed but {count} normal maps")
-    return times
-
-
-def _tum_groundtruth(path: Path, t_frame: np.ndarray, notes: list) -> np.ndarray | None:
+def _groundtruth_at(path: Path, t_frame: np.ndarray, notes: list) -> np.ndarray | None:
     if not path.is_file():
         notes.append("no groundtruth.txt: ARE, tilt and NEES not computed")
         return None
-    data = _loadtxt(path, 8)
-    t, quat_xyzw = data[:, 0], data[:, 4:8]
-    inside = (t_frame >= t[0]) & (t_frame <= t[-1])
-    if not np.all(inside):
-        raise InputError(f"{path}: ground truth covers {t[0]:.3f}-{t[-1]:.3f} s but frames span "
+    t, _, quat_xyzw = read_tum_trajectory(path)
+    if len(t) == 0 or t_frame[0] < t[0] or t_frame[-1] > t[-1]:
+        span = f"{t[0]:.3f}-{t[-1]:.3f} s" if len(t) else "no time"
+        raise InputError(f"{path}: ground truth covers {span} but frames span "
                          f"{t_frame[0]:.3f}-{t_frame[-1]:.3f} s")
     return Slerp(t, Rotation.from_quat(quat_xyzw))(t_frame).as_matrix()
 
 
-def _euroc_imu(path: Path, notes: list):
+def _imu(path: Path, notes: list):
     if not path.is_file():
         notes.append("no imu0/data.csv: IMU backends run without IMU or are skipped")
         return None, None, None
-    data = _loadtxt(path, 7, delimiter=",")
-    return data[:, 0] * 1e-9, data[:, 1:4], data[:, 4:7]
+    imu = read_euroc_imu(path)
+    return imu.t_s, imu.gyro_rad_s, imu.accel_m_s2
 
 
 def make_backends(names=BACKEND_NAMES) -> tuple[dict, dict]:
