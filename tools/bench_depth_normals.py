@@ -63,7 +63,7 @@ def sequence_rotations(depth_files, K, unit_m, estimator: DepthNormals):
         t0 = time.perf_counter()
         nm = estimator.estimate(depth, K, source=str(path))
         normals_ms.append(1e3 * (time.perf_counter() - t0))
-        visual = solve_manhattan(nm.normals, nm.kappa, R_init=backend.predicted_R_cm(float(k)))
+        visual = solve_manhattan(nm, R_init=backend.predicted_R_cm(float(k)))
         estimates.append(backend.process_frame(float(k), visual))
         quality.append(visual.quality)
         solve_ms.append(sum(visual.timing_ms.values()))

@@ -46,6 +46,10 @@ class NormalMap:
     normals: np.ndarray
     kappa: np.ndarray
     t: float = float("nan")
+    independent_regions: float | None = None
+    """How many independent errors a fully valid map of this source carries (errors are spatially
+    correlated); the solver's covariance shrinks with it. None: the solver's default, fitted for
+    network-like errors. Depth normals set it from their plane-fitting window."""
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,8 @@ frame) must pass |fy| here and convert their ground truth with `flip_y_rotation`
 
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -180,7 +182,7 @@ class DepthNormals:
         if frame.depth is None:
             raise InputError(f"{source}: depth normals need a depth map, the frame has none")
         result = self.estimate(frame.depth, frame.K, source=source)
-        return NormalMap(result.normals, result.kappa, t=frame.t)
+        return dataclasses.replace(result, t=frame.t)
 
     def estimate(self, depth_m, K, source: str = "depth map") -> NormalMap:
         """Unit normals (H, W, 3) float32 in the OpenCV camera frame, facing the camera, and kappa
@@ -285,7 +287,9 @@ class DepthNormals:
             normals = _repeat(normals, cfg.stride_px, H, W)
             kappa = _repeat(kappa, cfg.stride_px, H, W)
         kappa[~valid] = 0.0  # no confidence where the pixel itself has no depth
-        return NormalMap(normals=normals.astype(np.float32, copy=False), kappa=kappa.astype(np.float32, copy=False))
+        # Windows overlap: about one independent plane fit per window area carries the errors.
+        return NormalMap(normals=normals.astype(np.float32, copy=False), kappa=kappa.astype(np.float32, copy=False),
+                         independent_regions=H * W / cfg.window_px**2)
 
 
 def _repeat(image: np.ndarray, stride: int, height: int, width: int) -> np.ndarray:

@@ -66,9 +66,12 @@ class ManhattanSolver:
 
     def solve(self, normal_map: NormalMap, R_init: np.ndarray | None = None) -> VisualRotation:
         """Rotation and covariance for one normal map; `R_init` (3, 3) is an `R_cm` guess or None."""
-        return self.solve_arrays(normal_map.normals, normal_map.kappa, R_init, t=normal_map.t)
+        return self.solve_arrays(normal_map.normals, normal_map.kappa, R_init, t=normal_map.t,
+                                 independent_regions=normal_map.independent_regions)
 
-    def solve_arrays(self, normals, kappa=None, R_init=None, t: float = float("nan")) -> VisualRotation:
+    def solve_arrays(self, normals, kappa=None, R_init=None, t: float = float("nan"),
+                     independent_regions: float | None = None) -> VisualRotation:
+        """As `solve`, on arrays; `independent_regions` overrides the config's (see NormalMap)."""
         t0 = time.perf_counter()
         moments = normal_moments(normals, kappa)
         t1 = time.perf_counter()
@@ -82,7 +85,8 @@ class ManhattanSolver:
         else:
             R_cm, iterations, _, converged = self._refine(moments, _check_rotation(R_init))
         cost = float(np.clip(normalised_cost(moments.G, moments.total_weight, R_cm), 0.0, 1.0))
-        cov = self._covariance(moments, R_cm, cost, n_pixels=moments.n_valid + moments.n_invalid)
+        n_pixels = int(np.prod(np.shape(normals)[:-1]))
+        cov = self._covariance(moments, R_cm, cost, n_pixels, independent_regions or self.config.independent_regions)
         t2 = time.perf_counter()
         return VisualRotation(
             R_cm=R_cm,
@@ -141,7 +145,8 @@ class ManhattanSolver:
                     break
         return R, iterations, cost, False
 
-    def _covariance(self, moments: NormalMoments, R_cm: np.ndarray, cost: float, n_pixels: int) -> np.ndarray:
+    def _covariance(self, moments: NormalMoments, R_cm: np.ndarray, cost: float, n_pixels: int,
+                    independent_regions: float) -> np.ndarray:
         """Absolute covariance of delta: scale * residual / N_eff * H^-1 plus a floor, eigenvalues capped.
 
         Treating the cost as sum_i w_i theta_i^2 with errors of variance proportional to 1/w_i gives
@@ -151,7 +156,7 @@ class ManhattanSolver:
         cfg = self.config
         _, hess = gradient_hessian(moments.tensor(), moments.total_weight, R_cm)
         valid_fraction = moments.n_valid / max(n_pixels, 1)
-        n_eff = min(float(moments.n_valid), cfg.independent_regions * valid_fraction)
+        n_eff = min(float(moments.n_valid), independent_regions * valid_fraction)
         n_eff = max(n_eff, 1.0)
         eigval, eigvec = np.linalg.eigh(0.5 * (hess + hess.T))
         residual = cfg.covariance_scale * cost / n_eff
@@ -176,7 +181,8 @@ _DEFAULT_SOLVER = ManhattanSolver()
 def solve_manhattan(normals, kappa=None, R_init=None, config: SolverConfig | None = None) -> VisualRotation:
     """Camera-to-Manhattan rotation and its covariance from a normal map.
 
-    `normals` (H, W, 3) or (N, 3) float in the camera frame (OpenCV: x right, y down, z forward);
+    `normals` (H, W, 3) or (N, 3) float in the camera frame (OpenCV: x right, y down, z forward),
+    or a `NormalMap` (which carries kappa and its source's error correlation);
     `kappa` matching (H, W) or (N,) confidence >= 0, or None for equal weights; `R_init` an `R_cm`
     guess (3, 3) or None for a global search. Returns a `VisualRotation` with `R_cm` (columns are the
     Manhattan axes in camera coordinates) and `cov` (3, 3, rad^2) of `delta` in
@@ -184,6 +190,10 @@ def solve_manhattan(normals, kappa=None, R_init=None, config: SolverConfig | Non
     in `n_invalid`; a map with no valid pixel raises `InputError` (a `ValueError`).
     """
     solver = _DEFAULT_SOLVER if config is None else ManhattanSolver(config)
+    if isinstance(normals, NormalMap):
+        if kappa is not None:
+            raise InputError("Pass kappa inside the NormalMap, not beside it")
+        return solver.solve(normals, R_init)
     return solver.solve_arrays(normals, kappa, R_init)
 
 
