@@ -66,9 +66,12 @@ class RunResult:
         return are_deg(self.R_wc_est, self.R_wc_true)
 
     def nees(self) -> np.ndarray:
-        """NEES after aligning the estimate's world (yaw gauge) to the truth with one rotation."""
+        """NEES after aligning the estimate's world to the truth with one rotation about up (the
+        filter's world yaw is a gauge; its tilt is absolute)."""
         A = align_constant(self.R_wc_est, self.R_wc_true)
-        return nees(A @ self.R_wc_est, self.R_wc_true, self.cov)
+        yaw = np.arctan2(A[1, 0] - A[0, 1], A[0, 0] + A[1, 1])
+        A_yaw = Rotation.from_rotvec([0.0, 0.0, yaw]).as_matrix()
+        return nees(A_yaw @ self.R_wc_est, self.R_wc_true, self.cov)
 
 
 def run_scenario(
