@@ -457,21 +457,26 @@ class Mekf(Backend):
         d = np.sqrt(d2)
         if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_sigma)
+        vertical = self._manhattan_vertical_rows()
+        if vertical is not None:  # one stacked update: the visual rotation and "m's z is up"
+            r_v, R_v, H_v = vertical
+            R_all = np.zeros((6, 6))
+            R_all[:3, :3], R_all[3:, 3:] = R_vis, R_v
+            r, R_vis, H = np.concatenate([r, r_v]), R_all, np.vstack([H, H_v])
         self._kalman_update(r, R_vis, H)
         self.counters["visual_updates"] += 1
-        self._manhattan_vertical_update()
 
-    def _manhattan_vertical_update(self) -> None:
-        """Pseudo-measurement: the Manhattan z axis is (nearly) world up (DESIGN.md "Conventions")."""
+    def _manhattan_vertical_rows(self):
+        """Pseudo-measurement "the Manhattan z axis is (nearly) world up" (DESIGN.md "Conventions"):
+        (residual, covariance, H) or None in visual-only mode or when m's z is far from up."""
         if self.mode == MekfMode.VISUAL_ONLY:
-            return  # the world is the Manhattan frame there
+            return None  # the world is the Manhattan frame there
         h = self.R_wm.T @ WORLD_UP
-        e_z = np.array([0.0, 0.0, 1.0])
         if np.arccos(np.clip(h[2], -1.0, 1.0)) > self.config.manhattan_vertical_max_rad:
-            return
+            return None
         H = np.zeros((3, N_STATE))
         H[:, MF] = _direction_update_jacobian(h)
-        self._kalman_update(e_z - h, self.config.manhattan_vertical_std_rad**2 * I3, H)
+        return np.array([0.0, 0.0, 1.0]) - h, self.config.manhattan_vertical_std_rad**2 * I3, H
 
     def _kalman_update(self, residual: np.ndarray, R: np.ndarray, H: np.ndarray) -> None:
         """filterpy update (Joseph form) of the zero-mean error state, then inject and reset."""
