@@ -101,3 +101,18 @@ def test_quaternion_order_and_projection():
     P = project_to_so3(noisy)
     np.testing.assert_allclose(P.T @ P, np.eye(3), atol=1e-12)
     assert np.linalg.det(P) == pytest.approx(1.0)
+
+
+def test_nees_leaves_gauge_directions_out_and_yaw_alignment():
+    rng = np.random.default_rng(5)
+    cov = np.diag([1e-4, 4e-4, 0.0])  # third direction is a gauge (variance 0)
+    R_est = exp_so3(rng.normal(size=(3000, 3)))
+    d = rng.normal(size=(3000, 3)) * np.sqrt([1e-4, 4e-4, 0.0])
+    R_true = R_est @ exp_so3(d)
+    values = nees(R_est, R_true, np.broadcast_to(cov, (3000, 3, 3)), gauge_variance_rad2=1e-12)
+    assert values.mean() == pytest.approx(2.0, abs=0.15)  # two degrees of freedom remain
+    from uareme_fusion.rotations import align_yaw
+
+    A = exp_so3([0.0, 0.0, 0.7])
+    R_gt = exp_so3(rng.normal(size=(20, 3)))
+    np.testing.assert_allclose(align_yaw(A.T @ R_gt, R_gt), A, atol=1e-9)

@@ -118,16 +118,32 @@ def tilt_error_deg(up_est_c: np.ndarray, up_true_c: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
-def nees(R_est: np.ndarray, R_true: np.ndarray, cov: np.ndarray) -> np.ndarray:
+def nees(R_est: np.ndarray, R_true: np.ndarray, cov: np.ndarray, gauge_variance_rad2: float = 0.0) -> np.ndarray:
     """Normalised estimation error squared of a rotation estimate, stack-wise.
 
     `delta = Log(R_est^T R_true)` is the error in the right-perturbation convention
     `R_true = R_est @ Exp(delta)`, and `cov` (..., 3, 3) is its covariance in rad^2.
-    A consistent estimator averages 3.
+    A consistent estimator averages 3. Directions whose variance is at most `gauge_variance_rad2`
+    are gauge freedoms (e.g. a filter's world yaw, fixed at initialisation with variance 0): they are
+    left out rather than divided by zero, so give 0 only when the covariance is full rank.
     """
     delta = log_so3(np.swapaxes(np.asarray(R_est, float), -1, -2) @ np.asarray(R_true, float))
-    sol = np.linalg.solve(np.asarray(cov, float), delta[..., None])[..., 0]
-    return np.sum(delta * sol, axis=-1)
+    cov = np.asarray(cov, float)
+    if gauge_variance_rad2 <= 0:
+        sol = np.linalg.solve(cov, delta[..., None])[..., 0]
+        return np.sum(delta * sol, axis=-1)
+    var, vec = np.linalg.eigh(cov)
+    proj = np.einsum("...ji,...j->...i", vec, delta)
+    keep = var > gauge_variance_rad2
+    return np.sum(np.where(keep, proj**2 / np.where(keep, var, 1.0), 0.0), axis=-1)
+
+
+def align_yaw(R_est: np.ndarray, R_gt: np.ndarray) -> np.ndarray:
+    """Rotation about world z minimising sum_i ||R_gt_i - A @ R_est_i||_F^2: the alignment for
+    estimates whose tilt is absolute (gravity known) and whose heading is a gauge."""
+    M = np.einsum("nij,nkj->ik", np.asarray(R_gt, float), np.asarray(R_est, float))
+    yaw = np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1])
+    return Rotation.from_rotvec([0.0, 0.0, yaw]).as_matrix()
 
 
 def quat_xyzw(R: np.ndarray) -> np.ndarray:
