@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import typer
+
 from .app import app
 
 
 @app.command()
-def demo() -> None:
-    """Run the method on built-in synthetic data and print what it gets right (about a minute)."""
+def demo(
+    out: Path = typer.Option(Path("uareme-demo"), help="Folder for the demo's plot."),
+) -> None:
+    """Run the method on built-in synthetic data and print what it gets right (under a minute)."""
     from ..demo import run_demo
 
-    run_demo()
+    run_demo(out_dir=out)
