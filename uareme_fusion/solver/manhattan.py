@@ -22,6 +22,11 @@ from .quartic import gradient_hessian, normalised_cost
 RANDOM_NORMALS_COST = 0.4
 """Expected normalised cost of isotropic random normals: 1 - 3 E[c^4] = 1 - 3/5."""
 
+# Levenberg-Marquardt damping of the normalised cost's Hessian (dimensionless, O(1) at a minimum).
+_DAMPING_START = 1e-6
+_DAMPING_MIN = 1e-9
+_DAMPING_GIVE_UP = 1e8
+
 R_CM_UPRIGHT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """Labelling used when there is no prior: m's x is nearest camera right, m's z nearest image up
 (-y in OpenCV), so that `R_wc = R_cm^T` is z-up for an upright camera."""
@@ -75,17 +80,17 @@ class ManhattanSolver:
         t0 = time.perf_counter()
         moments = normal_moments(normals, kappa)
         t1 = time.perf_counter()
+        n_pixels = int(np.prod(np.shape(normals)[:-1]))
         if moments.n_valid == 0 or not moments.total_weight > 0:
             raise InputError(
-                f"No valid normals in a map of shape {np.shape(normals)}: all "
-                f"{int(np.prod(np.shape(normals)[:-1]))} pixels are NaN, zero-length, or have kappa <= 0"
+                f"No valid normals in a map of shape {np.shape(normals)}: all {n_pixels} pixels are NaN, "
+                "zero-length, or have kappa <= 0"
             )
         if R_init is None:
             R_cm, iterations, converged = self._solve_global(moments)
         else:
             R_cm, iterations, _, converged = self._refine(moments, _check_rotation(R_init))
         cost = float(np.clip(normalised_cost(moments.G, moments.total_weight, R_cm), 0.0, 1.0))
-        n_pixels = int(np.prod(np.shape(normals)[:-1]))
         cov = self._covariance(moments, R_cm, cost, n_pixels, independent_regions or self.config.independent_regions)
         t2 = time.perf_counter()
         return VisualRotation(
@@ -122,14 +127,14 @@ class ManhattanSolver:
         G, W, T = moments.G, moments.total_weight, moments.tensor()
         R = R0
         cost = float(normalised_cost(G, W, R))
-        damping = 1e-6
+        damping = _DAMPING_START
         iterations = 0
         while iterations < cfg.max_iterations:
             iterations += 1
             grad, hess = gradient_hessian(T, W, R)
             eig_min = np.linalg.eigvalsh(hess)[0]
             # Levenberg-Marquardt: a shift that makes the model convex, grown while steps fail.
-            mu = max(damping, 1e-9 - eig_min)
+            mu = max(damping, _DAMPING_MIN - eig_min)
             step = np.linalg.solve(hess + mu * np.eye(3), -grad)
             R_new = R @ exp_so3(step)
             if np.linalg.norm(step) < cfg.step_tolerance_rad:
@@ -138,10 +143,10 @@ class ManhattanSolver:
             cost_new = float(normalised_cost(G, W, R_new))
             if cost_new <= cost:
                 R, cost = R_new, cost_new
-                damping = max(damping / 4.0, 1e-9)
+                damping = max(damping / 4.0, _DAMPING_MIN)
             else:
                 damping = mu * 8.0
-                if damping > 1e8:
+                if damping > _DAMPING_GIVE_UP:
                     break
         return R, iterations, cost, False
 
