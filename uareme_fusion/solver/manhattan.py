@@ -165,8 +165,7 @@ class ManhattanSolver:
         n_eff = max(n_eff, 1.0)
         eigval, eigvec = np.linalg.eigh(0.5 * (hess + hess.T))
         residual = cfg.covariance_scale * cost / n_eff
-        with np.errstate(divide="ignore"):
-            var = np.where(eigval > 0, residual / eigval, np.inf) + cfg.floor_std_rad**2
+        var = np.divide(residual, eigval, out=np.full(3, np.inf), where=eigval > 0) + cfg.floor_std_rad**2
         var = np.minimum(var, cfg.max_variance_rad2)
         return (eigvec * var) @ eigvec.T
 

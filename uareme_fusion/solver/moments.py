@@ -91,11 +91,11 @@ def normal_moments(normals, kappa=None) -> NormalMoments:
     n, k = check_normal_map(normals, kappa)
     x, y, z = np.ascontiguousarray(n.T)  # contiguous coordinates: 4x faster products below
     Q = np.empty((6, x.shape[0]), dtype=n.dtype)
-    for row, (a, b) in enumerate(((x, x), (y, y), (z, z), (x, y), (x, z), (y, z))):
-        np.multiply(a, b, out=Q[row])
-    sq_norm = Q[0] + Q[1]
-    sq_norm += Q[2]
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # such pixels become invalid
+        for row, (a, b) in enumerate(((x, x), (y, y), (z, z), (x, y), (x, z), (y, z))):
+            np.multiply(a, b, out=Q[row])
+        sq_norm = Q[0] + Q[1]
+        sq_norm += Q[2]
         # w_i / |n_i|^4 turns the monomials of n_i into those of the unit normal.
         weight = np.divide(1.0 if k is None else k, sq_norm)
         weight /= sq_norm  # two divisions: |n|^4 itself would overflow float32 for |n| > 1e9
