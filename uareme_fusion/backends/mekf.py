@@ -89,6 +89,12 @@ class MekfConfig(BaseModel):
     samples has std `this / sqrt(T)` per tilt axis before inflation."""
     accel_update_period_s: float = Field(0.04, gt=0)
     """Accelerometer samples are averaged (in a common camera frame) over this long per update, s."""
+    accel_lowpass_tau_s: float = Field(0.0, ge=0)
+    """Time constant of each of two cascaded first-order low-pass stages (second-order roll-off)
+    applied to the accelerometer in an almost-inertial frame (the camera frame carried along by the
+    gyro), s; 0 = off (each update uses only its own period's mean). Translational accelerations
+    average out over it (velocity stays bounded), so seconds suit handheld IMU-only use; each update
+    then measures the filtered direction."""
     accel_norm_scale: float = Field(0.05, gt=0)
     """Relative deviation of |mean a| from gravity (dimensionless) at which the update's variance
     doubles: variance factor `1 + (dev / this)^2`."""
@@ -194,6 +200,9 @@ class Mekf(Backend):
         # Accelerometer average since the last update, expressed in the current camera frame.
         self._acc_sum_c = np.zeros(3)
         self._acc_time_s = 0.0
+        # Low-pass stages (2, 3) of the specific force (m/s^2), rows in the current camera frame
+        # (None until the first update).
+        self._acc_lp_c: np.ndarray | None = None
         self._record_t: list[np.ndarray] = []
         self._record_R: list[np.ndarray] = []
 
@@ -354,6 +363,7 @@ class Mekf(Backend):
             if saturated.any():
                 self._flags |= Status.GYRO_SATURATED
             dt = np.where(gap, 0.0, dt)
+            self._acc_lp_c = None  # the frame carried along by the gyro is lost
         M = exp_so3(rate_c * dt[:, None])
         C = _prefix_products(M)
         C_N = C[-1]
@@ -378,6 +388,8 @@ class Mekf(Backend):
         # Accelerometer: time-weighted sum of specific force, rotated into the chunk's end frame.
         w_dt = dt if weight is None else dt * weight
         self._acc_sum_c = C_N.T @ (self._acc_sum_c + np.einsum("kjl,kl,k->j", C, accel_c, w_dt))
+        if self._acc_lp_c is not None:
+            self._acc_lp_c = self._acc_lp_c @ C_N  # rows v^T C_N = (C_N^T v)^T
         self._acc_time_s += float(w_dt.sum())
         self._last_gyro_c = gyro_c[-1]
         self.t_state = float(t[-1])
@@ -407,17 +419,27 @@ class Mekf(Backend):
 
     # ------------------------------------------------------------------ updates
     def _accel_update(self) -> None:
-        """Tilt from the averaged accelerometer direction, noise inflated continuously by how far
-        |a| and the innovation are from pure gravity."""
+        """Tilt from the accelerometer direction (the period's mean, or its low-passed value with
+        `accel_lowpass_tau_s`), noise inflated continuously by how far |a| and the innovation are
+        from pure gravity."""
         cfg = self.config
         T = self._acc_time_s
-        acc_c = self._acc_sum_c
+        acc_c = self._acc_sum_c / T if T > 0 else self._acc_sum_c
         self._acc_sum_c, self._acc_time_s = np.zeros(3), 0.0
+        if cfg.accel_lowpass_tau_s > 0 and T > 0:
+            lp = self._acc_lp_c
+            if lp is None:
+                lp = self._acc_lp_c = np.array([acc_c, acc_c])
+            else:
+                alpha = 1.0 - np.exp(-T / cfg.accel_lowpass_tau_s)
+                lp[0] += alpha * (acc_c - lp[0])
+                lp[1] += alpha * (lp[0] - lp[1])
+            acc_c = lp[1]
         norm = np.linalg.norm(acc_c)
         # |mean specific force| against gravity: the mean is taken in a common (rotating) camera
         # frame, so it is the inertial-frame average and translational accelerations cancel in it.
-        norm_dev = abs(norm / T * self._inv_g - 1.0) if T > 0 else 0.0
-        if not norm > 0.1 * cfg.gravity_m_s2 * T:  # near free fall: no direction
+        norm_dev = abs(norm * self._inv_g - 1.0)
+        if not (T > 0 and norm > 0.1 * cfg.gravity_m_s2):  # near free fall: no direction
             self.counters["accel_skipped"] += 1
             return
         z = acc_c / norm
