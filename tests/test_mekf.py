@@ -9,7 +9,7 @@ import pytest
 from uareme_fusion.backends.mekf import BG, MF, N_STATE, TH, Mekf, MekfConfig, _prefix_products
 from uareme_fusion.config import load_config
 from uareme_fusion.errors import ConfigError
-from uareme_fusion.rotations import WORLD_UP, align_constant, angle_between, exp_so3, log_so3, manhattan_symmetries, nees
+from uareme_fusion.rotations import WORLD_UP, align_yaw, angle_between, exp_so3, log_so3, manhattan_symmetries, nees
 from uareme_fusion.rotations import tilt_error_deg, up_in_camera
 from uareme_fusion.types import Status, VisualRotation
 
@@ -34,14 +34,6 @@ def visual_measurement(R_cm_true, cov, rng, relabel=True, noisy=True):
         P = manhattan_symmetries()[rng.integers(24)]
         vis = VisualRotation(R_cm=R_cm @ P, cov=P.T @ cov @ P, cost=0.01, iterations=3, n_valid=100)
     return vis
-
-
-def align_yaw(R_est, R_true):
-    """Rotation about world up that best maps the estimated world onto the true one (the filter's
-    world yaw is a gauge; its tilt is absolute)."""
-    A = align_constant(R_est, R_true)
-    yaw = np.arctan2(A[1, 0] - A[0, 1], A[0, 0] + A[1, 1])
-    return exp_so3([0.0, 0.0, yaw])
 
 
 def run_fused(omega_c, duration_s, seed, gyro_noise=2e-4, bias=np.zeros(3), visual_std_rad=0.01, config=None):

@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from uareme_fusion.backends.mekf import Mekf, MekfConfig
 from uareme_fusion.backends.single import SingleFrame
 from uareme_fusion.config import load_config
-from uareme_fusion.rotations import are_deg, align_constant, nees, tilt_error_deg, up_in_camera
+from uareme_fusion.rotations import align_yaw, are_deg, nees, tilt_error_deg, up_in_camera
 from uareme_fusion.sim.imu import simulate_imu
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.sim.trajectory import make_trajectory
@@ -74,9 +74,7 @@ class RunResult:
         first `yaw_fit_s` seconds where yaw is unobservable and drifts (a turning vehicle: the
         gauge is the heading at initialisation, where its variance is 0)."""
         fit = slice(None) if yaw_fit_s is None else self.t_s < self.t_s[0] + yaw_fit_s
-        A = align_constant(self.R_wc_est[fit], self.R_wc_true[fit])
-        yaw = np.arctan2(A[1, 0] - A[0, 1], A[0, 0] + A[1, 1])
-        A_yaw = Rotation.from_rotvec([0.0, 0.0, yaw]).as_matrix()
+        A_yaw = align_yaw(self.R_wc_est[fit], self.R_wc_true[fit])
         return nees(A_yaw @ self.R_wc_est, self.R_wc_true, self.cov)
 
 
