@@ -18,3 +18,11 @@ class InputError(UaremeError, ValueError):
 
 class ConfigError(InputError):
     """A configuration file or option that does not validate (unknown key, wrong type or unit)."""
+
+
+class SourceError(UaremeError):
+    """A source that failed while running: a camera that disconnected, a video that stopped decoding.
+
+    Raised mid-stream (opening a bad source is an `InputError`); the pipeline keeps what it has
+    written so far complete and valid, and exits with a non-zero status.
+    """

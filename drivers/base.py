@@ -1,0 +1,104 @@
+"""What every input source gives the pipeline: a time-ordered stream of frames and IMU batches.
+
+A source opens its input in `__init__` (raising `InputError` naming the path and the problem when it
+cannot), then `events()` yields `Frame` and `ImuBatch` objects in timestamp order: every IMU sample in
+a batch is no later than the next frame's time. Mid-stream failures (a camera disconnecting, a video
+that stops decoding) raise `SourceError`. Sources hold at most a few frames in memory.
+
+Conventions: times are float seconds on the source's clock; IMU samples are in the IMU frame `i`
+(gyro rad/s, specific force m/s^2); `R_ci` maps IMU to camera coordinates.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from uareme_fusion.types import Frame
+
+
+@dataclass(frozen=True)
+class ImuBatch:
+    """Consecutive IMU samples: `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3) in frame `i`."""
+
+    t_s: np.ndarray
+    gyro_rad_s: np.ndarray
+    accel_m_s2: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """Reference camera attitudes `R_wc` (N, 3, 3) at times `t_s` (N,), world z up where the dataset
+    says so (otherwise evaluation aligns a constant rotation)."""
+
+    t_s: np.ndarray
+    R_wc: np.ndarray
+    gravity_aligned: bool = False
+    """True when the reference world frame has z up (simulator, TUM with IMU, EuRoC)."""
+
+    def at(self, t_s: np.ndarray, max_gap_s: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+        """`R_wc` slerped at `t_s` and a mask of the times within `max_gap_s` of a reference sample
+        and inside its span (outside the mask the rotation is the nearest sample's)."""
+        t_s = np.asarray(t_s, dtype=float)
+        t_clip = np.clip(t_s, self.t_s[0], self.t_s[-1])
+        if len(self.t_s) == 1:
+            R = np.repeat(self.R_wc[:1], len(t_s), axis=0)
+        else:
+            R = Slerp(self.t_s, Rotation.from_matrix(self.R_wc))(t_clip).as_matrix()
+        idx = np.clip(np.searchsorted(self.t_s, t_s), 1, max(len(self.t_s) - 1, 1))
+        gap = np.minimum(np.abs(t_s - self.t_s[idx - 1]), np.abs(t_s - self.t_s[np.minimum(idx, len(self.t_s) - 1)]))
+        ok = (t_s >= self.t_s[0] - max_gap_s) & (t_s <= self.t_s[-1] + max_gap_s) & (gap <= max_gap_s)
+        return R, ok
+
+
+@dataclass(frozen=True)
+class SourceInfo:
+    """What a source knows about itself before it runs."""
+
+    name: str
+    """What the user passed (a path, `oak`, `webcam:0`, `sim:bus`), for messages and summaries."""
+    n_frames: int | None = None
+    """Number of frames when known (files, datasets); None for live cameras."""
+    fps: float | None = None
+    K: np.ndarray | None = None
+    """(3, 3) intrinsics in pixels of the frames as yielded (OpenCV convention), None when unknown."""
+    has_depth: bool = False
+    has_imu: bool = False
+    R_ci: np.ndarray = field(default_factory=lambda: np.eye(3))
+    """IMU-to-camera rotation (device calibration for OAK; identity unless configured)."""
+    imu_time_offset_s: float = 0.0
+    """Added to IMU timestamps to put them on the camera clock."""
+    image_size: tuple[int, int] | None = None
+    """(height, width) of yielded frames when known."""
+
+
+class Source(ABC):
+    """A stream of `Frame` and `ImuBatch` events in timestamp order. Use as a context manager."""
+
+    info: SourceInfo
+
+    @abstractmethod
+    def events(self) -> Iterator[Frame | ImuBatch]:
+        """Yield frames and IMU batches in timestamp order; raise `SourceError` if the input fails
+        mid-stream."""
+
+    def ground_truth(self) -> GroundTruth | None:
+        """Reference attitudes when the dataset has them."""
+        return None
+
+    def close(self) -> None:
+        """Release files, decoders and devices. Safe to call twice."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
