@@ -26,6 +26,9 @@ class Frame:
     depth: np.ndarray | None = None
     K: np.ndarray | None = None
     index: int = -1
+    normals: "NormalMap | None" = None
+    """Precomputed normals for this frame (the simulator's exact normals, or a file), used when the
+    pipeline is told to take normals from the source instead of estimating them."""
 
 
 @dataclass(frozen=True)
