@@ -69,6 +69,9 @@ class SourceInfo:
     fps: float | None = None
     K: np.ndarray | None = None
     """(3, 3) intrinsics in pixels of the frames as yielded (OpenCV convention), None when unknown."""
+    has_frames: bool = True
+    """False for IMU-only sources (BROAD, an IMU CSV): the pipeline then reports one estimate per IMU
+    batch, so such sources should yield batches at about the rate estimates are wanted (e.g. 30 Hz)."""
     has_depth: bool = False
     has_imu: bool = False
     R_ci: np.ndarray = field(default_factory=lambda: np.eye(3))
