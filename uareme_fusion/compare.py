@@ -34,13 +34,10 @@ from .config import load_config
 from .drivers.euroc_imu import read_euroc_imu
 from .drivers.tum_rgbd import read_tum_list, read_tum_trajectory
 from .errors import InputError
-from .rotations import align_constant, align_yaw, are_deg, nees, tilt_error_deg, up_in_camera
+from .metrics import JUMP_DEG, attitude_errors
 from .sim.normal_maps import manhattan_normal_map
 from .solver import solve_manhattan
 from .types import Estimate, Status, VisualRotation
-
-JUMP_DEG = 10.0
-"""An ARE above this is a globally inconsistent jump (a wrong Manhattan labelling or local minimum)."""
 
 BACKEND_NAMES = ("single", "smoother", "smoother-gyro", "mekf")
 
@@ -265,29 +262,14 @@ def run_backend(backend: Backend, seq: VisualSequence) -> BackendRun:
 
 GRAVITY_AWARE = ("mekf", "smoother-gyro")
 """Backends whose tilt is absolute when an IMU is present: NEES after a yaw-only alignment."""
-GAUGE_VARIANCE_RAD2 = 1e-12
-"""Variances at most this are gauge directions (world yaw fixed at initialisation), left out of NEES."""
-
-
 def errors_over_time(run: BackendRun, R_wc_true: np.ndarray, yaw_only_nees: bool = False) -> dict:
-    """Per-frame ARE, tilt (deg) and NEES of an initialised run; NaN where not initialised.
-
-    ARE uses one constant 3D alignment (the paper's protocol). NEES uses the same alignment for
-    vision-only backends (their world is the Manhattan frame), or one rotation about up for
-    backends that know gravity (`yaw_only_nees`), so that their absolute tilt is scored as it is.
-    """
-    R_est = np.array([e.R_wc for e in run.estimates])
-    cov = np.array([e.cov for e in run.estimates])
+    """Per-frame ARE, tilt (deg) and NEES of an initialised run (`metrics.attitude_errors`); NaN where
+    not initialised. `initialised` marks the scored frames."""
     ok = np.array([not (e.status & Status.NOT_INITIALISED) for e in run.estimates])
-    n = len(R_est)
-    are, tilt, ne = (np.full(n, np.nan) for _ in range(3))
-    if ok.any():
-        A = align_constant(R_est[ok], R_wc_true[ok])
-        are[ok] = are_deg(A @ R_est[ok], R_wc_true[ok], align=False)
-        tilt[ok] = tilt_error_deg(up_in_camera(R_est[ok]), up_in_camera(R_wc_true[ok]))
-        A_nees = align_yaw(R_est[ok], R_wc_true[ok]) if yaw_only_nees else A
-        ne[ok] = nees(A_nees @ R_est[ok], R_wc_true[ok], cov[ok], gauge_variance_rad2=GAUGE_VARIANCE_RAD2)
-    return {"are_deg": are, "tilt_deg": tilt, "nees": ne, "initialised": ok}
+    err = attitude_errors(np.array([e.R_wc for e in run.estimates]), np.array([e.cov for e in run.estimates]),
+                          ok, R_wc_true, yaw_only_nees)
+    err["initialised"] = err.pop("valid")
+    return err
 
 
 def summarise(run: BackendRun, R_wc_true: np.ndarray | None, yaw_only_nees: bool = False) -> dict:
