@@ -1,0 +1,183 @@
+"""The streaming loop: each frame's normals, visual rotation and estimate, handed to the sinks.
+
+Memory is bounded: nothing per frame is kept here (sinks write and forget; timings are running
+sums). A source that fails mid-stream or Ctrl-C ends the run cleanly: the sinks are closed, so
+everything written so far stays complete and valid, and `RunStats.stopped` says why it ended.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter, defaultdict
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+from ..backends.base import Backend
+from ..drivers.base import ImuBatch, Source
+from ..errors import InputError, SourceError
+from ..solver import solve_manhattan
+from ..types import Estimate, Frame, NormalMap, Status, VisualRotation
+
+STAGES = ("source", "normals", "solver", "backend", "sinks")
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """Everything the pipeline knows about one output time. `frame` is None for the estimates of an
+    IMU-only source; `normal_map` and `visual` are None when there was no usable image."""
+
+    t_s: float
+    estimate: Estimate
+    frame: Frame | None = None
+    normal_map: NormalMap | None = None
+    visual: VisualRotation | None = None
+
+
+class StageTimes:
+    """Running sums of the seconds spent in each stage (bounded memory)."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = defaultdict(float)
+        self.calls: dict[str, int] = defaultdict(int)
+
+    def add(self, stage: str, seconds: float) -> None:
+        self.seconds[stage] += seconds
+        self.calls[stage] += 1
+
+    def mean_ms(self, per: int) -> dict[str, float]:
+        """Milliseconds per output (frame) in each stage and in total."""
+        per = max(per, 1)
+        out = {s: 1e3 * self.seconds[s] / per for s in STAGES if s in self.seconds}
+        out["total"] = sum(out.values())
+        return out
+
+
+@dataclass
+class RunStats:
+    """Counts and timings of one run; `stopped` is end, max_frames, interrupted or source_error."""
+
+    source: str = ""
+    normals: str = ""
+    backend: str = ""
+    frames: int = 0
+    estimates: int = 0
+    frames_without_visual: int = 0
+    imu_samples: int = 0
+    status_counts: Counter = field(default_factory=Counter)
+    times: StageTimes = field(default_factory=StageTimes)
+    wall_s: float = 0.0
+    stopped: str = "end"
+    error: str | None = None
+
+    def as_dict(self) -> dict:
+        return {"source": self.source, "normals": self.normals, "backend": self.backend,
+                "frames": self.frames, "estimates": self.estimates,
+                "frames_without_visual": self.frames_without_visual, "imu_samples": self.imu_samples,
+                "status_counts": dict(sorted(self.status_counts.items())),
+                "timing_ms": self.times.mean_ms(self.estimates),
+                "fps": self.estimates / self.wall_s if self.wall_s > 0 else 0.0,
+                "wall_s": self.wall_s, "stopped": self.stopped, "error": self.error}
+
+
+class Pipeline:
+    """normals -> solver -> backend -> sinks, one event at a time.
+
+    `normals` has `estimate_frame(Frame) -> NormalMap`; each sink has `write(FrameResult)` and
+    `close()`. The solver starts from the backend's predicted `R_cm` (or the last visual rotation),
+    and searches globally on the first frame.
+    """
+
+    def __init__(self, normals, backend: Backend, sinks: Iterable = ()):
+        self.normals, self.backend, self.sinks = normals, backend, list(sinks)
+        self._R_cm_prev = None
+        self.stats = RunStats(backend=backend.name)
+
+    def process_imu(self, batch: ImuBatch) -> None:
+        t0 = time.perf_counter()
+        if len(batch):
+            self.backend.process_imu(batch.t_s, batch.gyro_rad_s, batch.accel_m_s2)
+        self.stats.imu_samples += len(batch)
+        self.stats.times.add("backend", time.perf_counter() - t0)
+
+    def visual_rotation(self, normal_map: NormalMap, t_s: float) -> VisualRotation | None:
+        """The solver's rotation for one map, None when the map has no valid normals."""
+        R_init = self.backend.predicted_R_cm(t_s)
+        try:
+            visual = solve_manhattan(normal_map, R_init=R_init if R_init is not None else self._R_cm_prev)
+        except InputError:  # a blank or black frame: no valid normals
+            return None
+        self._R_cm_prev = visual.R_cm
+        return visual
+
+    def process_frame(self, frame: Frame) -> FrameResult:
+        times = self.stats.times
+        t0 = time.perf_counter()
+        normal_map = self.normals.estimate_frame(frame)
+        t1 = time.perf_counter()
+        visual = self.visual_rotation(normal_map, frame.t)
+        t2 = time.perf_counter()
+        estimate = self.backend.process_frame(frame.t, visual)
+        t3 = time.perf_counter()
+        times.add("normals", t1 - t0)
+        times.add("solver", t2 - t1)
+        times.add("backend", t3 - t2)
+        self.stats.frames += 1
+        self.stats.frames_without_visual += visual is None
+        return self._emit(FrameResult(frame.t, estimate, frame, normal_map, visual))
+
+    def estimate_now(self, t_s: float) -> FrameResult:
+        """An estimate with no image (IMU-only sources)."""
+        t0 = time.perf_counter()
+        estimate = self.backend.process_frame(t_s, None)
+        self.stats.times.add("backend", time.perf_counter() - t0)
+        return self._emit(FrameResult(t_s, estimate))
+
+    def _emit(self, result: FrameResult) -> FrameResult:
+        t0 = time.perf_counter()
+        for sink in self.sinks:
+            sink.write(result)
+        self.stats.times.add("sinks", time.perf_counter() - t0)
+        self.stats.estimates += 1
+        for flag in Status:
+            if flag and flag in result.estimate.status:
+                self.stats.status_counts[flag.name] += 1
+        return result
+
+    def run(self, source: Source, max_frames: int | None = None,
+            on_result: Callable[[FrameResult, RunStats], None] | None = None) -> RunStats:
+        """Consume `source` to its end (or `max_frames`), then close the sinks; never raises for a
+        source failure or Ctrl-C: `stats.stopped` and `stats.error` say what happened."""
+        stats = self.stats
+        stats.source = source.info.name
+        imu_only = not source.info.has_frames
+        start = time.perf_counter()
+        events = iter(source.events())
+        try:
+            while max_frames is None or stats.estimates < max_frames:
+                t0 = time.perf_counter()
+                event = next(events, None)
+                stats.times.add("source", time.perf_counter() - t0)
+                if event is None:
+                    break
+                if isinstance(event, ImuBatch):
+                    self.process_imu(event)
+                    result = self.estimate_now(float(event.t_s[-1])) if imu_only and len(event) else None
+                else:
+                    result = self.process_frame(event)
+                if result is not None and on_result is not None:
+                    on_result(result, stats)
+            else:
+                stats.stopped = "max_frames"
+        except SourceError as exc:
+            stats.stopped, stats.error = "source_error", str(exc)
+        except KeyboardInterrupt:
+            stats.stopped, stats.error = "interrupted", "interrupted by the user (Ctrl-C)"
+        finally:
+            stats.wall_s = time.perf_counter() - start
+            stats.normals = getattr(self.normals, "name", "") if self.normals is not None else ""
+            self.close()
+        return stats
+
+    def close(self) -> None:
+        for sink in self.sinks:
+            sink.close()

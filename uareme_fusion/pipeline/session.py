@@ -1,0 +1,107 @@
+"""One run from a source to an output folder: `trajectory.tum`, `estimates.csv`, `summary.json`.
+
+`summary.json` is written however the run ends (end of source, `max_frames`, a source failure,
+Ctrl-C), with `stopped` saying which; the trajectory and CSV are flushed frame by frame. With
+`evaluate=True` the source's ground truth scores the run (`metrics.attitude_errors`).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import numpy as np
+
+from ..drivers.base import GroundTruth, Source
+from ..errors import InputError
+from ..metrics import attitude_errors, error_summary
+from ..rotations import align_constant
+from ..types import Status
+from .config import RunConfig
+from .runner import Pipeline, RunStats
+from .sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
+from .stages import CappedNormals, make_backend, make_normal_estimator
+
+GRAVITY_AWARE_BACKENDS = ("mekf", "smoother")
+"""With an IMU these know absolute up: NEES after a yaw-only alignment (compare.GRAVITY_AWARE)."""
+
+
+def make_output_folder(out_dir: str | Path) -> Path:
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{out}: cannot create the output folder ({exc.strerror or exc})") from None
+    return out
+
+
+def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipeline:
+    normals = None
+    if source.info.has_frames:
+        normals = CappedNormals(make_normal_estimator(cfg.normals, source.info), cfg.kappa_cap)
+    return Pipeline(normals, make_backend(cfg, source.info), sinks)
+
+
+def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False, extra_sinks: Iterable = (),
+               on_result: Callable | None = None, command: str = "run") -> dict:
+    """Run an opened source into `out`; returns the summary written to `out/summary.json`."""
+    truth = source.ground_truth() if evaluate else None
+    if evaluate and truth is None:
+        raise InputError(f"{source.info.name}: this source has no ground truth to evaluate against "
+                         "(use 'uareme-fusion run' instead)")
+    log = EstimateLog() if evaluate else None
+    sinks = [TumTrajectoryWriter(out / "trajectory.tum"), EstimatesCsvWriter(out / "estimates.csv"),
+             *extra_sinks, *([log] if log else [])]
+    pipeline = build_pipeline(source, cfg, sinks)
+    stats = pipeline.run(source, max_frames=cfg.max_frames, on_result=on_result)
+    summary = summary_document(stats, cfg, command, source)
+    if log is not None:
+        summary.update(evaluation(log, truth, gravity_aware=source.info.has_imu and cfg.backend in
+                                  GRAVITY_AWARE_BACKENDS))
+    summary["outputs"] = sorted(p.name for p in out.iterdir() if p.name != "summary.json") + ["summary.json"]
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=False) + "\n")
+    return summary
+
+
+def run_to_folder(source_spec: str, out_dir: str | Path, cfg: RunConfig | None = None, imu: str | None = None,
+                  evaluate: bool = False, on_result: Callable | None = None, extra_sinks: Iterable = (),
+                  command: str = "run", **source_options) -> dict:
+    """Open `source_spec` (see `drivers.open_source`), run it, write the outputs; returns the summary."""
+    from ..drivers import open_source
+
+    cfg = cfg or RunConfig()
+    out = make_output_folder(out_dir)
+    with open_source(str(source_spec), imu=imu, **source_options) as source:
+        return run_source(source, out, cfg, evaluate, extra_sinks, on_result, command)
+
+
+def summary_document(stats: RunStats, cfg: RunConfig, command: str, source: Source) -> dict:
+    info = source.info
+    doc = {"command": command, **stats.as_dict(),
+           "source_info": {"frames_known": info.n_frames, "fps": info.fps, "has_imu": info.has_imu,
+                           "has_depth": info.has_depth, "intrinsics_known": info.K is not None},
+           "config": cfg.model_dump(mode="json")}
+    return doc
+
+
+def evaluation(log: EstimateLog, truth: GroundTruth, gravity_aware: bool) -> dict:
+    """ARE, tilt and NEES against `truth` over initialised estimates inside its time span.
+
+    Without a gravity-aligned reference (e.g. ICL-NUIM) tilt is measured after the same constant
+    alignment as ARE, since the reference world's z is not up.
+    """
+    t, R_est, cov, status = log.arrays()
+    if len(t) == 0:
+        return {"evaluation_note": "no estimates to score", **error_summary(
+            {"valid": np.zeros(0, bool), "are_deg": np.zeros(0), "tilt_deg": np.zeros(0), "nees": np.zeros(0)})}
+    R_true, in_span = truth.at(t)
+    valid = in_span & ((status & int(Status.NOT_INITIALISED)) == 0)
+    note = "tilt against the reference's z axis (gravity-aligned)"
+    if not truth.gravity_aligned and valid.any():
+        R_est = align_constant(R_est[valid], R_true[valid]) @ R_est
+        note = "reference is not gravity-aligned: tilt after the constant alignment used for ARE"
+    errors = attitude_errors(R_est, cov, valid, R_true, yaw_only_nees=gravity_aware and truth.gravity_aligned)
+    return {**error_summary(errors), "evaluation_note": note}

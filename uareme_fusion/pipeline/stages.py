@@ -1,0 +1,136 @@
+"""Building the pipeline's stages from a `RunConfig` and what the source says about itself."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..backends.base import Backend
+from ..backends.single import SingleFrame
+from ..config import load_config, validate_config
+from ..drivers.base import SourceInfo
+from ..errors import InputError
+from ..io.normal_maps import load_normal_map
+from ..types import Frame, NormalMap
+from .config import RunConfig
+
+NORMAL_FILE_SUFFIXES = (".npz", ".npy", ".png")
+MODEL_FILE_SUFFIXES = (".pt", ".pth", ".ts")
+
+
+class SourceNormals:
+    """The normals a source carries with each frame (the simulator's exact normals)."""
+
+    name = "source"
+
+    def __init__(self, source_name: str):
+        self.source_name = source_name
+
+    def estimate_frame(self, frame: Frame) -> NormalMap:
+        if frame.normals is None:
+            raise InputError(f"{self.source_name}: frame {frame.index} carries no normals "
+                             "(use --normals learned or depth)")
+        return frame.normals
+
+
+class NormalFiles:
+    """Precomputed normal maps, one file per frame in sorted order (frame i reads the i-th file)."""
+
+    name = "files"
+
+    def __init__(self, folder: Path):
+        self.files = sorted(p for p in folder.iterdir() if p.suffix.lower() in NORMAL_FILE_SUFFIXES)
+        if not self.files:
+            raise InputError(f"{folder}: no normal maps ({', '.join(NORMAL_FILE_SUFFIXES)}) in this folder")
+        self._count = 0
+
+    def estimate_frame(self, frame: Frame) -> NormalMap:
+        k = frame.index if frame.index >= 0 else self._count
+        self._count += 1
+        if k >= len(self.files):
+            raise InputError(f"{self.files[0].parent}: {len(self.files)} normal maps but the source has "
+                             f"a frame {k}")
+        return load_normal_map(self.files[k])
+
+
+class CappedNormals:
+    """Any estimator's normal maps with kappa capped (the paper caps it before the solver)."""
+
+    def __init__(self, estimator, cap: float):
+        self.estimator, self.cap = estimator, float(cap)
+
+    @property
+    def name(self) -> str:
+        return getattr(self.estimator, "name", type(self.estimator).__name__)
+
+    def estimate_frame(self, frame: Frame) -> NormalMap:
+        nm = self.estimator.estimate_frame(frame)
+        if nm.kappa is not None and np.nanmax(nm.kappa, initial=0.0) > self.cap:
+            nm = NormalMap(nm.normals, np.minimum(nm.kappa, self.cap), nm.t, nm.independent_regions)
+        return nm
+
+
+class AutoNormals:
+    """The source's own normals when its frames carry them, learned normals otherwise (decided on
+    the first frame)."""
+
+    def __init__(self, source_name: str):
+        self.source_name, self.name, self._chosen = source_name, "auto", None
+
+    def estimate_frame(self, frame: Frame) -> NormalMap:
+        if self._chosen is None:
+            self._chosen = SourceNormals(self.source_name) if frame.normals is not None else _learned()
+            self.name = f"auto ({self._chosen.name})"
+        return self._chosen.estimate_frame(frame)
+
+
+def make_normal_estimator(spec: str, info: SourceInfo):
+    """The normal estimator named by `spec` (see `RunConfig.normals`); checks that the source can feed it."""
+    from ..normals.depth import DepthNormals
+
+    if spec == "auto":
+        return AutoNormals(info.name)
+    if spec == "source":
+        return SourceNormals(info.name)
+    if spec == "depth":
+        if not info.has_depth:
+            raise InputError(f"{info.name}: --normals depth needs a depth map, and this source has none "
+                             "(use --normals learned)")
+        return DepthNormals()
+    if spec == "learned":
+        return _learned()
+    path = Path(spec)
+    if path.is_dir():
+        return NormalFiles(path)
+    if path.suffix.lower() in MODEL_FILE_SUFFIXES:
+        if not path.is_file():
+            raise InputError(f"{path}: model file not found")
+        return _learned(path)
+    raise InputError(f"--normals {spec!r}: expected auto, learned, depth, source, a model file "
+                     f"({', '.join(MODEL_FILE_SUFFIXES)}) or a folder of normal maps")
+
+
+def _learned(model_path: Path | None = None):
+    from ..normals.learned import LearnedNormals
+
+    return LearnedNormals() if model_path is None else LearnedNormals(model=model_path)
+
+
+def make_backend(cfg: RunConfig, info: SourceInfo) -> Backend:
+    """The backend of `cfg`, given the source's IMU-to-camera rotation and time offset."""
+    imu_geometry = {"R_ci": np.asarray(info.R_ci, float).tolist(), "imu_time_offset_s": info.imu_time_offset_s}
+    if cfg.backend == "single":
+        return SingleFrame()
+    if cfg.backend == "smoother":
+        from ..backends.smoother import Smoother, SmootherConfig, SmootherMode
+
+        base = load_config("paper", SmootherConfig, section="smoother").model_dump()
+        if info.has_imu:
+            base.update(mode=SmootherMode.GYRO, R_ci=imu_geometry["R_ci"])
+        return Smoother(validate_config({**base, **cfg.smoother}, SmootherConfig, "run config [smoother]"))
+    from ..backends.mekf import Mekf, MekfConfig
+
+    base = load_config(cfg.mekf_preset, MekfConfig).model_dump()
+    base.update(imu_geometry)
+    return Mekf(validate_config({**base, **cfg.mekf}, MekfConfig, "run config [mekf]"))
