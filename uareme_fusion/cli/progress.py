@@ -1,0 +1,26 @@
+"""A rich progress bar fed by the pipeline's per-result callback: frames, fps, ETA when the length is known."""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from .app import err_console
+
+
+@contextmanager
+def frame_progress(description: str, total: int | None):
+    """Yields `on_result(result, stats)` that advances a progress bar on stderr."""
+    columns = [TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+               TextColumn("{task.fields[fps]:.1f} fps"), TimeElapsedColumn()]
+    if total:
+        columns.append(TimeRemainingColumn())
+    with Progress(*columns, console=err_console, transient=False) as progress:
+        task = progress.add_task(description, total=total or None, fps=0.0)
+
+        def on_result(result, stats):
+            elapsed = progress.tasks[task].elapsed or 0.0
+            progress.update(task, completed=stats.estimates, fps=stats.estimates / elapsed if elapsed > 0 else 0.0)
+
+        yield on_result
