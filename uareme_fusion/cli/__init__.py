@@ -7,5 +7,6 @@ from . import bench_cmd, demo_cmd, solve_cmd  # noqa: E402,F401
 from . import compare_cmd  # noqa: E402,F401
 from . import simulate_cmd  # noqa: E402,F401
 from . import run_cmd  # noqa: E402,F401
+from . import overlay_cmds  # noqa: E402,F401
 
 __all__ = ["app", "main"]

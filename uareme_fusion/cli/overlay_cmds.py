@@ -1,0 +1,57 @@
+"""`uareme-fusion horizon VIDEO --out VIDEO` and `uareme-fusion ground INPUT --out DIR`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from ..pipeline.drawing_sinks import GroundSink, HorizonVideoSink
+from .app import app
+from .run_cmd import _o, execute, run_config
+
+
+@app.command("horizon")
+def horizon_command(
+    source: str = typer.Argument(..., help="A video (or any source 'run' accepts)."),
+    out: Path = typer.Option(..., "--out", help="Overlay video (.mp4 or .avi); estimates go to OUT_STEM.run/."),
+    imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
+    config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
+    max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    panes: bool = typer.Option(False, "--panes", help="Add panes of normals and confidence beside each frame."),
+    fov_deg: Optional[float] = typer.Option(None, "--fov-deg",
+                                            help="Assumed horizontal field of view when K is unknown (default 60)."),
+) -> None:
+    """Draw the horizon and the Manhattan axes on every frame of a video."""
+    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
+                     assumed_fov_deg=fov_deg)
+
+    def sinks(src, out_dir, cfg):
+        return [HorizonVideoSink(out, src.info.fps or 30.0, cfg.assumed_fov_deg, panes)]
+
+    execute(source, out.parent / f"{out.stem}.run", cfg, imu, fps, evaluate=False, command="horizon",
+            extra_sinks_factory=sinks)
+    typer.echo(f"wrote {out}")
+
+
+@app.command("ground")
+def ground_command(
+    source: str = typer.Argument(..., help="An image, folder of images, video or dataset."),
+    out: Path = typer.Option(..., "--out", help="Folder for masks/, overlay/ (or ground.mp4) and the estimates."),
+    imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
+    config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
+    max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    video: bool = typer.Option(False, "--video", help="Write the overlays as OUT/ground.mp4 instead of images."),
+    threshold_deg: Optional[float] = typer.Option(None, "--threshold-deg",
+                                                  help="Ground when the normal is within this angle of up (15)."),
+) -> None:
+    """Segment the ground: pixels whose normal is within a threshold of the estimated up vector."""
+    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
+                     ground_threshold_deg=threshold_deg)
+
+    def sinks(src, out_dir, cfg):
+        return [GroundSink(out_dir, cfg.ground_threshold_deg, out_dir / "ground.mp4" if video else None,
+                           src.info.fps or 30.0)]
+
+    execute(source, out, cfg, imu, fps, evaluate=False, command="ground", extra_sinks_factory=sinks)
