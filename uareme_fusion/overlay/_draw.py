@@ -33,8 +33,11 @@ def outlined_text(image: np.ndarray, text: str, origin_xy: tuple[int, int], colo
     height, width = image.shape[:2]
     scale = max(0.4, min(height, width) / 600)
     thickness = max(1, int(round(scale * 1.5)))
-    cv2.putText(image, text, origin_xy, cv2.FONT_HERSHEY_SIMPLEX, scale, OUTLINE_RGB, thickness + 2, cv2.LINE_AA)
-    cv2.putText(image, text, origin_xy, cv2.FONT_HERSHEY_SIMPLEX, scale, tuple(int(c) for c in colour_rgb), thickness, cv2.LINE_AA)
+    x, y = origin_xy
+    # The outline is the same text shifted by one pixel: a thicker stroke would also widen the advance.
+    for dx, dy in ((-1, -1), (-1, 1), (1, -1), (1, 1), (-1, 0), (1, 0), (0, -1), (0, 1)):
+        cv2.putText(image, text, (x + dx, y + dy), cv2.FONT_HERSHEY_SIMPLEX, scale, OUTLINE_RGB, thickness, cv2.LINE_AA)
+    cv2.putText(image, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, scale, tuple(int(c) for c in colour_rgb), thickness, cv2.LINE_AA)
 
 
 def text_height_px(image: np.ndarray) -> int:

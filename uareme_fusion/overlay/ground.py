@@ -81,6 +81,7 @@ def draw_ground(
     if weight.shape != (height, width):
         interpolation = cv2.INTER_NEAREST if mask.dtype == bool else cv2.INTER_LINEAR
         weight = cv2.resize(weight, (width, height), interpolation=interpolation)
-    weight = (alpha * weight)[..., None]
-    blended = image * (1.0 - weight) + np.asarray(colour_rgb, np.float32) * weight
-    return np.clip(np.rint(blended), 0, 255).astype(np.uint8)
+    weight *= np.float32(alpha)
+    colour_image = np.empty_like(image)
+    colour_image[:] = colour_rgb
+    return cv2.blendLinear(np.ascontiguousarray(image), colour_image, 1.0 - weight, weight)
