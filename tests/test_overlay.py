@@ -14,6 +14,7 @@ from uareme_fusion.overlay import (
     draw_ground,
     draw_horizon,
     draw_manhattan_axes,
+    draw_overlay,
     ground_mask,
     horizon_line,
     horizon_segment,
@@ -253,6 +254,16 @@ def test_draw_manhattan_axes_colours_each_axis_and_the_vanishing_point():
     radius = 4 * 2  # 4 x the stroke (2 px at 480 rows)
     assert out[cy - radius, cx].tolist() == [0, 0, 255]  # Z's vanishing point: a blue ring at the centre
     assert np.all(out[cy - 60, cx - 60] == 100)
+
+
+def test_draw_overlay_notes_an_assumed_fov_only():
+    up_c = np.array([0.0, -1.0, 0.0])
+    K_60 = assumed_K(H, W, 60.0)
+    with_K = draw_overlay(grey_image(), up_c, np.eye(3), K_60)
+    assumed = draw_overlay(grey_image(), up_c, np.eye(3), None, fov_deg=60.0)
+    assert np.array_equal(with_K, draw_manhattan_axes(draw_horizon(grey_image(), up_c, K_60), np.eye(3), K_60))
+    assert np.array_equal(assumed, draw_manhattan_axes(draw_horizon(grey_image(), up_c, K_60, assumed_fov_note(60.0)), np.eye(3), K_60))
+    assert np.array_equal(draw_overlay(grey_image(), up_c), draw_horizon(grey_image(), up_c, K_60, assumed_fov_note()))
 
 
 def test_drawing_rejects_non_uint8_rgb():

@@ -6,6 +6,7 @@ frame; `R_cm` maps Manhattan to camera coordinates; K is in pixels with pixel ce
 """
 
 from .camera import DEFAULT_FOV_DEG, assumed_fov_note, assumed_K, check_K, intrinsics_or_assumed
+from .compose import draw_overlay
 from .ground import draw_ground, ground_mask
 from .horizon import (
     draw_horizon,
@@ -26,6 +27,7 @@ __all__ = [
     "draw_ground",
     "draw_horizon",
     "draw_manhattan_axes",
+    "draw_overlay",
     "ground_mask",
     "horizon_line",
     "horizon_segment",
