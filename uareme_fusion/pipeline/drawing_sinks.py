@@ -14,8 +14,8 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
-from ..overlay import (assumed_fov_note, draw_ground, draw_horizon, draw_manhattan_axes, ground_mask,
-                       intrinsics_or_assumed, side_by_side)
+from ..overlay import draw_ground, ground_mask, side_by_side
+from ..overlay.compose import draw_overlay
 from .runner import FrameResult
 
 VIDEO_CODECS = {".mp4": "mp4v", ".avi": "MJPG", ".mkv": "MJPG", ".mov": "mp4v"}
@@ -31,13 +31,7 @@ def estimate_R_cm(result: FrameResult) -> np.ndarray | None:
 
 def overlay_image(result: FrameResult, fov_deg: float, panes: bool) -> np.ndarray:
     """The frame with horizon and Manhattan axes drawn (and normal/confidence panes when `panes`)."""
-    rgb = result.frame.rgb
-    height, width = rgb.shape[:2]
-    K, assumed = intrinsics_or_assumed(result.frame.K, height, width, fov_deg)
-    image = draw_horizon(rgb, result.estimate.up_c, K, assumed_fov_note(fov_deg) if assumed else None)
-    R_cm = estimate_R_cm(result)
-    if R_cm is not None:
-        image = draw_manhattan_axes(image, R_cm, K)
+    image = draw_overlay(result.frame.rgb, result.estimate.up_c, estimate_R_cm(result), result.frame.K, fov_deg)
     return side_by_side(image, result.normal_map) if panes else image
 
 
