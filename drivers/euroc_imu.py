@@ -9,7 +9,11 @@ a_z [m/s^2]` comma-separated, gyro and specific force in the IMU (sensor) frame 
 
 Times: `t_ns` keeps the file's integer nanoseconds exactly; `t_s = t_ns * 1e-9` as float seconds.
 Rows are returned as they are in the file (no reordering, nothing dropped); `n_non_increasing`
-counts timestamps that do not increase, for the caller to report.
+counts timestamps that do not increase (duplicates and steps back), for the caller to report, and
+the backends' IMU stream reorders, drops and counts them; jumps in time are kept (the backends
+treat them as IMU gaps). Bad files raise `InputError` naming the file and the line: too few or
+ragged columns, a cell that is not a number (timestamps must be integers), NaN or infinite values.
+Columns after the seventh are ignored.
 """
 
 from __future__ import annotations
@@ -21,7 +25,11 @@ from typing import Iterator
 import numpy as np
 
 from uareme_fusion.errors import InputError
+from uareme_fusion.io.text_tables import read_table
 from uareme_fusion.types import ImuSample
+
+EUROC_IMU_COLUMNS = ("timestamp [ns]", "w_x [rad/s]", "w_y [rad/s]", "w_z [rad/s]",
+                     "a_x [m/s^2]", "a_y [m/s^2]", "a_z [m/s^2]")
 
 
 @dataclass(frozen=True)
@@ -58,15 +66,10 @@ def read_euroc_imu(path: str | Path) -> EurocImu:
                 break
     if not path.is_file():
         raise InputError(f"EuRoC IMU file {path} does not exist")
-    try:
-        t_ns = np.loadtxt(path, delimiter=",", comments="#", usecols=0, dtype=np.int64, ndmin=1)
-        values = np.loadtxt(path, delimiter=",", comments="#", usecols=range(1, 7), dtype=float, ndmin=2)
-    except (ValueError, IndexError) as exc:
-        raise InputError(f"{path} is not an EuRoC IMU file (expected 7 comma-separated columns: "
-                         f"timestamp [ns], gyro xyz [rad/s], accel xyz [m/s^2]): {exc}") from None
-    if len(t_ns) == 0:
-        raise InputError(f"{path} holds no IMU samples")
-    if not np.all(np.isfinite(values)):
-        bad = int(np.sum(~np.isfinite(values).all(axis=1)))
-        raise InputError(f"{path}: {bad} rows hold non-finite gyro or accel values")
+    table = read_table(path, EUROC_IMU_COLUMNS, delimiter=",", kind="an EuRoC IMU file")
+    if len(table) == 0:
+        raise InputError(f"{path} holds no IMU samples (only comments or blank lines)")
+    t_ns = table.ints(0)
+    values = table.floats(slice(1, 7))
+    table.require_finite(values, "gyro or accel value")
     return EurocImu(path, t_ns, t_ns * 1e-9, values[:, :3], values[:, 3:])

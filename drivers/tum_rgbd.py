@@ -20,7 +20,6 @@ timestamp within `max_dt_s`; unpaired images are counted in `n_unpaired`, never 
 from __future__ import annotations
 
 import json
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -30,42 +29,68 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from uareme_fusion.errors import InputError
+from uareme_fusion.io.images import read_image
+from uareme_fusion.io.text_tables import read_table
+from uareme_fusion.normals.depth import read_depth_png
 from uareme_fusion.types import Frame
 
 TUM_DEPTH_SCALE = 5000.0
 """Depth PNG units per metre in TUM RGB-D and ICL-NUIM."""
 
 
+TUM_LIST_COLUMNS = ("timestamp [s]", "filename")
+TUM_TRAJECTORY_COLUMNS = ("timestamp [s]", "tx [m]", "ty [m]", "tz [m]", "qx", "qy", "qz", "qw")
+TUM_ACCELEROMETER_COLUMNS = ("timestamp [s]", "ax [m/s^2]", "ay [m/s^2]", "az [m/s^2]")
+ASSOCIATION_COLUMNS = ("timestamp [s]", "filename", "timestamp [s]", "filename")
+QUATERNION_NORM_TOLERANCE = 1e-2
+"""Stored quaternions may deviate this much from unit length (rounding); more is a broken file."""
+
+
 def read_tum_list(path: Path) -> tuple[np.ndarray, list[str]]:
-    """`timestamp filename` lines -> (t_s (N,), filenames)."""
-    rows = _load_text(path, dtype=str, columns=2)
-    return rows[:, 0].astype(float), [str(f) for f in rows[:, 1]]
+    """`timestamp filename` lines -> (t_s (N,), filenames); times finite and strictly increasing."""
+    table = read_table(path, TUM_LIST_COLUMNS, kind="a TUM image list")
+    t = table.floats(0)
+    table.require_finite(t, "timestamp")
+    table.require_increasing(t)
+    return t, table.strings(1)
 
 
 def read_tum_trajectory(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`timestamp tx ty tz qx qy qz qw` -> (t_s (N,), p (N, 3) m, quat_xyzw (N, 4))."""
-    rows = _load_text(path, dtype=float, columns=8)
-    return rows[:, 0], rows[:, 1:4], rows[:, 4:8]
+    """`timestamp tx ty tz qx qy qz qw` -> (t_s (N,), p (N, 3) m, quat_xyzw (N, 4) unit).
+
+    Times must be finite and strictly increasing, quaternions unit length within
+    `QUATERNION_NORM_TOLERANCE` (they are renormalised); otherwise `InputError` naming the line."""
+    table = read_table(path, TUM_TRAJECTORY_COLUMNS, kind="a TUM trajectory file")
+    rows = table.floats(slice(0, 8))
+    table.require_finite(rows, "value")
+    table.require_increasing(rows[:, 0])
+    norm = np.linalg.norm(rows[:, 4:8], axis=1)
+    bad = np.abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE
+    if bad.any():
+        raise InputError(f"{path}: {int(bad.sum())} quaternion(s) qx qy qz qw are not unit length "
+                         f"({table.lines_where(bad)}; first norm {norm[bad][0]:.4g})")
+    return rows[:, 0], rows[:, 1:4], rows[:, 4:8] / norm[:, None]
 
 
 def read_tum_accelerometer(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """`timestamp ax ay az` -> (t_s (N,), accel_m_s2 (N, 3))."""
-    rows = _load_text(path, dtype=float, columns=4)
+    """`timestamp ax ay az` -> (t_s (N,), accel_m_s2 (N, 3)); all values finite, rows in file order
+    (as for EuRoC, the backends' IMU stream reorders and counts samples out of order)."""
+    table = read_table(path, TUM_ACCELEROMETER_COLUMNS, kind="a TUM accelerometer file")
+    rows = table.floats(slice(0, 4))
+    table.require_finite(rows, "value")
     return rows[:, 0], rows[:, 1:4]
 
 
-def _load_text(path: Path, dtype, columns: int) -> np.ndarray:
-    try:
-        with warnings.catch_warnings():  # blank lines are fine in these files
-            warnings.simplefilter("ignore", UserWarning)
-            rows = np.loadtxt(path, dtype=dtype, comments="#", ndmin=2)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read {path}: {exc}") from None
-    if rows.size == 0:
-        return np.zeros((0, columns), dtype=rows.dtype)
-    if rows.shape[1] < columns:
-        raise InputError(f"{path}: expected {columns} columns per line, got {rows.shape[1]}")
-    return rows[:, :columns]
+def read_associations(path: Path) -> tuple[np.ndarray, list[str], list[str]]:
+    """`t file t file` lines (rgb and depth in either order) -> (t_rgb_s (N,), rgb files, depth files)."""
+    table = read_table(path, ASSOCIATION_COLUMNS, kind="a TUM associations file")
+    first = table.strings(1)[0] if len(table) else ""
+    depth_first = "depth" in first and "rgb" not in first
+    c_rgb, c_dep = (2, 0) if depth_first else (0, 2)
+    t_rgb = table.floats(c_rgb)
+    table.require_finite(t_rgb, "timestamp")
+    table.require_increasing(t_rgb)
+    return t_rgb, table.strings(c_rgb + 1), table.strings(c_dep + 1)
 
 
 def associate(t_a: np.ndarray, t_b: np.ndarray, max_dt_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -107,16 +132,16 @@ class TumSequence:
         return len(self.rgb_paths)
 
     def read_frame(self, i: int) -> Frame:
-        """Frame i: rgb (H, W, 3) uint8 RGB order, depth (H, W) float32 m (0 = missing)."""
-        bgr = cv2.imread(str(self.rgb_paths[i]), cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise InputError(f"cannot read image {self.rgb_paths[i]}")
+        """Frame i: rgb (H, W, 3) uint8 RGB order, depth (H, W) float32 m (0 = missing).
+
+        `InputError` naming the file for an unreadable image, or depth that is not a 16-bit
+        single-channel PNG of the rgb image's size. Grayscale, RGBA and 16-bit rgb images are
+        converted to 8-bit RGB (OpenCV's IMREAD_COLOR)."""
+        bgr = read_image(self.rgb_paths[i], cv2.IMREAD_COLOR, what=f"the rgb image of frame {i}")
         depth = None
         if self.depth_paths[i] is not None:
-            raw = cv2.imread(str(self.depth_paths[i]), cv2.IMREAD_UNCHANGED)
-            if raw is None or raw.ndim != 2:
-                raise InputError(f"cannot read 16-bit depth image {self.depth_paths[i]}")
-            depth = raw.astype(np.float32) / np.float32(self.depth_scale)
+            raw = read_depth_png(self.depth_paths[i], 1.0, expected_shape=bgr.shape[:2])  # stored units
+            depth = raw / np.float32(self.depth_scale)
         return Frame(float(self.t_s[i]), bgr[..., ::-1].copy(), depth, self.K, i)
 
     def frames(self) -> Iterator[Frame]:
@@ -132,18 +157,47 @@ class TumSequence:
         return Slerp(t_gt, Rotation.from_quat(q))(t).as_matrix()
 
 
+def _read_scene_json(path: Path) -> dict:
+    """The simulator's scene.json: `depth_scale` (> 0) and `K` (3, 3) are checked when present."""
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: not a readable JSON file ({exc})") from None
+    if not isinstance(meta, dict):
+        raise InputError(f"{path}: expected a JSON object, got {type(meta).__name__}")
+    out = {}
+    if "depth_scale" in meta:
+        scale = meta["depth_scale"]
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (np.isfinite(scale) and scale > 0):
+            raise InputError(f"{path}: depth_scale must be a positive number, got {scale!r}")
+        out["depth_scale"] = float(scale)
+    if "K" in meta:
+        try:
+            K = np.asarray(meta["K"], dtype=float)
+        except (TypeError, ValueError):
+            K = None
+        if K is None or K.shape != (3, 3) or not np.all(np.isfinite(K)):
+            raise InputError(f"{path}: K must be a 3x3 matrix of numbers, got {meta['K']!r}")
+        out["K"] = K
+    return out
+
+
 def load_tum_rgbd(root: str | Path, depth_scale: float | None = None, max_dt_s: float = 0.02) -> TumSequence:
     """Open a TUM RGB-D style folder (see the module docstring). `depth_scale` defaults to the
     simulator's scene.json value when present, else 5000 units per metre."""
     root = Path(root)
     if not root.is_dir():
         raise InputError(f"TUM RGB-D folder {root} does not exist")
+    if depth_scale is not None and not (np.isfinite(depth_scale) and depth_scale > 0):
+        raise InputError(f"depth_scale must be a positive number of depth units per metre, got {depth_scale}")
+    if not (np.isfinite(max_dt_s) and max_dt_s >= 0):
+        raise InputError(f"max_dt_s must be a time >= 0 s, got {max_dt_s}")
     K = None
     scene_json = root / "scene.json"
     if scene_json.is_file():
-        meta = json.loads(scene_json.read_text())
-        depth_scale = depth_scale or float(meta.get("depth_scale", TUM_DEPTH_SCALE))
-        K = np.asarray(meta["K"], float) if "K" in meta else None
+        meta = _read_scene_json(scene_json)
+        depth_scale = depth_scale or meta.get("depth_scale", TUM_DEPTH_SCALE)
+        K = meta.get("K")
     depth_scale = depth_scale or TUM_DEPTH_SCALE
 
     n_unpaired = 0
@@ -155,16 +209,15 @@ def load_tum_rgbd(root: str | Path, depth_scale: float | None = None, max_dt_s: 
         depth_paths = [root / dep_files[depth_for[i]] if i in depth_for else None for i in range(len(t_rgb))]
         n_unpaired = len(t_rgb) - len(ia) if len(dep_files) else 0
     elif (root / "associations.txt").is_file():
-        rows = _load_text(root / "associations.txt", dtype=str, columns=4)
-        depth_first = len(rows) > 0 and "depth" in rows[0, 1] and "rgb" not in rows[0, 1]
-        c_rgb, c_dep = (2, 0) if depth_first else (0, 2)
-        t_rgb, rgb_files = rows[:, c_rgb].astype(float), list(rows[:, c_rgb + 1])
-        depth_paths = [root / f for f in rows[:, c_dep + 1]]
+        t_rgb, rgb_files, dep_files = read_associations(root / "associations.txt")
+        depth_paths = [root / f for f in dep_files]
     else:
         raise InputError(f"{root} has neither rgb.txt nor associations.txt (TUM RGB-D layout)")
     rgb_paths = [root / f for f in rgb_files]
     exists = np.array([p.is_file() for p in rgb_paths], bool)
     n_missing = int(np.sum(~exists))
+    if not rgb_paths:
+        raise InputError(f"{root}: the image list holds no frames")
     if n_missing == len(rgb_paths):
         raise InputError(f"{root}: none of the {len(rgb_paths)} listed rgb images exist")
     keep = np.flatnonzero(exists)

@@ -1,7 +1,7 @@
 """Loading YAML presets into pydantic models, with errors that name the file and the key.
 
 Each component owns its pydantic model (e.g. `MekfConfig` in `backends/mekf.py`); this module only
-reads files. Presets live in `configs/` (installed as `uareme_fusion.configs`) and are found by
+reads files. Keys given twice in one mapping are errors (YAML would silently keep the last). Presets live in `configs/` (installed as `uareme_fusion.configs`) and are found by
 name: `load_config("vehicle", MekfConfig)` or by path: `load_config("my.yaml", MekfConfig)`.
 """
 
@@ -19,6 +19,26 @@ from .errors import ConfigError
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, except that a key given twice in one mapping is an error (PyYAML keeps
+    the last value silently)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                duplicate = key in seen
+            except TypeError:  # unhashable key: construct_mapping reports it
+                break
+            if duplicate:
+                raise yaml.constructor.ConstructorError(
+                    "while constructing a mapping", node.start_mark, f"found duplicate key '{key}'", key_node.start_mark
+                )
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 def preset_names() -> list[str]:
     """Names of the YAML presets shipped with the package."""
     return sorted(p.name[:-5] for p in resources.files("uareme_fusion.configs").iterdir() if p.name.endswith(".yaml"))
@@ -33,13 +53,18 @@ def read_yaml(name_or_path: str | Path) -> tuple[dict, str]:
             raise ConfigError(f"Unknown preset '{name_or_path}'; presets are: {', '.join(preset_names())}")
         text, where = preset.read_text(), f"preset '{name_or_path}'"
     else:
+        if path.is_dir():
+            raise ConfigError(f"Cannot read config file {path}: it is a folder")
         try:
-            text = path.read_text()
+            text = path.read_text(encoding="utf-8-sig")
         except OSError as exc:
             raise ConfigError(f"Cannot read config file {path}: {exc.strerror or exc}") from None
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"Cannot read config file {path}: not UTF-8 text (byte {exc.object[exc.start]:#04x} "
+                              f"at offset {exc.start})") from None
         where = str(path)
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{where} is not valid YAML: {exc}") from None
     if data is None:
@@ -67,6 +92,10 @@ def load_config(name_or_path: str | Path, model: type[ModelT], section: str | No
     """
     data, where = read_yaml(name_or_path)
     if section is not None:
-        data = data.get(section, {}) or {}
+        data = data.get(section, {})
         where = f"{where} [{section}]"
+        if data is None:
+            data = {}
+        if not isinstance(data, dict):
+            raise ConfigError(f"{where}: the section must hold a mapping of keys to values, got {type(data).__name__}")
     return validate_config(data, model, where)

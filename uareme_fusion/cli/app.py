@@ -2,12 +2,14 @@
 
 Command modules (`uareme_fusion/cli/*_cmd.py`) register themselves on `app`; each parses its options
 and calls one library function. The command group turns the project's errors (`UaremeError`, e.g. an
-`InputError` for a bad file) into one red line on stderr and exit status 2, so a user mistake never
-shows a traceback; Ctrl-C exits with 130 after the command's own cleanup ran.
+`InputError` for a bad file), command-line usage errors (a bad option value, a missing argument) and
+`OSError`s (a path that cannot be read or written) into one red line on stderr and exit status 2, so
+a user mistake never shows a traceback; Ctrl-C exits with 130 after the command's own cleanup ran.
 """
 
 from __future__ import annotations
 
+import click
 import typer
 from rich.console import Console
 from typer.core import TyperGroup
@@ -22,12 +24,36 @@ def error_line(message: str) -> None:
     err_console.print(f"[bold red]error:[/] {message}", markup=True)
 
 
+# Usage errors from click, and from the copy of click that recent typer versions carry inside.
+_USAGE_ERRORS = tuple({click.UsageError, typer.BadParameter.__base__})
+
+
+def _usage_error_line(exc) -> None:
+    """One line for a command-line mistake (bad option value, missing argument, unknown command)."""
+    where = exc.ctx.command_path if exc.ctx is not None else "uareme-fusion"
+    error_line(f"{exc.format_message()} (see '{where} --help')".replace("[", r"\["))
+
+
 class _ErrorBoundaryGroup(TyperGroup):
+    def make_context(self, info_name, args, parent=None, **extra):
+        try:
+            return super().make_context(info_name, args, parent=parent, **extra)
+        except _USAGE_ERRORS as exc:  # options of the group itself
+            _usage_error_line(exc)
+            raise typer.Exit(2) from None
+
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
         except UaremeError as exc:
             error_line(str(exc).replace("[", r"\["))
+            raise typer.Exit(2) from None
+        except _USAGE_ERRORS as exc:  # typer's own parsing and typer.BadParameter
+            _usage_error_line(exc)
+            raise typer.Exit(2) from None
+        except OSError as exc:  # a path the user gave that cannot be read or written
+            where = f"{exc.filename}: " if exc.filename else ""
+            error_line(f"{where}{exc.strerror or exc}".replace("[", r"\["))
             raise typer.Exit(2) from None
         except KeyboardInterrupt:
             err_console.print("[yellow]interrupted[/]")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from .app import app
+from .app import app, fail
 
 BENCHMARKS = ("solver",)
 
@@ -21,6 +21,8 @@ def bench(
     """Time a stage on this machine (one core) and print medians, p90 and ratios to references."""
     if what not in BENCHMARKS:
         raise typer.BadParameter(f"unknown benchmark '{what}'; choose from {', '.join(BENCHMARKS)}")
+    if json_out is not None and (json_out.is_dir() or not json_out.parent.is_dir()):
+        raise fail(f"--json {json_out}: cannot write a file there (a folder, or its folder does not exist)")
     from ..benchmarks import solver
 
     results = solver.run(repeats=repeats)

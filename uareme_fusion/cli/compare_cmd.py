@@ -10,6 +10,9 @@ import typer
 from ..compare import compare, load_sequence, synthetic_sequence
 from .app import app, fail
 
+MAX_SYNTHETIC_DURATION_S = 3600.0
+"""The synthetic sequence is held in memory: an hour at 15 fps is about 54000 frames."""
+
 
 @app.command("compare")
 def compare_command(
@@ -17,8 +20,9 @@ def compare_command(
     out: Path = typer.Option(..., "--out", help="Folder for compare.md, compare.json and compare.png."),
     synthetic: Optional[str] = typer.Option(
         None, help="Build the sequence in memory from this simulator trajectory (walk, shake, static, bus, ...)."),
-    seed: int = typer.Option(0, help="Seed of the synthetic sequence."),
-    duration_s: float = typer.Option(20.0, "--duration-s", help="Length of the synthetic sequence, seconds."),
+    seed: int = typer.Option(0, min=0, help="Seed of the synthetic sequence."),
+    duration_s: float = typer.Option(20.0, "--duration-s", min=0.1, max=MAX_SYNTHETIC_DURATION_S,
+                                     help="Length of the synthetic sequence, seconds."),
     drop_fraction: float = typer.Option(0.1, help="Synthetic: fraction of frames without a visual rotation."),
     bad_fraction: float = typer.Option(0.05, help="Synthetic: fraction of frames with random normals."),
 ) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from .app import app
+from .app import app, fail
 
 
 @app.command()
@@ -14,6 +14,8 @@ def demo(
     out: Path = typer.Option(Path("uareme-demo"), help="Folder for the demo's plot."),
 ) -> None:
     """Run the method on built-in synthetic data and print what it gets right (under a minute)."""
+    if out.exists() and not out.is_dir():
+        raise fail(f"--out {out} exists and is not a folder")
     from ..demo import run_demo
 
     run_demo(out_dir=out)

@@ -2,7 +2,12 @@
 
 Array files hold normals (H, W, 3) in the camera frame, or (H, W, 4) with kappa as the last channel
 (the learned estimator's output contract); `.npz` files name them `normals` and optionally `kappa`.
-A normal PNG uses the paper's colouring, X-Y-Z to R-G-B: `n = rgb / max * 2 - 1`, 8 or 16 bit.
+A normal PNG uses the paper's colouring, X-Y-Z to R-G-B: `n = rgb / max * 2 - 1`, 8 or 16 bit
+(an alpha channel is ignored).
+Bad files raise `InputError` naming the file: missing, empty, truncated or corrupt files, an .npz
+given as .npy (or the reverse), an array header larger than the file or than `MAX_ARRAY_BYTES`
+(refused before allocating), wrong shapes or dtypes. NaN/Inf normals or kappa are loaded as they
+are: the solver ignores and counts such pixels (`n_invalid`).
 `frame="opencv"` (default) reads the vectors as x right, y down, z forward; `frame="opengl"` as
 x right, y up, z backward (converted to OpenCV here).
 """
@@ -17,6 +22,10 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import NormalMap
+from .images import read_image
+
+MAX_ARRAY_BYTES = 2 << 30
+"""Largest normal-map array we load (2 GiB: a 16k x 16k float32 map with kappa)."""
 
 NORMAL_FRAMES = ("opencv", "opengl")
 _OPENGL_TO_OPENCV = np.array([1.0, -1.0, -1.0], dtype=np.float32)
@@ -27,6 +36,8 @@ def load_normal_map(path: str | Path, frame: str = "opencv") -> NormalMap:
     path = Path(path)
     if frame not in NORMAL_FRAMES:
         raise InputError(f"Unknown normal frame '{frame}'; use one of {', '.join(NORMAL_FRAMES)}")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, expected a normal-map file (.npy, .npz or .png)")
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     suffix = path.suffix.lower()
@@ -46,7 +57,30 @@ def load_normal_map(path: str | Path, frame: str = "opencv") -> NormalMap:
     return NormalMap(normals=normals, kappa=kappa.astype(np.float32, copy=False))
 
 
+def _check_npy_header(path: Path, fh, available_bytes: int) -> None:
+    """Refuse an array whose header declares more data than the file holds (or than MAX_ARRAY_BYTES)
+    before numpy allocates it; `fh` is positioned at the start of the .npy data."""
+    try:
+        version = np.lib.format.read_magic(fh)
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, _, dtype = read_header(fh)
+    except (ValueError, OSError, EOFError, SyntaxError) as exc:
+        raise InputError(f"{path}: not a readable .npy array ({exc})") from None
+    if dtype.hasobject:
+        raise InputError(f"{path}: the array holds Python objects (dtype {dtype}), expected floating-point normals")
+    n_bytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if n_bytes > min(available_bytes, MAX_ARRAY_BYTES):
+        raise InputError(
+            f"{path}: the array header declares shape {shape} ({n_bytes / 2**20:.0f} MiB of {dtype}) but "
+            f"{'the limit is ' + str(MAX_ARRAY_BYTES >> 20) + ' MiB' if n_bytes > MAX_ARRAY_BYTES else 'the file holds less'}"
+        )
+
+
 def _load_npy(path: Path) -> np.ndarray:
+    if zipfile.is_zipfile(path):
+        raise InputError(f"{path}: this is an .npz archive (zip), not an .npy array; rename it to .npz")
+    with open(path, "rb") as fh:
+        _check_npy_header(path, fh, path.stat().st_size)
     try:
         return np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
@@ -54,20 +88,38 @@ def _load_npy(path: Path) -> np.ndarray:
 
 
 def _load_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    if not zipfile.is_zipfile(path):
+        hint = "; it is an .npy array: rename it to .npy" if _is_npy(path) else ""
+        raise InputError(f"{path}: not a readable .npz archive (not a zip file){hint}")
     try:
-        with np.load(path, allow_pickle=False) as data:
-            keys = list(data.keys())
+        with zipfile.ZipFile(path) as archive:
+            members = {info.filename: info for info in archive.infolist()}
+            keys = [name[:-4] for name in members if name.endswith(".npy")]
             if "normals" not in keys:
                 raise InputError(f"{path}: expected an array named 'normals' (and optionally 'kappa'), found {keys}")
+            for name in ("normals", "kappa"):
+                if name in keys:
+                    with archive.open(f"{name}.npy") as fh:
+                        _check_npy_header(path, fh, members[f"{name}.npy"].file_size)
+        with np.load(path, allow_pickle=False) as data:
             normals = data["normals"]
             kappa = data["kappa"] if "kappa" in keys else None
     except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        if isinstance(exc, InputError):
+            raise
         raise InputError(f"{path}: not a readable .npz archive ({exc})") from None
     normals, kappa_channel = _split_channels(path, normals)
     kappa = kappa_channel if kappa is None else kappa
     if kappa is not None and kappa.shape != normals.shape[:2]:
         raise InputError(f"{path}: kappa has shape {kappa.shape}, expected {normals.shape[:2]} to match normals")
+    if kappa is not None and not (np.issubdtype(kappa.dtype, np.floating) or np.issubdtype(kappa.dtype, np.integer)):
+        raise InputError(f"{path}: expected kappa as real numbers, got dtype {kappa.dtype}")
     return normals, kappa
+
+
+def _is_npy(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        return fh.read(6) == b"\x93NUMPY"
 
 
 def _split_channels(path: Path, array: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
@@ -81,9 +133,7 @@ def _split_channels(path: Path, array: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 
 def _load_image(path: Path) -> np.ndarray:
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise InputError(f"{path}: cannot decode the image (corrupt or not an image)")
+    image = read_image(path, cv2.IMREAD_UNCHANGED, what="a normal image (X-Y-Z as R-G-B)")
     if image.ndim != 3 or image.shape[2] < 3:
         raise InputError(f"{path}: a normal image needs 3 colour channels, got shape {image.shape}")
     if image.dtype == np.uint8:

@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 
 from ..errors import ConfigError, InputError
+from ..io.images import read_image
 from ..types import Frame, NormalMap
 
 ICL_NUIM_DEPTH_UNIT_M = 1.0 / 5000.0
@@ -113,9 +114,13 @@ def check_intrinsics(K, source: str = "depth map") -> tuple[float, float, float,
     """(fx, fy, cx, cy) from a (3, 3) pinhole matrix; `InputError` naming `source` if unusable."""
     if K is None:
         raise InputError(f"{source}: depth normals need camera intrinsics K (fx, fy, cx, cy), got none")
-    K = np.asarray(K, dtype=float)
+    try:
+        K = np.asarray(K, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{source}: expected intrinsics K as a finite (3, 3) matrix of numbers, got {K!r}") from None
     if K.shape != (3, 3) or not np.all(np.isfinite(K)):
-        raise InputError(f"{source}: expected intrinsics K as a finite (3, 3) matrix, got shape {K.shape}")
+        raise InputError(f"{source}: expected intrinsics K as a finite (3, 3) matrix, got shape {K.shape}"
+                         + ("" if K.shape != (3, 3) else " with NaN or infinite entries"))
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     if fy < 0:
         raise InputError(
@@ -148,19 +153,17 @@ def read_depth_png(path, unit_m: float, expected_shape: tuple[int, int] | None =
     count, or a size other than `expected_shape` (H, W).
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise InputError(f"{path}: depth image not found")
-    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if raw is None or raw.size == 0:
-        raise InputError(f"{path}: not a readable image")
+    if not (np.isfinite(unit_m) and unit_m > 0):
+        raise InputError(f"{path}: depth unit must be > 0 metres, got {unit_m}")
+    raw = read_image(path, cv2.IMREAD_UNCHANGED, what="a 16-bit depth PNG")
     if raw.ndim != 2:
         raise InputError(f"{path}: expected a single-channel depth image, got shape {raw.shape}")
     if raw.dtype != np.uint16:
         raise InputError(f"{path}: expected 16-bit depth (uint16), got {raw.dtype}")
     if expected_shape is not None and raw.shape != tuple(expected_shape):
         raise InputError(f"{path}: expected depth of size {tuple(expected_shape)} (H, W), got {raw.shape}")
-    if not unit_m > 0:
-        raise InputError(f"{path}: depth unit must be > 0 metres, got {unit_m}")
     return raw.astype(np.float32) * np.float32(unit_m)
 
 
@@ -193,7 +196,10 @@ class DepthNormals:
         `depth_m` (H, W) float metres, 0 or NaN where missing; `K` (3, 3) with fx, fy > 0.
         """
         fx, fy, cx, cy = check_intrinsics(K, source)
-        depth = np.asarray(depth_m)
+        try:
+            depth = np.asarray(depth_m)
+        except ValueError as exc:  # a ragged nested list
+            raise InputError(f"{source}: expected a depth map (H, W) of float metres ({exc})") from None
         if depth.ndim != 2 or min(depth.shape) < self.config.window_px:
             raise InputError(
                 f"{source}: expected a depth map of shape (H, W) at least {self.config.window_px} px "

@@ -47,6 +47,8 @@ GT_KAPPA = 100.0
 EUROC_IMU_HEADER = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
                     "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
 MAX_PIXELS = 4096 * 4096
+MAX_TIME_OFFSET_S = 1.0
+"""Largest IMU-camera clock offset the simulator writes, s."""
 
 
 @dataclass(frozen=True)
@@ -80,6 +82,19 @@ class SequenceOptions:
             raise InputError(f"--imu-rate must be between 100 and 1000 Hz, got {self.imu_rate_hz}")
         if self.hfov_deg is not None and not 45.0 <= self.hfov_deg <= 95.0:
             raise InputError(f"--fov must be between 45 and 95 degrees, got {self.hfov_deg}")
+        if not 0 <= self.seed < 2**63:
+            raise InputError(f"--seed must be an integer >= 0, got {self.seed}")
+        if not abs(self.time_offset_s) <= MAX_TIME_OFFSET_S:
+            raise InputError(f"time_offset_s must be within +-{MAX_TIME_OFFSET_S:g} s, got {self.time_offset_s}")
+        R_ci = np.asarray(self.R_ci, dtype=float) if np.shape(self.R_ci) == (3, 3) else None
+        if (R_ci is None or not np.all(np.isfinite(R_ci)) or not np.allclose(R_ci.T @ R_ci, np.eye(3), atol=1e-6)
+                or np.linalg.det(R_ci) <= 0):
+            raise InputError(f"R_ci must be a 3x3 rotation matrix (orthonormal, det +1), got {self.R_ci}")
+        noise = self.imu_noise.as_dict()
+        bad = [k for k, v in noise.items() if not np.all(np.isfinite(v)) or (np.ndim(v) == 0 and v < 0)
+               or np.shape(v) not in ((), (3,))]
+        if bad:
+            raise InputError(f"imu_noise: {', '.join(bad)} must be finite (densities >= 0, biases 3-vectors)")
 
 
 def _save_npz(path: Path, **arrays) -> None:

@@ -1,0 +1,114 @@
+"""Reading image files that users bring, with one clear `InputError` for every way they can be bad.
+
+`read_image(path, flags, what)` is `cv2.imread` plus the checks it leaves out: a missing, empty or
+non-image file, a truncated or corrupt one, and an image too large to decode. PNG and JPEG headers
+are checked BEFORE decoding (`image_size`), so a file that claims 30000 x 30000 pixels is refused
+without allocating gigabytes; other formats rely on OpenCV's own limit (`cv2.error`, also turned
+into an `InputError`).
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+
+MAX_IMAGE_PIXELS = 8192 * 8192
+"""Largest image we decode (67 Mpixel: 400 MB as 16-bit RGB); far beyond any camera frame we use."""
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_JPEG_SOI = b"\xff\xd8"
+# JPEG start-of-frame markers (they carry the size): C0-CF except DHT (C4), JPG (C8) and DAC (CC).
+_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+_JPEG_HEADER_BYTES = 1 << 20
+
+
+def image_format(head: bytes) -> str | None:
+    """'png', 'jpeg' or None (another or no image format) from a file's first bytes."""
+    if head.startswith(_PNG_SIGNATURE):
+        return "png"
+    if head.startswith(_JPEG_SOI):
+        return "jpeg"
+    return None
+
+
+def image_size(path: str | Path) -> tuple[int, int] | None:
+    """(width, height) in pixels read from a PNG or JPEG header without decoding the image.
+
+    None for other formats, or when the header does not hold a size (a corrupt file: decoding it
+    then fails with its own message).
+    """
+    with open(path, "rb") as fh:
+        head = fh.read(_JPEG_HEADER_BYTES)
+    kind = image_format(head)
+    if kind == "png":
+        # The IHDR chunk comes first: length (4), b"IHDR", width (4), height (4), big-endian.
+        if len(head) >= 24 and head[12:16] == b"IHDR":
+            return struct.unpack(">II", head[16:24])
+        return None
+    if kind == "jpeg":
+        pos = 2
+        while pos + 9 <= len(head):
+            if head[pos] != 0xFF:
+                return None
+            marker = head[pos + 1]
+            if marker == 0xFF:  # fill byte
+                pos += 1
+                continue
+            if marker in _JPEG_SOF:
+                height, width = struct.unpack(">HH", head[pos + 5 : pos + 9])
+                return width, height
+            (length,) = struct.unpack(">H", head[pos + 2 : pos + 4])
+            pos += 2 + length
+    return None
+
+
+def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED, what: str = "image") -> np.ndarray:
+    """`cv2.imread(path, flags)` (BGR(A) channel order, the file's bit depth for IMREAD_UNCHANGED).
+
+    Raises `InputError` naming the file and `what` it should be for a missing or empty file, a
+    file that is not an image (its first bytes are quoted), a header larger than `MAX_IMAGE_PIXELS`
+    or with a zero side, and a truncated or corrupt image that OpenCV cannot decode.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, expected {what}")
+    if not path.is_file():
+        raise InputError(f"{path}: no such file (expected {what})")
+    n_bytes = path.stat().st_size
+    if n_bytes == 0:
+        raise InputError(f"{path}: empty file (0 bytes), expected {what}")
+    size = image_size(path)
+    if size is not None:
+        width, height = size
+        if width == 0 or height == 0:
+            raise InputError(f"{path}: the image header declares {width} x {height} pixels (a zero side)")
+        if width * height > MAX_IMAGE_PIXELS:
+            raise InputError(
+                f"{path}: the image header declares {width} x {height} pixels, more than the limit of "
+                f"{MAX_IMAGE_PIXELS} pixels; refusing to decode it"
+            )
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # our message replaces OpenCV's log
+    try:
+        image = cv2.imread(str(path), flags)
+    except cv2.error as exc:
+        reason = str(exc).strip().splitlines()[-1]
+        raise InputError(f"{path}: OpenCV cannot decode {what} ({reason})") from None
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+    if image is None or image.size == 0:
+        if not cv2.haveImageReader(str(path)):
+            with open(path, "rb") as fh:
+                head = fh.read(8)
+            raise InputError(
+                f"{path}: not a readable image, cannot decode it: not a format OpenCV reads (file starts with "
+                f"{head!r}); expected {what}"
+            )
+        raise InputError(f"{path}: not a readable image, cannot decode it: corrupt or truncated ({n_bytes} bytes); "
+                         f"expected {what}")
+    return image
