@@ -62,18 +62,19 @@ def _check_npy_header(path: Path, fh, available_bytes: int) -> None:
     before numpy allocates it; `fh` is positioned at the start of the .npy data."""
     try:
         version = np.lib.format.read_magic(fh)
-        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, _, dtype = read_header(fh)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+        else:
+            shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
     except (ValueError, OSError, EOFError, SyntaxError) as exc:
         raise InputError(f"{path}: not a readable .npy array ({exc})") from None
     if dtype.hasobject:
         raise InputError(f"{path}: the array holds Python objects (dtype {dtype}), expected floating-point normals")
     n_bytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
     if n_bytes > min(available_bytes, MAX_ARRAY_BYTES):
-        raise InputError(
-            f"{path}: the array header declares shape {shape} ({n_bytes / 2**20:.0f} MiB of {dtype}) but "
-            f"{'the limit is ' + str(MAX_ARRAY_BYTES >> 20) + ' MiB' if n_bytes > MAX_ARRAY_BYTES else 'the file holds less'}"
-        )
+        why = f"the limit is {MAX_ARRAY_BYTES >> 20} MiB" if n_bytes > MAX_ARRAY_BYTES else "the file holds less"
+        raise InputError(f"{path}: the array header declares shape {shape} ({n_bytes / 2**20:.0f} MiB of {dtype}) "
+                         f"but {why}")
 
 
 def _load_npy(path: Path) -> np.ndarray:
