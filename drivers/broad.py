@@ -5,7 +5,9 @@ File layout (HDF5): `imu_gyr` (N, 3) rad/s, `imu_acc` (N, 3) m/s^2, `imu_mag` (N
 (N,) bool marking the samples to score, attribute `sampling_rate` in Hz.
 
 Conventions: `R_ref_imu` (N, 3, 3) maps IMU coordinates to the ENU reference frame (z up), i.e. it
-plays the role of `R_wi`; rows with a NaN quaternion are NaN.
+plays the role of `R_wi`; rows with a NaN quaternion are NaN (the optical system lost the markers).
+Missing datasets, wrong shapes, a bad sampling rate and NaN/Inf IMU samples raise `InputError`
+naming the file and the dataset.
 """
 
 from __future__ import annotations
@@ -42,6 +44,13 @@ class BroadTrial:
         return R
 
 
+def _numeric(path: Path, f, key: str) -> np.ndarray:
+    try:
+        return np.asarray(f[key], float)
+    except (TypeError, ValueError, OSError):  # h5py: OSError when it has no conversion to float
+        raise InputError(f"BROAD file {path}: {key} is not numeric (dtype {f[key].dtype})") from None
+
+
 def read_broad(path: str | Path) -> BroadTrial:
     """Read one BROAD `.hdf5` trial; `InputError` naming the file if it is unreadable or incomplete."""
     import h5py
@@ -56,12 +65,14 @@ def read_broad(path: str | Path) -> BroadTrial:
         if missing or "sampling_rate" not in f.attrs:
             what = ", ".join(missing + ([] if "sampling_rate" in f.attrs else ["attribute sampling_rate"]))
             raise InputError(f"BROAD file {path} lacks {what}")
-        gyro = np.asarray(f["imu_gyr"], float)
-        accel = np.asarray(f["imu_acc"], float)
-        quat = np.asarray(f["opt_quat"], float)
+        gyro, accel, quat = (_numeric(path, f, key) for key in ("imu_gyr", "imu_acc", "opt_quat"))
         movement = np.asarray(f["movement"], bool)
-        rate = float(f.attrs["sampling_rate"])
-    n = gyro.shape[0]
+        try:
+            rate = float(np.asarray(f.attrs["sampling_rate"]).reshape(-1)[0])
+        except (TypeError, ValueError, IndexError):
+            raise InputError(f"BROAD file {path}: sampling_rate must be a number of Hz, got "
+                             f"{f.attrs['sampling_rate']!r}") from None
+    n = gyro.shape[0] if gyro.ndim else 0
     if gyro.shape != (n, 3) or accel.shape != (n, 3) or quat.shape != (n, 4) or movement.shape != (n,):
         raise InputError(
             f"BROAD file {path}: expected imu_gyr/imu_acc (N, 3), opt_quat (N, 4), movement (N,); got "
@@ -69,4 +80,9 @@ def read_broad(path: str | Path) -> BroadTrial:
         )
     if not (np.isfinite(rate) and rate > 0):
         raise InputError(f"BROAD file {path}: sampling_rate must be positive, got {rate}")
+    for key, values in (("imu_gyr", gyro), ("imu_acc", accel)):
+        bad = ~np.isfinite(values).all(axis=1)
+        if bad.any():
+            raise InputError(f"BROAD file {path}: {key} holds NaN or infinite values in {int(bad.sum())} row(s) "
+                             f"(first: sample {int(np.flatnonzero(bad)[0])})")
     return BroadTrial(path.stem, np.arange(n) / rate, gyro, accel, quat, movement, rate)

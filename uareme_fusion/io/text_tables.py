@@ -57,7 +57,8 @@ class TextTable:
 
     def require_finite(self, values: np.ndarray, what: str) -> None:
         """`InputError` naming the lines whose `values` (N,) or (N, k) hold NaN or infinity."""
-        bad = ~np.isfinite(values).reshape(len(values), -1).all(axis=1)
+        finite = np.isfinite(values)
+        bad = ~finite.all(axis=tuple(range(1, finite.ndim))) if finite.ndim > 1 else ~finite
         if bad.any():
             raise InputError(
                 f"{self.path}: {int(bad.sum())} row(s) hold a NaN or infinite {what} ({self.lines_where(bad)})"
