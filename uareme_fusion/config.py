@@ -3,11 +3,13 @@
 Each component owns its pydantic model (e.g. `MekfConfig` in `backends/mekf.py`); this module only
 reads files. Presets live in `configs/` (installed as `uareme_fusion.configs`) and are found by
 name: `load_config("vehicle", MekfConfig)` or by path: `load_config("my.yaml", MekfConfig)`.
-A key given twice in one mapping is an error (plain YAML loading would keep the last silently).
+A key given twice in one mapping is an error (plain YAML loading would keep the last silently), and
+so is a NaN or infinite number (`.nan`, `.inf`) anywhere in a file: no parameter means "unbounded".
 """
 
 from __future__ import annotations
 
+import math
 from importlib import resources
 from pathlib import Path
 from typing import TypeVar
@@ -47,6 +49,8 @@ def preset_names() -> list[str]:
 
 def read_yaml(name_or_path: str | Path) -> tuple[dict, str]:
     """The mapping in a preset (by name) or a YAML file (by path), and where it came from."""
+    if not str(name_or_path).strip():
+        raise ConfigError(f"Unknown preset '{name_or_path}' (an empty name); presets are: {', '.join(preset_names())}")
     path = Path(name_or_path)
     if path.suffix.lower() not in (".yaml", ".yml") and not path.exists():
         preset = resources.files("uareme_fusion.configs") / f"{name_or_path}.yaml"
@@ -72,7 +76,21 @@ def read_yaml(name_or_path: str | Path) -> tuple[dict, str]:
         data = {}
     if not isinstance(data, dict):
         raise ConfigError(f"{where} must hold a mapping of keys to values, got {type(data).__name__}")
+    bad = _non_finite_keys(data)
+    if bad:
+        raise ConfigError(f"{where}: {', '.join(bad)}: NaN and infinity are not allowed in configuration files")
     return data, where
+
+
+def _non_finite_keys(value, prefix: str = "") -> list[str]:
+    """Dotted keys (list items as [i]) holding a NaN or infinite float, anywhere in `value`."""
+    if isinstance(value, float):
+        return [] if math.isfinite(value) else [prefix or "(top level)"]
+    if isinstance(value, dict):
+        return [k for key, v in value.items() for k in _non_finite_keys(v, f"{prefix}.{key}" if prefix else str(key))]
+    if isinstance(value, list):
+        return [k for i, v in enumerate(value) for k in _non_finite_keys(v, f"{prefix}[{i}]")]
+    return []
 
 
 def validate_config(data: dict, model: type[ModelT], where: str = "config") -> ModelT:
@@ -81,9 +99,18 @@ def validate_config(data: dict, model: type[ModelT], where: str = "config") -> M
         return model.model_validate(data)
     except ValidationError as exc:
         problems = "; ".join(
-            f"{'.'.join(str(p) for p in err['loc']) or '(top level)'}: {err['msg']}" for err in exc.errors()
+            f"{'.'.join(str(p) for p in err['loc']) or '(top level)'}: {err['msg']}{_got(err)}" for err in exc.errors()
         )
         raise ConfigError(f"{where}: {problems}") from None
+
+
+def _got(err: dict) -> str:
+    """' (got VALUE)' for a scalar or short value the user wrote, '' otherwise."""
+    value = err.get("input")
+    if isinstance(value, dict) or err["type"] == "missing":
+        return ""
+    text = repr(value)
+    return f" (got {text if len(text) <= 40 else text[:37] + '...'})"
 
 
 def load_config(name_or_path: str | Path, model: type[ModelT], section: str | None = None) -> ModelT:
