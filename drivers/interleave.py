@@ -1,0 +1,114 @@
+"""Putting IMU samples between frames: the time-ordering every source with an IMU needs.
+
+    imu = ImuInterleaver(batches, time_offset_s=info.imu_time_offset_s)
+    for frame in frames:
+        batch = imu.until(frame.t)          # every sample no later than the frame (camera clock)
+        if batch is not None:
+            yield batch
+        yield frame
+    yield from imu.rest()
+
+Clocks: batches carry IMU-clock stamps (as the IMU wrote them); a sample stamped `t` happened at
+camera time `t + time_offset_s` (`SourceInfo.imu_time_offset_s`), and that camera time decides
+where it goes in the stream. Stamps are never rewritten, so a recording keeps the IMU clock.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+
+import numpy as np
+
+from .base import ImuBatch
+
+IMU_ONLY_BATCH_S = 1.0 / 30.0
+"""Span of the batches IMU-only sources yield: the pipeline reports one estimate per batch."""
+
+
+def empty_batch() -> ImuBatch:
+    return ImuBatch(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+
+
+def concat_batches(batches: list[ImuBatch]) -> ImuBatch:
+    if len(batches) == 1:
+        return batches[0]
+    return ImuBatch(np.concatenate([b.t_s for b in batches]), np.concatenate([b.gyro_rad_s for b in batches]),
+                    np.concatenate([b.accel_m_s2 for b in batches]))
+
+
+def slice_batch(batch: ImuBatch, start: int, stop: int | None = None) -> ImuBatch:
+    return ImuBatch(batch.t_s[start:stop], batch.gyro_rad_s[start:stop], batch.accel_m_s2[start:stop])
+
+
+def split_by_span(t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray,
+                  span_s: float = IMU_ONLY_BATCH_S) -> Iterator[ImuBatch]:
+    """In-memory IMU arrays as consecutive batches each covering about `span_s` seconds (views, no
+    copies); the stream IMU-only sources yield."""
+    if len(t_s) == 0:
+        return
+    edges = np.arange(t_s[0] + span_s, t_s[-1] + span_s, span_s)
+    cuts = np.unique(np.concatenate([[0], np.searchsorted(t_s, edges, side="right"), [len(t_s)]]))
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        yield ImuBatch(t_s[a:b], gyro_rad_s[a:b], accel_m_s2[a:b])
+
+
+class ImuInterleaver:
+    """Hands out IMU samples in camera-time order, pulling batches from an iterator only as far as
+    needed (a live IMU is never read ahead by more than one batch)."""
+
+    def __init__(self, batches: Iterable[ImuBatch], time_offset_s: float = 0.0):
+        self._source = iter(batches)
+        self.time_offset_s = float(time_offset_s)
+        self._pending: list[ImuBatch] = []
+        self._exhausted = False
+        self.n_samples = 0
+        """Samples handed out so far."""
+
+    def _newest_cam_s(self) -> float:
+        return self._pending[-1].t_s[-1] + self.time_offset_s if self._pending else -np.inf
+
+    def until(self, t_cam_s: float) -> ImuBatch | None:
+        """All not yet released samples whose camera time is <= `t_cam_s`, as one batch (None when
+        there are none)."""
+        while not self._exhausted and self._newest_cam_s() <= t_cam_s:
+            batch = next(self._source, None)
+            if batch is None:
+                self._exhausted = True
+            elif len(batch):
+                self._pending.append(batch)
+        if not self._pending:
+            return None
+        pending = concat_batches(self._pending)
+        cut = int(np.searchsorted(pending.t_s, t_cam_s - self.time_offset_s, side="right"))
+        self._pending = [slice_batch(pending, cut)] if cut < len(pending) else []
+        if cut == 0:
+            return None
+        self.n_samples += cut
+        return slice_batch(pending, 0, cut)
+
+    def rest(self) -> Iterator[ImuBatch]:
+        """The samples after the last frame, batch by batch."""
+        yield from self._pending
+        self.n_samples += sum(len(b) for b in self._pending)
+        self._pending = []
+        if not self._exhausted:
+            for batch in self._source:
+                if len(batch):
+                    self.n_samples += len(batch)
+                    yield batch
+            self._exhausted = True
+
+
+def interleave(frames: Iterable, imu_batches: Iterable[ImuBatch] | None, time_offset_s: float = 0.0) -> Iterator:
+    """Frames with the IMU samples due before each one (see the module docstring); the IMU's tail
+    after the last frame comes last."""
+    if imu_batches is None:
+        yield from frames
+        return
+    imu = ImuInterleaver(imu_batches, time_offset_s)
+    for frame in frames:
+        batch = imu.until(frame.t)
+        if batch is not None:
+            yield batch
+        yield frame
+    yield from imu.rest()

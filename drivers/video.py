@@ -1,0 +1,127 @@
+"""Video files and webcams through OpenCV.
+
+    with VideoSource("clip.mp4") as src: ...      # n_frames and fps from the container
+    with VideoSource("webcam:0") as src: ...      # live; n_frames None
+
+Timestamps (float s): for files, the container's presentation time of each frame
+(`CAP_PROP_POS_MSEC`) when it increases, else `index / fps`; for webcams, host monotonic time since
+the first frame. Frames are RGB uint8 (OpenCV decodes BGR; grayscale and 16-bit video is converted).
+K is unknown (None). Failures: a file or camera that cannot be opened -> `InputError`; a file that
+stops decoding before its frame count, or a camera that stops delivering -> `SourceError` naming
+the frame index.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from uareme_fusion.errors import InputError, SourceError
+from uareme_fusion.types import Frame
+
+from .base import Source, SourceInfo
+
+WEBCAM_PATTERN = re.compile(r"^webcam(?::(\d+))?$")
+DEFAULT_FPS = 30.0
+"""Frame rate assumed when the container does not state one."""
+WEBCAM_READ_RETRIES = 3
+"""Consecutive failed reads after which a webcam counts as disconnected."""
+
+
+def to_rgb8(image: np.ndarray) -> np.ndarray:
+    """An OpenCV image (gray, BGR or BGRA; uint8 or uint16) as (H, W, 3) uint8 RGB."""
+    if image.dtype == np.uint16:
+        image = (image.astype(np.uint32) * 255 + 32767) // 65535  # full 16-bit range -> 0..255, rounded
+        image = image.astype(np.uint8)
+    elif image.dtype != np.uint8:
+        raise InputError(f"expected an 8- or 16-bit image, got dtype {image.dtype}")
+    if image.ndim == 2 or image.shape[2] == 1:
+        return cv2.cvtColor(image, cv2.COLOR_GRAY2RGB)
+    if image.shape[2] == 4:
+        return cv2.cvtColor(image, cv2.COLOR_BGRA2RGB)
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def parse_webcam(spec: str) -> int | None:
+    """Camera index of `webcam` / `webcam:N`, None for anything else."""
+    match = WEBCAM_PATTERN.match(spec.strip())
+    return None if match is None else int(match.group(1) or 0)
+
+
+class VideoSource(Source):
+    """A video file or a webcam (`webcam:N`); see the module docstring."""
+
+    def __init__(self, spec: str | Path, fps: float | None = None):
+        self.spec = str(spec)
+        self.camera = parse_webcam(self.spec)
+        if self.camera is None:
+            path = Path(self.spec)
+            if not path.is_file():
+                raise InputError(f"video {path}: no such file")
+            self._cap = cv2.VideoCapture(str(path))
+            if not self._cap.isOpened():
+                self._cap.release()
+                raise InputError(f"video {path}: OpenCV cannot open it (not a video, or a codec it lacks)")
+        else:
+            self._cap = cv2.VideoCapture(self.camera)
+            if not self._cap.isOpened():
+                self._cap.release()
+                raise InputError(f"{self.spec}: cannot open camera {self.camera} (not connected, or in use)")
+        count = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        container_fps = float(self._cap.get(cv2.CAP_PROP_FPS))
+        if fps is not None and not (np.isfinite(fps) and fps > 0):
+            raise InputError(f"--fps must be > 0, got {fps}")
+        self.fps = fps or (container_fps if np.isfinite(container_fps) and container_fps > 0 else None)
+        width = int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH))
+        height = int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        self.info = SourceInfo(
+            name=self.spec,
+            n_frames=count if self.camera is None and count > 0 else None,
+            fps=self.fps,
+            image_size=(height, width) if width > 0 and height > 0 else None,
+        )
+        self.use_fps_times = fps is not None  # an explicit --fps overrides the container's clock
+
+    def _file_time(self, index: int, last_t: float) -> float:
+        t = self._cap.get(cv2.CAP_PROP_POS_MSEC) * 1e-3
+        if not self.use_fps_times and np.isfinite(t) and (index == 0 and t >= 0 or t > last_t):
+            return t
+        return index / (self.fps or DEFAULT_FPS)
+
+    def events(self) -> Iterator[Frame]:
+        if self._cap is None:
+            raise SourceError(f"{self.spec}: the source was closed")
+        index, last_t, t0, failures = 0, -np.inf, None, 0
+        while True:
+            ok, image = self._cap.read()
+            if not ok or image is None:
+                if self.camera is not None:
+                    failures += 1
+                    if failures < WEBCAM_READ_RETRIES:
+                        continue
+                    raise SourceError(f"{self.spec}: the camera stopped delivering frames after frame {index - 1} "
+                                      f"({index} frames read)")
+                if self.info.n_frames is not None and index < self.info.n_frames:
+                    raise SourceError(f"video {self.spec}: decoding stopped at frame {index} of "
+                                      f"{self.info.n_frames} (truncated or corrupt file)")
+                return
+            failures = 0
+            if self.camera is None:
+                t = self._file_time(index, last_t)
+            else:
+                now = time.monotonic()
+                t0 = now if t0 is None else t0
+                t = now - t0
+            yield Frame(t=float(t), rgb=to_rgb8(image), index=index)
+            last_t = t
+            index += 1
+
+    def close(self) -> None:
+        if self._cap is not None:
+            self._cap.release()
+            self._cap = None
