@@ -1,0 +1,134 @@
+"""`open_source`: one string names any input; the right driver opens it.
+
+    with open_source("clip.mp4", imu="imu.csv") as src: ...
+    with open_source("sim:bus", seconds=20, render=False) as src: ...
+
+Spec -> driver (first match wins):
+- `sim:SCENARIO` -> `SimulatedSource` (options: seconds, width, height, seed, render, imu, imu_rate_hz,
+  imu_noise, hfov_deg, normals_noise_deg, R_ci);
+- `webcam` / `webcam:N` -> `VideoSource`; `oak` / `oak:ID` -> `OakSource` (size, depth, imu_rate_hz);
+- a folder with `rgb.txt` -> `TumSource` (TUM RGB-D, `simulate` output, `--record` folders);
+  with `associations.txt` -> `IclNuimSource` when its timestamps are frame numbers, else `TumSource`;
+  with `mav0/` (or `cam0/`/`imu0/`) -> `EurocSource`; holding image files -> `ImageSource`;
+- a `.hdf5`/`.h5` file -> `BroadSource`; a `.csv` file -> `ImuCsvSource`; an image file or a glob
+  -> `ImageSource`; any other file -> `VideoSource`.
+`imu=FILE` merges an EuRoC-format IMU CSV into a camera source (`merge_imu`; option
+`imu_time_offset_s`, added to the IMU stamps to put them on the camera clock). `fps` applies to
+video, images, ICL-NUIM, the simulator and OAK; datasets with their own timestamps refuse it.
+Every failure to open is an `InputError` naming the spec and what is missing.
+"""
+
+from __future__ import annotations
+
+import glob as globlib
+import inspect
+from pathlib import Path
+
+import numpy as np
+
+from uareme_fusion.errors import InputError
+
+from .base import Source
+from .broad_source import BroadSource
+from .euroc import EurocSource, find_mav0
+from .icl_nuim import IclNuimSource
+from .images import IMAGE_SUFFIXES, ImageSource
+from .imu_csv import ImuCsvSource, merge_imu
+from .simulated import SimulatedSource
+from .tum import TumSource
+from .tum_rgbd import read_associations
+from .video import VideoSource, parse_webcam
+
+BROAD_SUFFIXES = (".hdf5", ".h5")
+
+
+def _construct(cls, where: str, *args, **options) -> Source:
+    """`cls(*args, **options)` with unknown option names reported as an `InputError`."""
+    accepted = [name for name in inspect.signature(cls.__init__).parameters if name != "self"]
+    unknown = sorted(set(options) - set(accepted))
+    if unknown:
+        raise InputError(f"{where}: unknown option(s) {', '.join(unknown)}; {cls.__name__} accepts "
+                         f"{', '.join(accepted[len(args):])}")
+    return cls(*args, **options)
+
+
+def _no_fps(fps: float | None, where: str) -> None:
+    if fps is not None:
+        raise InputError(f"{where}: --fps does not apply (the dataset has its own timestamps)")
+
+
+def _associations_count_frames(path: Path) -> bool:
+    t, _, _ = read_associations(path)
+    return len(t) > 0 and bool(np.all(np.asarray(t) == np.round(t)))
+
+
+def _open_folder(path: Path, fps: float | None, options: dict) -> Source:
+    where = str(path)
+    if (path / "rgb.txt").is_file():
+        _no_fps(fps, where)
+        return _construct(TumSource, where, path, **options)
+    if (path / "associations.txt").is_file():
+        if _associations_count_frames(path / "associations.txt"):
+            return _construct(IclNuimSource, where, path, fps=fps, **options)
+        _no_fps(fps, where)
+        return _construct(TumSource, where, path, **options)
+    if find_mav0(path) is not None:
+        _no_fps(fps, where)
+        return _construct(EurocSource, where, path, **options)
+    if any(p.suffix.lower() in IMAGE_SUFFIXES for p in path.iterdir() if p.is_file()):
+        return _construct(ImageSource, where, path, fps=fps, **options)
+    subfolders = sorted(p.name for p in path.iterdir() if p.is_dir())
+    if {"rgb", "depth"} & set(subfolders):
+        raise InputError(f"dataset folder {path}: has {'/ and '.join(s for s in subfolders if s in ('rgb', 'depth'))}/ "
+                         "but no index file: expected rgb.txt (TUM RGB-D, simulate output) or associations.txt "
+                         "(ICL-NUIM); to run on the images alone, pass the image folder itself")
+    if "mav0" in subfolders or "imu0" in subfolders:
+        raise InputError(f"EuRoC folder {path}: found no cam0/data.csv or imu0/data.csv")
+    raise InputError(f"folder {path}: not a dataset (no rgb.txt, associations.txt or mav0/) and holds no image "
+                     "files")
+
+
+def open_source(spec: str, imu: str | None = None, fps: float | None = None, **options) -> Source:
+    """Open the input `spec` names (see the module docstring); `imu` merges an IMU CSV into it."""
+    imu_offset_s = float(options.pop("imu_time_offset_s", 0.0))
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise InputError(f"--fps must be > 0, got {fps}")
+    source = _open(str(spec).strip(), fps, options)
+    if imu is None:
+        return source
+    try:
+        return merge_imu(source, ImuCsvSource(imu), imu_offset_s)
+    except BaseException:
+        source.close()
+        raise
+
+
+def _open(spec: str, fps: float | None, options: dict) -> Source:
+    if spec.startswith("sim:"):
+        if fps is not None:
+            options["fps"] = fps
+        return _construct(SimulatedSource, spec, spec[4:], **options)
+    if parse_webcam(spec) is not None:
+        return _construct(VideoSource, spec, spec, fps=fps, **options)
+    if spec == "oak" or spec.startswith("oak:"):
+        from .oak import OakSource
+
+        return _construct(OakSource, spec, spec[4:] or None, fps=fps, **options)
+    path = Path(spec).expanduser()
+    if path.is_dir():
+        return _open_folder(path, fps, options)
+    if path.is_file():
+        suffix = path.suffix.lower()
+        if suffix in BROAD_SUFFIXES:
+            _no_fps(fps, spec)
+            return _construct(BroadSource, spec, path, **options)
+        if suffix == ".csv":
+            _no_fps(fps, spec)
+            return _construct(ImuCsvSource, spec, path, **options)
+        if suffix in IMAGE_SUFFIXES:
+            return _construct(ImageSource, spec, path, fps=fps, **options)
+        return _construct(VideoSource, spec, path, fps=fps, **options)
+    if globlib.has_magic(spec):
+        return _construct(ImageSource, spec, spec, fps=fps, **options)
+    raise InputError(f"{spec}: no such file or folder (expected a video, images, a dataset folder, a .hdf5 or "
+                     ".csv file, webcam:N, sim:SCENARIO or oak[:ID])")
