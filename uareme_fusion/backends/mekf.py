@@ -74,6 +74,10 @@ class MekfConfig(BaseModel):
     """Gyro bias random-walk density, rad/s^2/sqrt(Hz)."""
     gyro_bias_initial_std_rad_s: float = Field(0.01, ge=0)
     """Prior standard deviation of each gyro bias component, rad/s."""
+    gyro_rate_noise_sqrt_s: float = Field(0.0, ge=0)
+    """Relative gyro error (scale factor, axis misalignment, timing) as a white-noise density, sqrt(s):
+    the attitude variance grows by `(this * |omega|)^2` per second of rotation at `|omega|` (0 = off),
+    so the filter leans on the accelerometer more while the camera turns fast."""
     gyro_sampling: GyroSampling = GyroSampling.INSTANT
     gyro_range_rad_s: float = Field(34.9, gt=0)
     """Gyro full scale, rad/s (34.9 = 2000 deg/s); readings at or beyond it are flagged."""
@@ -103,6 +107,17 @@ class MekfConfig(BaseModel):
     variance factor `1 + (angle / this)^2` (continuous, no timeouts)."""
     accel_downweight_flag_ratio: float = Field(2.0, gt=1)
     """ACCEL_DOWNWEIGHTED is set when the inflated std exceeds this many times the nominal one."""
+    rest_gyro_max_rad_s: float = Field(0.0, ge=0)
+    """Rest detection for the zero-rate bias update (0 = off): an accelerometer-update period is at
+    rest when its mean gyro reading and the rms deviation of its gyro samples from that mean are both
+    below this, rad/s (vqf uses 2 deg/s = 0.035)."""
+    rest_accel_max_m_s2: float = Field(0.5, gt=0)
+    """...and the rms deviation of its accelerometer samples from their mean is below this, m/s^2."""
+    rest_min_duration_s: float = Field(1.5, ge=0)
+    """Rest must have lasted this long before the mean gyro reading measures the bias, s."""
+    rest_rate_std_rad_s: float = Field(5e-4, gt=0)
+    """Residual angular rate allowed at rest (micro-motion), added to the gyro white noise of the
+    period's mean in the zero-rate update's std, rad/s."""
     initial_tilt_std_rad: float = Field(0.03, gt=0)
     """Tilt std after initialisation from the first accelerometer samples, rad."""
     init_accel_window_s: float = Field(0.05, gt=0)
@@ -176,6 +191,7 @@ class Mekf(Backend):
         self._imu_is_camera = bool(np.array_equal(self.R_ci, I3))
         self._q_gyro = cfg.gyro_noise_rad_s_sqrt_hz**2
         self._q_bias = cfg.gyro_bias_rw_rad_s2_sqrt_hz**2
+        self._q_rate = cfg.gyro_rate_noise_sqrt_s**2
         self._inv_g = 1.0 / cfg.gravity_m_s2
         self._trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
         self.stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
@@ -189,7 +205,8 @@ class Mekf(Backend):
         self.initialised = False
         self.manhattan_initialised = False
         self.counters = dict(visual_rejected=0, reinitialised=0, accel_downweighted=0, accel_skipped=0,
-                             imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0)
+                             imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0,
+                             rest_updates=0)
         self._flags = Status.OK
         self._last_gyro_c: np.ndarray | None = None
         self._pending: list[ImuBatch] = []
@@ -200,9 +217,17 @@ class Mekf(Backend):
         # Accelerometer average since the last update, expressed in the current camera frame.
         self._acc_sum_c = np.zeros(3)
         self._acc_time_s = 0.0
+        # Rest detection over the same period: raw gyro and accelerometer sums (camera frame), sums
+        # of squared norms, sample count; time rest began (None when moving).
+        self._rest_sums = np.zeros(8)
+        self._rest_since_s: float | None = None
+        self._rest_n = 0
         # Low-pass stages (2, 3) of the specific force (m/s^2), rows in the current camera frame
-        # (None until the first update).
+        # (None until the first update), and their sensitivity (2, 3, 3) to the gyro-bias error:
+        # the stages computed with the true bias would read `lp + J @ db` (the frame they were
+        # carried in turned with the estimated bias).
         self._acc_lp_c: np.ndarray | None = None
+        self._acc_lp_J: np.ndarray | None = None
         self._record_t: list[np.ndarray] = []
         self._record_R: list[np.ndarray] = []
 
@@ -323,13 +348,14 @@ class Mekf(Backend):
             self._integrate_chunk(t, gyro_c, accel_c, saturated, weight)
             return
         # A sample belongs to the chunk in which its interval starts, so a chunk ends on the sample
-        # whose interval crosses the boundary.
+        # whose interval crosses the boundary: every chunk but the last one crossed it and ends with
+        # an update (each update then averages between `period` and `period` + one sample step).
         elapsed_before = self._acc_time_s + (np.concatenate([[self.t_state], t[:-1]]) - self.t_state)
         cuts = np.flatnonzero(np.diff(np.floor(elapsed_before / period))) + 1
-        for idx in np.split(np.arange(t.size), cuts):
+        for i, idx in enumerate(np.split(np.arange(t.size), cuts)):
             self._integrate_chunk(t[idx], gyro_c[idx], accel_c[idx], saturated[idx],
                                   None if weight is None else weight[idx])
-            if self._acc_time_s >= period:
+            if i < cuts.size or self._acc_time_s >= period:
                 self._accel_update()
 
     def _integrate_chunk(self, t, gyro_c, accel_c, saturated, weight) -> None:
@@ -376,11 +402,13 @@ class Mekf(Backend):
         # dtheta_{k+1} = M_k^T dtheta_k - dt_k db, composed: dtheta_N = C_N^T dtheta_0 - C_N^T sum_k dt_k C_k db.
         F = np.eye(N_STATE)
         F[TH, TH] = C_N.T
-        F[TH, BG] = -C_N.T @ np.einsum("k,kij->ij", dt, C)
+        A_bias = C_N.T @ np.einsum("k,kij->ij", dt, C)
+        F[TH, BG] = -A_bias
         # White gyro noise is isotropic, so its rotated sum is q_g T I; bias random walk to 2nd order.
         q_g, q_b = self._q_gyro, self._q_bias
         Q = np.zeros((N_STATE, N_STATE))
-        Q[_DIAG_TH] = q_g * T + q_b * T**3 / 3.0 + unknown_var
+        rate_var = self._q_rate * float(np.einsum("ki,ki,k->", rate_c, rate_c, dt)) if self._q_rate else 0.0
+        Q[_DIAG_TH] = q_g * T + q_b * T**3 / 3.0 + unknown_var + rate_var
         Q[_DIAG_TH_BG] = Q[_DIAG_BG_TH] = -q_b * T**2 / 2.0
         Q[_DIAG_BG] = q_b * T
         self._add_manhattan_noise(Q, float(t[-1] - self.t_state))
@@ -389,10 +417,56 @@ class Mekf(Backend):
         w_dt = dt if weight is None else dt * weight
         self._acc_sum_c = C_N.T @ (self._acc_sum_c + np.einsum("kjl,kl,k->j", C, accel_c, w_dt))
         if self._acc_lp_c is not None:
-            self._acc_lp_c = self._acc_lp_c @ C_N  # rows v^T C_N = (C_N^T v)^T
+            lp = self._acc_lp_c = self._acc_lp_c @ C_N  # rows v^T C_N = (C_N^T v)^T
+            # With the true bias the chunk turns by C_N Exp(-A_bias db), so a carried vector v reads
+            # Exp(A_bias db) C_N^T v = C_N^T v - skew(C_N^T v) A_bias db.
+            J = self._acc_lp_J
+            J = np.matmul(C_N.T, J, out=J)
+            J[0] -= skew(lp[0]) @ A_bias
+            J[1] -= skew(lp[1]) @ A_bias
         self._acc_time_s += float(w_dt.sum())
+        if cfg.rest_gyro_max_rad_s > 0:
+            self._accumulate_rest(gyro_c, accel_c, weight)
         self._last_gyro_c = gyro_c[-1]
         self.t_state = float(t[-1])
+
+    def _accumulate_rest(self, gyro_c, accel_c, weight) -> None:
+        """Add a chunk's raw readings to the rest statistics (samples with weight 0 left out)."""
+        if weight is not None:
+            keep = weight > 0
+            gyro_c, accel_c = gyro_c[keep], accel_c[keep]
+        sums = self._rest_sums
+        sums[0:3] += gyro_c.sum(axis=0)
+        sums[3] += float(np.einsum("ki,ki->", gyro_c, gyro_c))
+        sums[4:7] += accel_c.sum(axis=0)
+        sums[7] += float(np.einsum("ki,ki->", accel_c, accel_c))
+        self._rest_n += gyro_c.shape[0]
+
+    def _rest_update(self, T: float) -> None:
+        """Zero-rate update: after `rest_min_duration_s` of rest the period's mean gyro reading
+        measures the bias (`b_c = mean gyro`, camera frame), with the gyro white noise of a
+        T-second mean plus `rest_rate_std_rad_s`."""
+        cfg = self.config
+        sums, n = self._rest_sums, self._rest_n
+        self._rest_sums, self._rest_n = np.zeros(8), 0
+        if n < 2 or T <= 0:
+            return
+        g_mean, a_mean = sums[0:3] / n, sums[4:7] / n
+        g_dev2 = max(sums[3] / n - float(g_mean @ g_mean), 0.0)
+        a_dev2 = max(sums[7] / n - float(a_mean @ a_mean), 0.0)
+        limit2 = cfg.rest_gyro_max_rad_s**2
+        if float(g_mean @ g_mean) >= limit2 or g_dev2 >= limit2 or a_dev2 >= cfg.rest_accel_max_m_s2**2:
+            self._rest_since_s = None
+            return
+        if self._rest_since_s is None:
+            self._rest_since_s = self.t_state - T
+        if self.t_state - self._rest_since_s < cfg.rest_min_duration_s:
+            return
+        H = np.zeros((3, N_STATE))
+        H[:, BG] = I3
+        var = self._q_gyro / T + cfg.rest_rate_std_rad_s**2
+        self._kalman_update(g_mean - self.b_c, var * I3, H)
+        self.counters["rest_updates"] += 1
 
     def _add_manhattan_noise(self, Q: np.ndarray, dt: float) -> None:
         """Manhattan-frame random walk: yaw about world up and tilt, in m's right-perturbation."""
@@ -426,14 +500,20 @@ class Mekf(Backend):
         T = self._acc_time_s
         acc_c = self._acc_sum_c / T if T > 0 else self._acc_sum_c
         self._acc_sum_c, self._acc_time_s = np.zeros(3), 0.0
+        if cfg.rest_gyro_max_rad_s > 0:
+            self._rest_update(T)
         if cfg.accel_lowpass_tau_s > 0 and T > 0:
             lp = self._acc_lp_c
             if lp is None:
                 lp = self._acc_lp_c = np.array([acc_c, acc_c])
+                self._acc_lp_J = np.zeros((2, 3, 3))
             else:
                 alpha = 1.0 - np.exp(-T / cfg.accel_lowpass_tau_s)
                 lp[0] += alpha * (acc_c - lp[0])
                 lp[1] += alpha * (lp[0] - lp[1])
+                J = self._acc_lp_J  # the period's own mean is taken as bias-free (its age is ~T/2)
+                J[0] *= 1.0 - alpha
+                J[1] += alpha * (J[0] - J[1])
             acc_c = lp[1]
         norm = np.linalg.norm(acc_c)
         # |mean specific force| against gravity: the mean is taken in a common (rotating) camera
@@ -453,6 +533,9 @@ class Mekf(Backend):
             self.counters["accel_downweighted"] += 1
         H = np.zeros((3, N_STATE))
         H[:, TH] = _direction_update_jacobian(h)
+        if self._acc_lp_J is not None and cfg.accel_lowpass_tau_s > 0:
+            # z = normalise(lp - J db): the low-passed direction also measures the bias error.
+            H[:, BG] = -(I3 - np.outer(z, z)) @ self._acc_lp_J[1] / norm
         self._kalman_update(z - h, var * I3, H)
         self.counters["accel_updates"] += 1
 
@@ -513,6 +596,8 @@ class Mekf(Backend):
             self.R_wm = _orthonormal(self.R_wm @ exp_so3(dx[MF]))
             G[MF, MF] -= 0.5 * skew(dx[MF])
         self.b_c = self.b_c + dx[BG]
+        if self._acc_lp_c is not None:  # re-carry the low-passed accelerometer with the new bias
+            self._acc_lp_c += self._acc_lp_J @ dx[BG]
         if self.mode == MekfMode.VISUAL_ONLY:
             self.omega_c = self.omega_c + dx[RATE]
         P = G @ P @ G.T
