@@ -43,11 +43,14 @@ def test_reader_names_a_bad_file(tmp_path):
 
 
 @pytest.mark.slow
-def test_imu_only_inclination_close_to_vqf_on_slow_rotation():
-    """IMU-only MEKF inclination RMSE on the movement samples of the slow-rotation trial within 1.2x
-    of vqf's 6D filter (the benchmark prints all four trials; see the report for the others)."""
+@pytest.mark.parametrize("prefix", ["02_", "07_", "15_", "24_"])
+def test_imu_only_inclination_within_1_2x_of_vqf(prefix):
+    """IMU-only MEKF (`imu_only` preset, the same on every trial) inclination RMSE on the movement
+    samples within 1.2x of vqf's 6D filter (issue 5; measured 0.97 / 1.00 / 1.05 / 1.01)."""
     pytest.importorskip("vqf")
-    path = [p for p in trials() if p.stem.startswith("02_")][0]
+    paths = [p for p in trials() if p.stem.startswith(prefix)]
+    if not paths:
+        pytest.skip(f"BROAD trial {prefix}* not in {BROAD_DIR}")
     spec = importlib.util.spec_from_file_location("bench_mekf", Path(__file__).resolve().parents[1] / "tools" / "bench_mekf.py")
     bench = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = bench  # dataclasses look their module up
@@ -55,6 +58,6 @@ def test_imu_only_inclination_close_to_vqf_on_slow_rotation():
     from uareme_fusion.backends.mekf import MekfConfig
     from uareme_fusion.config import load_config
 
-    config = load_config("handheld", MekfConfig).model_copy(update=bench.BROAD_OVERRIDES)
-    mekf_rmse, vqf_rmse, _ = bench.broad_inclination(read_broad(path), config)
+    config = load_config(bench.BROAD_PRESET, MekfConfig)
+    mekf_rmse, vqf_rmse, _ = bench.broad_inclination(read_broad(paths[0]), config)
     assert mekf_rmse <= 1.2 * vqf_rmse, (mekf_rmse, vqf_rmse)

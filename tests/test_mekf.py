@@ -271,7 +271,7 @@ def test_inertial_lowpass_of_the_accelerometer_rejects_translational_acceleratio
 
 
 # ------------------------------------------------------------------------------------ presets
-@pytest.mark.parametrize("preset", ["building", "vehicle", "handheld"])
+@pytest.mark.parametrize("preset", ["building", "vehicle", "handheld", "imu_only"])
 def test_presets_load(preset):
     cfg = load_config(preset, MekfConfig)
     assert cfg.gyro_noise_rad_s_sqrt_hz > 0 and cfg.visual_gate_chi2 > 0
