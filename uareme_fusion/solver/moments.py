@@ -102,7 +102,7 @@ def normal_moments(normals, kappa=None) -> NormalMoments:
         valid = np.isfinite(weight)
         valid &= sq_norm > _MIN_SQUARED_NORM
         valid &= np.isfinite(sq_norm)
-        valid &= weight >= 0
+        valid &= ~np.signbit(weight)  # also a negative kappa whose weight underflows to -0.0
     n_invalid = valid.size - int(np.count_nonzero(valid))
     if n_invalid:
         weight[~valid] = 0.0
