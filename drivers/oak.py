@@ -33,7 +33,7 @@ from uareme_fusion.types import Frame
 from .base import ImuBatch, Source, SourceInfo
 from .interleave import concat_batches, empty_batch, slice_batch
 
-OAK_DEPTH_UNIT_M = 1e-3
+OAK_DEPTH_UNITS_PER_M = 1000.0
 """OAK stereo depth is uint16 millimetres."""
 EXTRINSICS_TRANSLATION_UNIT_M = 0.01
 """depthai calibration extrinsics hold translations in centimetres."""
@@ -58,7 +58,7 @@ def timestamp_s(stamp) -> float:
 
 
 def frame_from_messages(rgb_msg, index: int, K: np.ndarray | None = None, depth_msg=None,
-                        depth_unit_m: float = OAK_DEPTH_UNIT_M) -> Frame:
+                        depth_units_per_m: float = OAK_DEPTH_UNITS_PER_M) -> Frame:
     """An RGB ImgFrame (BGR from `getCvFrame`) and an optional depth ImgFrame aligned to it
     (uint16 from `getFrame`, 0 = no depth) as a `Frame` at the RGB device time."""
     bgr = np.asarray(rgb_msg.getCvFrame())
@@ -71,7 +71,7 @@ def frame_from_messages(rgb_msg, index: int, K: np.ndarray | None = None, depth_
         raw = np.asarray(depth_msg.getFrame())
         if raw.shape[:2] != rgb.shape[:2]:
             raise SourceError(f"oak: depth of size {raw.shape[:2]} is not aligned to RGB of size {rgb.shape[:2]}")
-        depth = raw.astype(np.float32) * np.float32(depth_unit_m)
+        depth = raw.astype(np.float32) / np.float32(depth_units_per_m)  # as the TUM reader divides: replays match
     return Frame(t=timestamp_s(rgb_msg.getTimestampDevice()), rgb=rgb, depth=depth, K=K, index=index)
 
 
