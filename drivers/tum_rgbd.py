@@ -15,6 +15,10 @@ Conventions: the ground-truth quaternion is whatever the file holds. For TUM and
 is the camera-to-world rotation `R_wc`; ICL-NUIM's published camera has its y axis flipped with
 respect to OpenCV (fy < 0), which this reader does not change. Frames are paired by nearest
 timestamp within `max_dt_s`; unpaired images are counted in `n_unpaired`, never silently lost.
+Bad files raise `InputError` naming the file and the line: too few or ragged columns, a cell that is
+not a number, NaN/Inf values, list and ground-truth times not strictly increasing, ground-truth
+quaternions far from unit length; images through `uareme_fusion.io.images.read_image` and depth
+through `read_depth_png` (16-bit, single channel, the rgb image's size).
 """
 
 from __future__ import annotations

@@ -138,7 +138,8 @@ COMPARE_DATASET_CASES = [
     ("rgb_list_text_time", {"rgb": "zero rgb/0.png\n0.1 rgb/1.png\n0.2 rgb/2.png\n"}, r"rgb.txt: line 1, column 1"),
     ("rgb_list_unsorted", {"rgb": "0.2 a\n0.1 b\n0.3 c\n"}, r"rgb.txt: line 2: timestamp 0.1 is not after"),
     ("rgb_list_too_short", {"rgb": "0.0 a\n0.1 b\n"}, "3 normal maps but 2 frame times"),
-    ("imu_nan", {"imu": "#h\n0,nan,0,0,0,0,9.8\n"}, r"data.csv: 1 row\(s\) hold a NaN or infinite gyro or accel value \(line 2\)"),
+    ("imu_nan", {"imu": "#h\n0,nan,0,0,0,0,9.8\n"},
+     r"data.csv: 1 row\(s\) hold a NaN or infinite gyro or accel value \(line 2\)"),
     ("imu_six_columns", {"imu": "#h\n0,0,0,0,0,9.8\n"}, "data.csv is not an EuRoC IMU file: line 2 has 6 column"),
     ("imu_text", {"imu": "#h\n0,0,0,0,0,x,9.8\n"}, r"data.csv: line 2, column 6"),
     ("imu_header_only", {"imu": "#h\n"}, "holds no IMU samples"),
@@ -172,8 +173,10 @@ COMPARE_OPTION_CASES = [
     ("negative_duration", ["--synthetic", "static", "--duration-s", "-1"], "Invalid value for '--duration-s'"),
     ("huge_duration", ["--synthetic", "static", "--duration-s", "1e9"], "less than or equal to 3600"),
     ("negative_seed", ["--synthetic", "static", "--seed", "-3"], "Invalid value for '--seed'"),
-    ("drop_fraction_above_one", ["--synthetic", "static", "--drop-fraction", "1.5"], r"drop_fraction \+ bad_fraction must be in"),
-    ("fractions_sum_to_one", ["--synthetic", "static", "--drop-fraction", "0.5", "--bad-fraction", "0.5"], "must be in"),
+    ("drop_fraction_above_one", ["--synthetic", "static", "--drop-fraction", "1.5"],
+     r"drop_fraction \+ bad_fraction must be in"),
+    ("fractions_sum_to_one", ["--synthetic", "static", "--drop-fraction", "0.5", "--bad-fraction", "0.5"],
+     "must be in"),
     ("no_out", ["--synthetic", "static", "NO_OUT"], "Missing option '--out'"),
 ]
 
@@ -191,14 +194,17 @@ def test_compare_bad_options(tmp_path, case, args, message):
 
 def test_compare_output_path_that_is_a_file(tmp_path):
     (tmp_path / "taken").write_text("x")
-    result = runner.invoke(app, ["compare", "--synthetic", "static", "--duration-s", "1", "--out", str(tmp_path / "taken")])
+    args = ["compare", "--synthetic", "static", "--duration-s", "1", "--out", str(tmp_path / "taken")]
+    result = runner.invoke(app, args)
     assert_one_error_line(result, "taken: cannot create the output folder")
 
 
 @pytest.mark.parametrize(
     "args, message",
-    [(["nosuch"], "unknown benchmark 'nosuch'; choose from solver"), (["--repeats", "1"], "Invalid value for '--repeats'"),
-     (["--repeats", "many"], "Invalid value for '--repeats'"), (["--json", "NODIR/x.json"], "cannot write a file there"),
+    [(["nosuch"], "unknown benchmark 'nosuch'; choose from solver"),
+     (["--repeats", "1"], "Invalid value for '--repeats'"),
+     (["--repeats", "many"], "Invalid value for '--repeats'"),
+     (["--json", "NODIR/x.json"], "cannot write a file there"),
      (["--json", "DIR"], "cannot write a file there")],
     ids=["unknown_benchmark", "too_few_repeats", "repeats_text", "json_in_missing_folder", "json_is_a_folder"],
 )

@@ -51,14 +51,17 @@ EUROC_CASES = [
     ("spaces", HEADER + euroc_rows().replace(",", " "), "line 2 has 1 column"),
     ("text_header_without_hash", "timestamp,wx,wy,wz,ax,ay,az\n" + euroc_rows(),
      r"line 1, column 1 \(timestamp \[ns\]\): cannot read 'timestamp' as an integer"),
-    ("text_in_gyro", GOOD + "1030000000,0.1,abc,0.3,0,0,9.81\n", r"line 7, column 3 \(w_y \[rad/s\]\): cannot read 'abc'"),
+    ("text_in_gyro", GOOD + "1030000000,0.1,abc,0.3,0,0,9.81\n",
+     r"line 7, column 3 \(w_y \[rad/s\]\): cannot read 'abc'"),
     ("text_in_accel", GOOD + "1030000000,0.1,0.2,0.3,0,0,g\n", r"line 7, column 7 \(a_z \[m/s\^2\]\)"),
     ("empty_cell", GOOD + "1030000000,0.1,,0.3,0,0,9.81\n", r"line 7, column 3 .*cannot read ''"),
     ("float_timestamp", HEADER + "1.5e9,0.1,0.2,0.3,0,0,9.81\n", r"line 2, column 1 .*'1.5e9' as an integer"),
     ("decimal_timestamp", HEADER + "1403636579.758,0.1,0.2,0.3,0,0,9.81\n", r"line 2, column 1 .*as an integer"),
-    ("overflowing_timestamp", HEADER + "99999999999999999999,0.1,0.2,0.3,0,0,9.81\n", r"line 2, column 1 .*as an integer"),
+    ("overflowing_timestamp", HEADER + "99999999999999999999,0.1,0.2,0.3,0,0,9.81\n",
+     r"line 2, column 1 .*as an integer"),
     ("nan_timestamp", HEADER + "nan,0.1,0.2,0.3,0,0,9.81\n", r"line 2, column 1 .*'nan' as an integer"),
-    ("nan_gyro", GOOD + "1030000000,nan,0.2,0.3,0,0,9.81\n", r"1 row\(s\) hold a NaN or infinite gyro or accel value \(line 7\)"),
+    ("nan_gyro", GOOD + "1030000000,nan,0.2,0.3,0,0,9.81\n",
+     r"1 row\(s\) hold a NaN or infinite gyro or accel value \(line 7\)"),
     ("inf_accel", GOOD + "1030000000,0.1,0.2,0.3,0,inf,9.81\n", r"NaN or infinite .*\(line 7\)"),
     ("minus_inf", GOOD + "1030000000,0.1,0.2,0.3,0,-inf,9.81\n", r"\(line 7\)"),
     ("many_nans", HEADER + euroc_rows(6).replace("0.02", "nan"),
@@ -95,7 +98,8 @@ def test_bad_euroc_files_name_the_file_line_and_column(tmp_path, case, content, 
 @pytest.mark.parametrize(
     "case, content, n_rows",
     [("no_header", euroc_rows(), 5), ("utf8_bom", "\ufeff" + GOOD, 5), ("crlf", GOOD.replace("\n", "\r\n"), 5),
-     ("blank_lines_between", GOOD.replace("\n", "\n\n"), 5), ("extra_columns_ignored", HEADER + "1,0,0,0,0,0,9.8,25.0\n", 1),
+     ("blank_lines_between", GOOD.replace("\n", "\n\n"), 5),
+     ("extra_columns_ignored", HEADER + "1,0,0,0,0,0,9.8,25.0\n", 1),
      ("spaces_after_commas", HEADER + "1, 0.1, 0.2, 0.3, 0, 0, 9.8\n", 1), ("no_final_newline", GOOD.rstrip("\n"), 5)],
     ids=lambda v: v if isinstance(v, str) and len(v) < 30 else "",
 )
@@ -163,7 +167,8 @@ LIST_CASES = [
     ("text_timestamp", "# c\nabc rgb/1.png\n", r"line 2, column 1 \(timestamp \[s\]\): cannot read 'abc' as a number"),
     ("nan_timestamp", "1.0 a.png\nnan b.png\n", r"NaN or infinite timestamp \(line 2\)"),
     ("inf_timestamp", "inf a.png\n", r"NaN or infinite timestamp \(line 1\)"),
-    ("duplicate_timestamp", "1.0 a.png\n1.0 b.png\n", r"line 2: timestamp 1.0 is not after the previous row's 1.0 \(line 1\)"),
+    ("duplicate_timestamp", "1.0 a.png\n1.0 b.png\n",
+     r"line 2: timestamp 1.0 is not after the previous row's 1.0 \(line 1\)"),
     ("not_sorted", "# h\n1.0 a.png\n3.0 b.png\n2.0 c.png\n", r"line 4: timestamp 2.0 is not after.*3.0 \(line 3\)"),
     ("binary", b"\xff\xfe\x00\x01" * 10, "not a text file"),
 ]
@@ -173,7 +178,8 @@ TRAJECTORY_CASES = [
     ("text_cell", "1 0 0 0 a 0 0 1\n", r"line 1, column 5 \(qx\): cannot read 'a'"),
     ("nan_position", "1 nan 0 0 0 0 0 1\n", r"NaN or infinite value \(line 1\)"),
     ("nan_quaternion", "# x\n1 0 0 0 0 0 0 1\n2 0 0 0 nan 0 0 1\n", r"\(line 3\)"),
-    ("zero_quaternion", "1 0 0 0 0 0 0 0\n2 0 0 0 0 0 0 1\n", r"1 quaternion\(s\) .*not unit length \(line 1; first norm 0\)"),
+    ("zero_quaternion", "1 0 0 0 0 0 0 0\n2 0 0 0 0 0 0 1\n",
+     r"1 quaternion\(s\) .*not unit length \(line 1; first norm 0\)"),
     ("unnormalised_quaternion", "1 0 0 0 0 0 0 2\n", r"not unit length \(line 1; first norm 2\)"),
     ("not_sorted", "2 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n", r"line 2: timestamp 1 is not after .*2 \(line 1\)"),
     ("duplicate", "1 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n", r"line 2: timestamp 1 is not after"),
@@ -235,8 +241,9 @@ def tum_folder(root, n=3, rgb=None, depth=None, extra=None):
     for i in range(n):
         cv2.imwrite(str(root / "rgb" / f"{i}.png"), np.full((8, 10, 3), 100, np.uint8))
         cv2.imwrite(str(root / "depth" / f"{i}.png"), np.full((8, 10), 5000, np.uint16))
-    (root / "rgb.txt").write_text(rgb if rgb is not None else "".join(f"{i * 0.1:.1f} rgb/{i}.png\n" for i in range(n)))
-    (root / "depth.txt").write_text(depth if depth is not None else "".join(f"{i * 0.1:.1f} depth/{i}.png\n" for i in range(n)))
+    default = {kind: "".join(f"{i * 0.1:.1f} {kind}/{i}.png\n" for i in range(n)) for kind in ("rgb", "depth")}
+    (root / "rgb.txt").write_text(rgb if rgb is not None else default["rgb"])
+    (root / "depth.txt").write_text(depth if depth is not None else default["depth"])
     for name, content in (extra or {}).items():
         write_case(root, content, name)
     return root
@@ -254,10 +261,12 @@ FOLDER_CASES = [
     ("negative_max_dt", {}, {"max_dt_s": -0.1}, "max_dt_s must be a time >= 0"),
     ("bad_groundtruth", {"groundtruth.txt": "1 0 0 0 0 0 0 0\n"}, {}, "groundtruth.txt: 1 quaternion"),
     ("bad_accelerometer", {"accelerometer.txt": "1 0 0\n"}, {}, "accelerometer.txt is not a TUM accelerometer file"),
-    ("rgb_list_unsorted", {"rgb.txt": "0.2 rgb/0.png\n0.1 rgb/1.png\n"}, {}, r"rgb.txt: line 2: timestamp 0.1 is not after"),
+    ("rgb_list_unsorted", {"rgb.txt": "0.2 rgb/0.png\n0.1 rgb/1.png\n"}, {},
+     r"rgb.txt: line 2: timestamp 0.1 is not after"),
     ("depth_list_text", {"depth.txt": "zero depth/0.png\n"}, {}, r"depth.txt: line 1, column 1"),
     ("empty_rgb_list", {"rgb.txt": "# nothing\n"}, {}, "the image list holds no frames"),
-    ("no_listed_image_exists", {"rgb.txt": "0.0 rgb/x.png\n0.1 rgb/y.png\n"}, {}, "none of the 2 listed rgb images exist"),
+    ("no_listed_image_exists", {"rgb.txt": "0.0 rgb/x.png\n0.1 rgb/y.png\n"}, {},
+     "none of the 2 listed rgb images exist"),
 ]
 
 
@@ -273,7 +282,8 @@ FRAME_CASES = [  # (id, file to overwrite, content, message)
     ("rgb_truncated", "rgb/1.png", "TRUNCATED", "rgb/1.png: not a readable image.*truncated"),
     ("rgb_text", "rgb/1.png", "text", "rgb/1.png: not a readable image"),
     ("depth_eight_bit", "depth/1.png", np.full((8, 10), 5, np.uint8), "depth/1.png: expected 16-bit depth"),
-    ("depth_wrong_size", "depth/1.png", np.full((4, 5), 5000, np.uint16), r"depth/1.png: expected depth of size \(8, 10\)"),
+    ("depth_wrong_size", "depth/1.png", np.full((4, 5), 5000, np.uint16),
+     r"depth/1.png: expected depth of size \(8, 10\)"),
     ("depth_colour", "depth/1.png", np.full((8, 10, 3), 5000, np.uint16), "depth/1.png: expected a single-channel"),
     ("depth_missing", "depth/1.png", "DELETE", "depth/1.png: depth image not found"),
     ("rgb_deleted_after_loading", "rgb/1.png", "DELETE", "rgb/1.png: no such file"),
@@ -356,7 +366,8 @@ BROAD_CASES = [
     ("text_rate", lambda p: broad_file(p, sampling_rate="fast"), "sampling_rate must be a number"),
     ("nan_gyro", lambda p: broad_file(p, imu_gyr=np.where(np.arange(20)[:, None] == 4, np.nan, np.zeros((20, 3)))),
      r"imu_gyr holds NaN or infinite values in 1 row\(s\) \(first: sample 4\)"),
-    ("inf_acc", lambda p: broad_file(p, imu_acc=np.full((20, 3), np.inf)), r"imu_acc holds NaN or infinite values in 20 row"),
+    ("inf_acc", lambda p: broad_file(p, imu_acc=np.full((20, 3), np.inf)),
+     r"imu_acc holds NaN or infinite values in 20 row"),
     ("text_gyro", lambda p: broad_file(p, imu_gyr=np.full((20, 3), "x".encode())), "imu_gyr is not numeric"),
 ]
 
