@@ -91,6 +91,8 @@ class ImageSource(Source):
         self.t_s = timestamps_from_names(self.paths, fps)
         span = self.t_s[-1] - self.t_s[0]
         rate = fps or ((len(self.t_s) - 1) / span if span > 0 else DEFAULT_FPS)
+        self.notes: list[str] = []
+        """What was left out or not used, for the run summary."""
         self.info = SourceInfo(name=str(spec), n_frames=len(self.paths), fps=float(rate),
                                K=None if K is None else np.asarray(K, float))
 

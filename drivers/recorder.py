@@ -30,6 +30,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from uareme_fusion.errors import InputError
+from uareme_fusion.sim.dataset import EUROC_IMU_HEADER
 from uareme_fusion.types import Frame
 
 from .base import GroundTruth, ImuBatch, Source, SourceInfo
@@ -37,8 +38,6 @@ from .tum import NORMALS_DIR, RECORD_META
 
 RECORD_DEPTH_SCALE = 1000.0
 """Depth PNG units per metre in recordings (millimetres)."""
-EUROC_IMU_HEADER = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
-                    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
 
 
 def _jsonable(matrix) -> list | None:

@@ -85,6 +85,8 @@ class VideoSource(Source):
             fps=self.fps,
             image_size=(height, width) if width > 0 and height > 0 else None,
         )
+        self.notes: list[str] = []
+        """What was left out or not used, for the run summary."""
         self.use_fps_times = fps is not None  # an explicit --fps overrides the container's clock
 
     def _file_time(self, index: int, last_t: float) -> float:
