@@ -37,22 +37,47 @@ class ImuStreamCounts:
         return self.nonfinite + self.duplicate + self.late
 
 
+COLUMNS = 8
+"""Columns of a sample row: time (s), gyro x y z (rad/s), accel x y z (m/s^2), saturated (0 or 1)."""
+
+
 @dataclass(frozen=True)
 class ImuBatch:
-    """Released samples in strictly increasing time: `t_s` (N,), `gyro_rad_s` (N, 3),
-    `accel_m_s2` (N, 3), `saturated` (N,) bool (gyro at or beyond its range on some axis)."""
+    """Released samples in strictly increasing time, one row each in `rows` (N, 8) (see `COLUMNS`);
+    the fields are views: `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3), `saturated` (N,)
+    (nonzero where the gyro is at or beyond its range on some axis)."""
 
-    t_s: np.ndarray
-    gyro_rad_s: np.ndarray
-    accel_m_s2: np.ndarray
-    saturated: np.ndarray
+    rows: np.ndarray
+
+    @classmethod
+    def of(cls, t_s, gyro_rad_s, accel_m_s2, saturated=None) -> "ImuBatch":
+        """A batch from its columns (`saturated` None: none saturated)."""
+        rows = np.empty((np.shape(t_s)[0], COLUMNS))
+        rows[:, 0], rows[:, 1:4], rows[:, 4:7] = t_s, gyro_rad_s, accel_m_s2
+        rows[:, 7] = 0.0 if saturated is None else saturated
+        return cls(rows)
+
+    @property
+    def t_s(self) -> np.ndarray:
+        return self.rows[:, 0]
+
+    @property
+    def gyro_rad_s(self) -> np.ndarray:
+        return self.rows[:, 1:4]
+
+    @property
+    def accel_m_s2(self) -> np.ndarray:
+        return self.rows[:, 4:7]
+
+    @property
+    def saturated(self) -> np.ndarray:
+        return self.rows[:, 7]
 
     def __len__(self) -> int:
-        return int(self.t_s.size)
+        return self.rows.shape[0]
 
 
-def _empty_batch() -> ImuBatch:
-    return ImuBatch(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, bool))
+_EMPTY_ROWS = np.zeros((0, COLUMNS))
 
 
 def check_imu_arrays(t_s, gyro_rad_s, accel_m_s2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -74,7 +99,8 @@ def check_imu_arrays(t_s, gyro_rad_s, accel_m_s2) -> tuple[np.ndarray, np.ndarra
 
 
 class ImuStream:
-    """Small reorder buffer with drop counting; see the module docstring."""
+    """Small reorder buffer with drop counting; see the module docstring. Held samples are rows of
+    one (N, 8) array, so that appending and releasing cost one numpy call each."""
 
     def __init__(self, reorder_window_s: float = 0.02, gyro_range_rad_s: float = np.inf):
         self.reorder_window_s = float(reorder_window_s)
@@ -82,55 +108,73 @@ class ImuStream:
         self.counts = ImuStreamCounts()
         self.watermark_s = -np.inf
         """Time of the newest released sample (or of the last `release_until`): older stamps are late."""
-        self._held = _empty_batch()
+        self._held = _EMPTY_ROWS
+
+    @property
+    def held_span_s(self) -> float:
+        """Time from the oldest to the newest held sample, s (0 when fewer than two are held)."""
+        held = self._held
+        return float(held[-1, 0] - held[0, 0]) if held.shape[0] > 1 else 0.0
+
+    @property
+    def newest_s(self) -> float:
+        """Stamp of the newest sample held or released, s (-inf before any)."""
+        return float(self._held[-1, 0]) if self._held.shape[0] else self.watermark_s
 
     def push(self, t_s, gyro_rad_s, accel_m_s2) -> ImuBatch:
         """Add samples; return those now older than the newest by more than the reorder window."""
+        self.add(t_s, gyro_rad_s, accel_m_s2)
+        if not self._held.shape[0]:
+            return ImuBatch(_EMPTY_ROWS)
+        return self.release_until(self._held[-1, 0] - self.reorder_window_s, move_watermark=False)
+
+    def add(self, t_s, gyro_rad_s, accel_m_s2) -> None:
+        """Add samples to the buffer (dropping and counting non-finite, duplicate and late ones)
+        without releasing any."""
         t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
-        finite = np.isfinite(t) & np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)
+        rows = np.empty((t.shape[0], COLUMNS))
+        rows[:, 0], rows[:, 1:4], rows[:, 4:7], rows[:, 7] = t, gyro, accel, 0.0
+        finite = np.isfinite(rows)
         if not finite.all():
+            finite = finite.all(axis=1)
             self.counts.nonfinite += int((~finite).sum())
-            t, gyro, accel = t[finite], gyro[finite], accel[finite]
+            rows = rows[finite]
+        if not rows.shape[0]:
+            return
+        if np.abs(rows[:, 1:4]).max() >= self.gyro_range_rad_s:
+            rows[:, 7] = np.abs(rows[:, 1:4]).max(axis=1) >= self.gyro_range_rad_s
         held = self._held
-        newest = held.t_s[-1] if len(held) else self.watermark_s
-        if t.size and t[0] > newest and (t.size == 1 or bool((t[1:] > t[:-1]).all())):
-            # In order (the usual case): append.
-            saturated = (np.abs(gyro) >= self.gyro_range_rad_s).any(axis=1)
-            self._held = ImuBatch(np.concatenate([held.t_s, t]), np.concatenate([held.gyro_rad_s, gyro]),
-                                  np.concatenate([held.accel_m_s2, accel]), np.concatenate([held.saturated, saturated]))
-            return self.release_until(t[-1] - self.reorder_window_s, move_watermark=False)
+        t = rows[:, 0]
+        newest = held[-1, 0] if held.shape[0] else self.watermark_s
+        if t[0] > newest and (t.shape[0] == 1 or bool((t[1:] > t[:-1]).all())):
+            self._held = np.concatenate([held, rows]) if held.shape[0] else rows  # in order: append
+            return
         stale = t <= self.watermark_s
         self.counts.duplicate += int(np.sum(t == self.watermark_s))
         self.counts.late += int(np.sum(t < self.watermark_s))
-        t, gyro, accel = t[~stale], gyro[~stale], accel[~stale]
-        if t.size:
-            t_all = np.concatenate([held.t_s, t])
-            gyro_all = np.concatenate([held.gyro_rad_s, gyro])
-            accel_all = np.concatenate([held.accel_m_s2, accel])
-            order = np.argsort(t_all, kind="stable")
-            t_all, gyro_all, accel_all = t_all[order], gyro_all[order], accel_all[order]
-            unique = np.ones(t_all.size, bool)
-            unique[1:] = t_all[1:] != t_all[:-1]
+        rows = rows[~stale]
+        if rows.shape[0]:
+            rows = np.concatenate([held, rows])
+            rows = rows[np.argsort(rows[:, 0], kind="stable")]
+            unique = np.ones(rows.shape[0], bool)
+            unique[1:] = rows[1:, 0] != rows[:-1, 0]
             self.counts.duplicate += int((~unique).sum())
-            saturated = (np.abs(gyro_all[unique]) >= self.gyro_range_rad_s).any(axis=1)
-            self._held = ImuBatch(t_all[unique], gyro_all[unique], accel_all[unique], saturated)
-        if not len(self._held):
-            return _empty_batch()
-        return self.release_until(self._held.t_s[-1] - self.reorder_window_s, move_watermark=False)
+            self._held = rows[unique]
 
     def release_until(self, t_s: float, move_watermark: bool = True) -> ImuBatch:
         """Release every held sample stamped at or before `t_s`; later arrivals older than `t_s`
         then count as late when `move_watermark`."""
         held = self._held
-        k = int(np.searchsorted(held.t_s, t_s, side="right"))
-        out = ImuBatch(held.t_s[:k], held.gyro_rad_s[:k], held.accel_m_s2[:k], held.saturated[:k])
-        self._held = ImuBatch(held.t_s[k:], held.gyro_rad_s[k:], held.accel_m_s2[k:], held.saturated[k:])
+        k = int(np.searchsorted(held[:, 0], t_s, side="right")) if held.shape[0] else 0
+        out = held[:k]
+        self._held = held[k:]
         if k:
-            self.watermark_s = max(self.watermark_s, float(out.t_s[-1]))
-            self.counts.saturated += int(out.saturated.sum())
+            self.watermark_s = max(self.watermark_s, float(out[-1, 0]))
+            if out[:, 7].any():
+                self.counts.saturated += int(np.count_nonzero(out[:, 7]))
         if move_watermark and np.isfinite(t_s):
             self.watermark_s = max(self.watermark_s, float(t_s))
-        return out
+        return ImuBatch(out)
 
     def flush(self) -> ImuBatch:
         """Release everything held."""

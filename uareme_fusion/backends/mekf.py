@@ -31,17 +31,29 @@ from ..rotations import WORLD_UP, exp_so3, log_so3, skew
 from ..solver.manhattan import R_CM_UPRIGHT
 from ..types import Estimate, Status, VisualRotation
 from .base import Backend
-from .imu_stream import ImuBatch, ImuStream
+from .imu_stream import COLUMNS, ImuBatch, ImuStream
 
 TH, BG, MF, RATE = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
 """Blocks of the 12-dimensional error state."""
 N_STATE = 12
 I3 = np.eye(3)
 _ZERO_STATE = np.zeros(N_STATE)
-_DIAG_TH = (np.arange(0, 3), np.arange(0, 3))
-_DIAG_BG = (np.arange(3, 6), np.arange(3, 6))
-_DIAG_TH_BG = (np.arange(0, 3), np.arange(3, 6))
-_DIAG_BG_TH = (np.arange(3, 6), np.arange(0, 3))
+_NO_ROWS = np.zeros((0, COLUMNS))
+_PERIOD_TOLERANCE_S = 1e-9
+"""An accelerometer period counts as complete this close to its length (sums of sample steps round)."""
+
+def _block_pattern(*blocks: tuple[slice, slice]) -> np.ndarray:
+    """(12, 12) zeros with I3 in the given blocks: process-noise terms are scalars times these."""
+    E = np.zeros((N_STATE, N_STATE))
+    for rows, cols in blocks:
+        E[rows, cols] = I3
+    E.setflags(write=False)
+    return E
+
+
+_E_TH = _block_pattern((TH, TH))
+_E_BG = _block_pattern((BG, BG))
+_E_TH_BG = _block_pattern((TH, BG), (BG, TH))
 
 
 class MekfMode(str, enum.Enum):
@@ -201,6 +213,7 @@ class Mekf(Backend):
         self.b_c = np.zeros(3)
         self.omega_c = np.zeros(3)
         self.P = np.zeros((N_STATE, N_STATE))
+        self._F = np.eye(N_STATE)  # transition buffer: only its TH rows change between chunks
         self.t_state: float | None = None
         self.initialised = False
         self.manhattan_initialised = False
@@ -216,7 +229,8 @@ class Mekf(Backend):
         self._dropped_reported = 0
         # Accelerometer average since the last update, expressed in the current camera frame.
         self._acc_sum_c = np.zeros(3)
-        self._acc_time_s = 0.0
+        self._acc_time_s = 0.0  # time covered by accelerometer samples since the last update, s
+        self._acc_elapsed_s = 0.0  # time elapsed since the last update (frame extrapolations too), s
         # Rest detection over the same period: raw gyro and accelerometer sums (camera frame), sums
         # of squared norms, sample count; time rest began (None when moving).
         self._rest_sums = np.zeros(8)
@@ -238,11 +252,17 @@ class Mekf(Backend):
         if self.mode == MekfMode.VISUAL_ONLY:
             self.counters["imu_ignored"] += int(np.size(t_s))
             return
-        t = np.atleast_1d(np.asarray(t_s, float)) - self.config.imu_time_offset_s
-        batch = self.stream.push(t, gyro_rad_s, accel_m_s2)
-        self._queue(batch)
-        if self._pending_span_s >= self.config.accel_update_period_s:
-            self._integrate_pending()
+        t = np.atleast_1d(np.asarray(t_s, float))
+        if self.config.imu_time_offset_s:
+            t = t - self.config.imu_time_offset_s
+        stream = self.stream
+        stream.add(t, gyro_rad_s, accel_m_s2)
+        # Samples wait in the reorder buffer; a frame's `propagate_to` releases them, or, in an
+        # IMU-only stream, this does once an accelerometer period's worth is older than the window.
+        if stream.held_span_s + self._pending_span_s >= self.config.accel_update_period_s + stream.reorder_window_s:
+            self._queue(stream.release_until(stream.newest_s - stream.reorder_window_s, move_watermark=False))
+            if self._pending_span_s >= self.config.accel_update_period_s:
+                self._integrate_pending()
 
     def flush(self) -> None:
         """Release and integrate every buffered IMU sample (end of an IMU-only stream)."""
@@ -258,7 +278,7 @@ class Mekf(Backend):
         """
         t_s = float(t_s)
         if self.mode == MekfMode.AUTO:
-            seen_imu = self.initialised or self._pending or len(self.stream._held) or self._init_samples
+            seen_imu = self.initialised or self._pending or self.stream.newest_s > -np.inf or self._init_samples
             self.mode = MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY
         self.propagate_to(t_s)
         if visual is None or self.mode == MekfMode.IMU_ONLY:
@@ -313,16 +333,8 @@ class Mekf(Backend):
         """Integrate the released samples; with `extrapolate_to_s`, then hold the last gyro rate up
         to that time (a synthetic sample that carries no accelerometer weight)."""
         batches, self._pending, self._pending_span_s = self._pending, [], 0.0
-        if len(batches) == 1:
-            b = batches[0]
-            t, gyro_i, accel_i, saturated = b.t_s, b.gyro_rad_s, b.accel_m_s2, b.saturated
-        elif batches:
-            t = np.concatenate([b.t_s for b in batches])
-            gyro_i = np.concatenate([b.gyro_rad_s for b in batches])
-            accel_i = np.concatenate([b.accel_m_s2 for b in batches])
-            saturated = np.concatenate([b.saturated for b in batches])
-        else:
-            t, gyro_i, accel_i, saturated = np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, bool)
+        batch = batches[0] if len(batches) == 1 else ImuBatch(np.concatenate([b.rows for b in batches]) if batches else _NO_ROWS)
+        t, gyro_i, accel_i, saturated = batch.t_s, batch.gyro_rad_s, batch.accel_m_s2, batch.saturated
         gyro_c, accel_c = (gyro_i, accel_i) if self._imu_is_camera else (gyro_i @ self.R_ci.T, accel_i @ self.R_ci.T)
         if not self.initialised:
             if t.size == 0:
@@ -330,92 +342,106 @@ class Mekf(Backend):
             t, gyro_c, accel_c, saturated = self._initialise_from_accel(t, gyro_c, accel_c, saturated, force_init)
             if not self.initialised:
                 return
-        weight = None
         last_t = t[-1] if t.size else self.t_state
-        if extrapolate_to_s is not None and extrapolate_to_s > last_t:
-            held = gyro_c[-1] if t.size else self._last_gyro_c
-            weight = np.ones(t.size + 1)
-            weight[-1] = 0.0
-            t = np.append(t, extrapolate_to_s)
-            gyro_c = np.vstack([gyro_c, held])
-            accel_c = np.vstack([accel_c, np.zeros(3)])
-            saturated = np.append(saturated, False)
-        if t.size == 0:
+        extra_s = extrapolate_to_s - last_t if extrapolate_to_s is not None and extrapolate_to_s > last_t else 0.0
+        if t.size == 0 and extra_s == 0.0:
             return
-        # Split at accelerometer-update boundaries so each chunk ends with at most one update.
         period = self.config.accel_update_period_s
-        if self._acc_time_s + (t[-1] - self.t_state) < period:
-            self._integrate_chunk(t, gyro_c, accel_c, saturated, weight)
+        due_s = period - _PERIOD_TOLERANCE_S
+        if t.size < 2 or last_t - self.t_state <= period:
+            # Short batch (a frame's worth): one chunk, then the update if the period is complete.
+            self._integrate_chunk(t, gyro_c, accel_c, saturated, extra_s)
+            if self._acc_elapsed_s >= due_s:
+                self._accel_update()
             return
-        # A sample belongs to the chunk in which its interval starts, so a chunk ends on the sample
-        # whose interval crosses the boundary: every chunk but the last one crossed it and ends with
-        # an update (each update then averages between `period` and `period` + one sample step).
-        elapsed_before = self._acc_time_s + (np.concatenate([[self.t_state], t[:-1]]) - self.t_state)
+        # Long batch: split at accelerometer-update boundaries. A sample belongs to the chunk in
+        # which its interval starts, so a chunk ends on the sample whose interval crosses the
+        # boundary: every chunk but the last one crossed it and ends with an update (each update then
+        # averages between `period` and `period` + one sample step).
+        elapsed_before = np.empty(t.size)
+        elapsed_before[0] = self._acc_elapsed_s
+        elapsed_before[1:] = self._acc_elapsed_s + (t[:-1] - self.t_state)
         cuts = np.flatnonzero(np.diff(np.floor(elapsed_before / period))) + 1
-        for i, idx in enumerate(np.split(np.arange(t.size), cuts)):
-            self._integrate_chunk(t[idx], gyro_c[idx], accel_c[idx], saturated[idx],
-                                  None if weight is None else weight[idx])
-            if i < cuts.size or self._acc_time_s >= period:
+        bounds = [0, *cuts.tolist(), t.size]
+        for i in range(len(bounds) - 1):
+            a, b = bounds[i], bounds[i + 1]
+            last = i == len(bounds) - 2
+            self._integrate_chunk(t[a:b], gyro_c[a:b], accel_c[a:b], saturated[a:b], extra_s if last else 0.0)
+            if not last or self._acc_elapsed_s >= due_s:
                 self._accel_update()
 
-    def _integrate_chunk(self, t, gyro_c, accel_c, saturated, weight) -> None:
+    def _integrate_chunk(self, t, gyro_c, accel_c, saturated, extra_s: float = 0.0) -> None:
         """Integrate samples (camera frame) over (t_state, t[-1]]: sample k covers (t_{k-1}, t_k]
-        with the mean of its rate and the previous one (trapezoid); `weight` (0 or 1) says whether
-        its accelerometer reading counts. One scipy call integrates the chunk; the transition
-        matrices are composed in closed form."""
+        with the mean of its rate and the previous one (trapezoid), or its own rate (`interval`);
+        then, for `extra_s` > 0, hold the last rate that much longer (to a frame's time; no
+        accelerometer reading there). One scipy call integrates the chunk; the transition matrices
+        are composed in closed form."""
         cfg = self.config
         n = t.size
-        dt = np.empty(n)
-        dt[0] = t[0] - self.t_state
-        dt[1:] = t[1:] - t[:-1]
-        if self._trapezoid:
-            rate_c = np.empty((n, 3))
-            rate_c[0] = self._last_gyro_c
-            rate_c[1:] = gyro_c[:-1]
-            rate_c += gyro_c
-            rate_c *= 0.5
-            rate_c -= self.b_c
-        else:
-            rate_c = gyro_c - self.b_c
+        m = n + 1 if extra_s > 0 else n
+        dt = np.empty(m)
+        rate_c = np.empty((m, 3))
+        if n:
+            dt[0] = t[0] - self.t_state
+            np.subtract(t[1:], t[:-1], out=dt[1:n])
+            if self._trapezoid:
+                rate_c[0] = self._last_gyro_c
+                rate_c[1:n] = gyro_c[:-1]
+                rate_c[:n] += gyro_c
+                rate_c[:n] *= 0.5
+            else:
+                rate_c[:n] = gyro_c
+            self._last_gyro_c = gyro_c[-1]
+        if m > n:
+            dt[n] = extra_s
+            rate_c[n] = self._last_gyro_c
+        rate_c -= self.b_c
         unknown_var = 0.0
         gap = dt > cfg.imu_gap_limit_s
         if gap.any() or saturated.any():
             # Do not integrate garbage: skip gaps, and grow the attitude variance by an unknown rate.
-            unknown = gap | saturated
+            unknown = gap.copy()
+            unknown[:n] |= saturated > 0
             unknown_var = float(np.sum((cfg.unknown_rate_std_rad_s * dt[unknown]) ** 2))
             if gap.any():
                 self._flags |= Status.IMU_GAP
                 self.counters["imu_gaps"] += int(gap.sum())
             if saturated.any():
                 self._flags |= Status.GYRO_SATURATED
-            dt = np.where(gap, 0.0, dt)
+            T_elapsed = float(dt.sum())
+            dt[gap] = 0.0
             self._acc_lp_c = None  # the frame carried along by the gyro is lost
+        else:
+            T_elapsed = float(dt.sum())
         M = exp_so3(rate_c * dt[:, None])
         C = _prefix_products(M)
         C_N = C[-1]
-        if cfg.record_imu_estimates:
+        if cfg.record_imu_estimates and n:
             self._record_t.append(t.copy())
-            self._record_R.append(self.R_wc @ C)
+            self._record_R.append(self.R_wc @ C[:n])
         self.R_wc = _orthonormal(self.R_wc @ C_N)
-        T = float(t[-1] - self.t_state) if unknown_var == 0.0 else float(dt.sum())
+        T = T_elapsed if unknown_var == 0.0 else float(dt.sum())
         # Error transition over the chunk (right perturbations), per sample
         # dtheta_{k+1} = M_k^T dtheta_k - dt_k db, composed: dtheta_N = C_N^T dtheta_0 - C_N^T sum_k dt_k C_k db.
-        F = np.eye(N_STATE)
+        A_bias = C_N.T @ (dt @ C.reshape(m, 9)).reshape(3, 3)
+        F = self._F
         F[TH, TH] = C_N.T
-        A_bias = C_N.T @ np.einsum("k,kij->ij", dt, C)
         F[TH, BG] = -A_bias
         # White gyro noise is isotropic, so its rotated sum is q_g T I; bias random walk to 2nd order.
         q_g, q_b = self._q_gyro, self._q_bias
-        Q = np.zeros((N_STATE, N_STATE))
         rate_var = self._q_rate * float(np.einsum("ki,ki,k->", rate_c, rate_c, dt)) if self._q_rate else 0.0
-        Q[_DIAG_TH] = q_g * T + q_b * T**3 / 3.0 + unknown_var + rate_var
-        Q[_DIAG_TH_BG] = Q[_DIAG_BG_TH] = -q_b * T**2 / 2.0
-        Q[_DIAG_BG] = q_b * T
-        self._add_manhattan_noise(Q, float(t[-1] - self.t_state))
+        Q = (q_g * T + q_b * T**3 / 3.0 + unknown_var + rate_var) * _E_TH
+        Q += (-q_b * T**2 / 2.0) * _E_TH_BG
+        Q += (q_b * T) * _E_BG
+        self._add_manhattan_noise(Q, T_elapsed)
         _, self.P = kf_predict(_ZERO_STATE, self.P, F, Q)
         # Accelerometer: time-weighted sum of specific force, rotated into the chunk's end frame.
-        w_dt = dt if weight is None else dt * weight
-        self._acc_sum_c = C_N.T @ (self._acc_sum_c + np.einsum("kjl,kl,k->j", C, accel_c, w_dt))
+        if n:
+            self._acc_sum_c = C_N.T @ (self._acc_sum_c + np.einsum("kjl,kl,k->j", C[:n], accel_c, dt[:n]))
+            self._acc_time_s += float(dt[:n].sum())
+        else:
+            self._acc_sum_c = C_N.T @ self._acc_sum_c
+        self._acc_elapsed_s += T_elapsed
         if self._acc_lp_c is not None:
             lp = self._acc_lp_c = self._acc_lp_c @ C_N  # rows v^T C_N = (C_N^T v)^T
             # With the true bias the chunk turns by C_N Exp(-A_bias db), so a carried vector v reads
@@ -424,17 +450,12 @@ class Mekf(Backend):
             J = np.matmul(C_N.T, J, out=J)
             J[0] -= skew(lp[0]) @ A_bias
             J[1] -= skew(lp[1]) @ A_bias
-        self._acc_time_s += float(w_dt.sum())
-        if cfg.rest_gyro_max_rad_s > 0:
-            self._accumulate_rest(gyro_c, accel_c, weight)
-        self._last_gyro_c = gyro_c[-1]
-        self.t_state = float(t[-1])
+        if cfg.rest_gyro_max_rad_s > 0 and n:
+            self._accumulate_rest(gyro_c, accel_c)
+        self.t_state = float(t[-1]) + extra_s if n else self.t_state + extra_s
 
-    def _accumulate_rest(self, gyro_c, accel_c, weight) -> None:
-        """Add a chunk's raw readings to the rest statistics (samples with weight 0 left out)."""
-        if weight is not None:
-            keep = weight > 0
-            gyro_c, accel_c = gyro_c[keep], accel_c[keep]
+    def _accumulate_rest(self, gyro_c, accel_c) -> None:
+        """Add a chunk's raw readings to the rest statistics."""
         sums = self._rest_sums
         sums[0:3] += gyro_c.sum(axis=0)
         sums[3] += float(np.einsum("ki,ki->", gyro_c, gyro_c))
@@ -499,7 +520,7 @@ class Mekf(Backend):
         cfg = self.config
         T = self._acc_time_s
         acc_c = self._acc_sum_c / T if T > 0 else self._acc_sum_c
-        self._acc_sum_c, self._acc_time_s = np.zeros(3), 0.0
+        self._acc_sum_c, self._acc_time_s, self._acc_elapsed_s = np.zeros(3), 0.0, 0.0
         if cfg.rest_gyro_max_rad_s > 0:
             self._rest_update(T)
         if cfg.accel_lowpass_tau_s > 0 and T > 0:
@@ -608,13 +629,12 @@ class Mekf(Backend):
         """Tilt from the mean of the first `init_accel_window_s` of accelerometer samples; yaw is the
         gauge (variance 0). Returns the samples still to integrate."""
         cfg = self.config
-        self._init_samples.append(ImuBatch(t, gyro_c, accel_c, saturated))
-        t_all = np.concatenate([b.t_s for b in self._init_samples])
+        self._init_samples.append(ImuBatch.of(t, gyro_c, accel_c, saturated))
+        held = ImuBatch(np.concatenate([b.rows for b in self._init_samples]))
+        t_all = held.t_s
         if t_all[-1] - t_all[0] < cfg.init_accel_window_s and not force:
             return t[:0], gyro_c[:0], accel_c[:0], saturated[:0]
-        g_all = np.concatenate([b.gyro_rad_s for b in self._init_samples])
-        a_all = np.concatenate([b.accel_m_s2 for b in self._init_samples])
-        s_all = np.concatenate([b.saturated for b in self._init_samples])
+        g_all, a_all, s_all = held.gyro_rad_s, held.accel_m_s2, held.saturated
         self._init_samples = []
         window = t_all <= t_all[0] + cfg.init_accel_window_s
         mean_acc = a_all[window].mean(axis=0)
