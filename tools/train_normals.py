@@ -57,12 +57,13 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 # Rendering random views
 # ---------------------------------------------------------------------------------------------
 def render_views(scene: str, seed: int, n_views: int, width: int, height: int,
-                 rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+                 rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`n_views` random views of scene `scene` generated from `seed`: (rgb (N, H, W, 3) uint8,
-    normals (N, H, W, 3) float32 unit in the OpenCV camera frame, 0 where nothing is hit)."""
+    normals (N, H, W, 3) float32 unit in the OpenCV camera frame, 0 where nothing is hit,
+    R_cm (N, 3, 3) Manhattan to camera, `R_wc^T R_wm`)."""
     duration_s = 30.0
     world = build_scenario(scene, duration_s, seed)
-    rgbs, normals = [], []
+    rgbs, normals, R_cms = [], [], []
     for _ in range(n_views):
         t = float(rng.uniform(0.0, duration_s))
         sample = world.trajectory.sample(t)
@@ -74,11 +75,13 @@ def render_views(scene: str, seed: int, n_views: int, width: int, height: int,
         R_wc = R_wc @ tilt  # camera x: pitch; camera z: roll
         K = intrinsics_from_fov(width, height, float(rng.uniform(*HFOV_RANGE_DEG)))
         renderer = Renderer(world.scene, K, width, height)
-        radiance, _, n_c, _ = renderer.render_float(R_wc, p_w, world.layer_poses(t), world.trajectory.R_wm(t)[0])
+        R_wm = world.trajectory.R_wm(t)[0]
+        radiance, _, n_c, _ = renderer.render_float(R_wc, p_w, world.layer_poses(t), R_wm)
         rgb = Renderer.to_uint8(radiance, float(rng.uniform(0.6, 1.4)), float(rng.uniform(0.0, 4.0)), rng)
         rgbs.append(rgb)
         normals.append(n_c)
-    return np.stack(rgbs), np.stack(normals)
+        R_cms.append(R_wc.T @ R_wm)
+    return np.stack(rgbs), np.stack(normals), np.stack(R_cms)
 
 
 def icsl_labelled(first: int = 0, count: int = ICSL_TRAIN_FRAMES, size=RENDER_SIZE):

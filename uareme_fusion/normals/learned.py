@@ -1,0 +1,229 @@
+"""Normals and confidence kappa from uncalibrated RGB with a small trained network (paper Sec. 3).
+
+    est = LearnedNormals()                      # the shipped weights, loaded offline
+    normal_map = est.estimate(rgb_uint8)        # NormalMap: normals (H, W, 3), kappa (H, W)
+    est = LearnedNormals(model="my_model.pt")   # a drop-in model (TorchScript or state dict)
+
+The image (any size) is resized to `LearnedNormalsConfig.width_px` x `height_px` (320 x 240), run
+through the network, and the output is upsampled back to the input size. No intrinsics are used.
+Returned normals are unit vectors in the OpenCV camera frame (x right, y down, z forward), facing
+the camera; kappa (the paper's eq. 3 concentration) is capped at `kappa_cap` (default 75, the
+paper's released setting) and is 0 where the network's output is not finite.
+
+Model files (`model=`), all with the contract of `network.py` (RGB in [0, 1] as (B, 3, H, W)
+float32 -> (B, 4, H, W): unit normal, kappa >= 0):
+- the shipped format: `torch.save({"format": WEIGHTS_FORMAT, "config": NetworkConfig fields,
+  "state_dict": ..., "meta": ...})` (what `tools/train_normals.py export` writes);
+- a bare state dict of `NormalNet` with the default `NetworkConfig`;
+- a TorchScript module (`torch.jit.save`) of any architecture.
+Every model is probed once on load with a small image; a file that is not one of these, or whose
+weights or outputs do not fit, raises `InputError` naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import ConfigError, InputError
+from ..types import Frame, NormalMap
+
+WEIGHTS_FORMAT = "uareme-normalnet-v1"
+DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "normalnet_lite0.pt"
+PROBE_SIZE_PX = (64, 48)
+"""(width, height) of the image every loaded model is checked on."""
+
+
+@dataclass(frozen=True)
+class LearnedNormalsConfig:
+    """Parameters of `LearnedNormals` (units in the names)."""
+
+    width_px: int = 320
+    """Network input width; images are resized to width_px x height_px and back."""
+    height_px: int = 240
+    kappa_cap: float = 75.0
+    """kappa is capped here before the solver (paper: 100; its released config: 75)."""
+    independent_regions: float = 60.0
+    """Effective number of independent normal errors in a full map (errors of a network are
+    correlated over large regions); sets the solver's covariance scale. Fitted so that the NEES of
+    single-frame rotations on held-out synthetic views is about 3 (tools/bench_normals.py)."""
+    threads: int | None = None
+    """torch CPU threads (None: leave torch's setting)."""
+    device: str = "cpu"
+
+    def __post_init__(self):
+        if self.width_px < 32 or self.height_px < 32 or self.width_px * self.height_px > 4096 * 4096:
+            raise ConfigError(f"width_px and height_px must be 32..4096, got {self.width_px}x{self.height_px}")
+        if not self.kappa_cap > 0:
+            raise ConfigError(f"kappa_cap must be > 0, got {self.kappa_cap}")
+        if not self.independent_regions >= 1:
+            raise ConfigError(f"independent_regions must be >= 1, got {self.independent_regions}")
+        if self.threads is not None and self.threads < 1:
+            raise ConfigError(f"threads must be >= 1, got {self.threads}")
+
+
+def _is_torchscript(path: Path) -> bool:
+    """TorchScript archives are zip files with a `code/` folder (plain torch.save zips have none)."""
+    if not zipfile.is_zipfile(path):
+        return False
+    with zipfile.ZipFile(path) as zf:
+        return any("/code/" in name or name.startswith("code/") for name in zf.namelist())
+
+
+def load_model(path: str | Path, device: str = "cpu"):
+    """A torch module in eval mode from a model file (see the module docstring for the formats).
+
+    Raises `InputError` naming the file when it is missing, not a torch file, holds weights of
+    another architecture, or gives outputs that break the (B, 4, H, W) contract."""
+    import torch
+
+    from .network import NetworkConfig, NormalNet, config_from_dict
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: model file not found")
+    if _is_torchscript(path):
+        try:
+            model = torch.jit.load(str(path), map_location=device)
+        except Exception as exc:  # torch raises RuntimeError and others for broken archives
+            raise InputError(f"{path}: cannot load this TorchScript module ({_first_line(exc)})") from None
+    else:
+        try:
+            payload = torch.load(path, map_location=device, weights_only=True)
+        except Exception as exc:
+            raise InputError(f"{path}: not a TorchScript module or a torch weights file "
+                             f"({_first_line(exc)})") from None
+        if isinstance(payload, dict) and payload.get("format") == WEIGHTS_FORMAT:
+            try:
+                config = config_from_dict(payload["config"])
+                model = NormalNet(config)
+            except (KeyError, TypeError, ValueError) as exc:
+                raise InputError(f"{path}: bad network config in the weights file ({exc})") from None
+            state_dict = payload.get("state_dict")
+        elif isinstance(payload, dict) and payload and all(isinstance(v, torch.Tensor) for v in payload.values()):
+            model, state_dict = NormalNet(NetworkConfig()), payload
+        else:
+            raise InputError(f"{path}: expected a {WEIGHTS_FORMAT} weights file, a NormalNet state dict or a "
+                             f"TorchScript module; found a {type(payload).__name__} of another layout")
+        _load_state_dict(model, state_dict, path)
+        model = model.to(device)
+    model.eval()
+    _probe(model, path, device)
+    return model
+
+
+def _first_line(exc: Exception) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _load_state_dict(model, state_dict, path: Path) -> None:
+    import torch
+
+    if not isinstance(state_dict, dict):
+        raise InputError(f"{path}: the weights file has no state_dict")
+    expected = model.state_dict()
+    missing = sorted(set(expected) - set(state_dict))
+    unexpected = sorted(set(state_dict) - set(expected))
+    wrong = [k for k in expected if k in state_dict and tuple(state_dict[k].shape) != tuple(expected[k].shape)]
+    if missing or unexpected or wrong:
+        parts = []
+        if missing:
+            parts.append(f"{len(missing)} missing tensors (e.g. {missing[0]})")
+        if unexpected:
+            parts.append(f"{len(unexpected)} unexpected tensors (e.g. {unexpected[0]})")
+        if wrong:
+            k = wrong[0]
+            parts.append(f"{len(wrong)} tensors of the wrong shape (e.g. {k}: {tuple(state_dict[k].shape)} "
+                         f"instead of {tuple(expected[k].shape)})")
+        raise InputError(f"{path}: weights of another architecture, they do not fit NormalNet: " + "; ".join(parts))
+    model.load_state_dict({k: v.to(expected[k].dtype) if isinstance(v, torch.Tensor) else v
+                           for k, v in state_dict.items()})
+
+
+def _probe(model, path: Path, device: str) -> None:
+    """Run the model once on a small image and check the output contract."""
+    import torch
+
+    w, h = PROBE_SIZE_PX
+    try:
+        with torch.no_grad():
+            out = model(torch.full((1, 3, h, w), 0.5, device=device))
+    except Exception as exc:
+        raise InputError(f"{path}: the model fails on a (1, 3, {h}, {w}) RGB input ({_first_line(exc)})") from None
+    if not isinstance(out, torch.Tensor) or tuple(out.shape) != (1, 4, h, w):
+        shape = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
+        raise InputError(f"{path}: the model must map (1, 3, {h}, {w}) RGB to (1, 4, {h}, {w}) "
+                         f"(normal, kappa), it gave {shape}")
+
+
+class LearnedNormals:
+    """Normal estimator for RGB frames: `estimate(rgb_uint8) -> NormalMap` (OpenCV camera frame)."""
+
+    name = "learned"
+
+    def __init__(self, model: str | Path | None = None, config: LearnedNormalsConfig | None = None):
+        import torch
+
+        self.config = config or LearnedNormalsConfig()
+        if self.config.threads is not None:
+            torch.set_num_threads(self.config.threads)
+        self.model_path = Path(model) if model is not None else DEFAULT_WEIGHTS
+        if model is None and not DEFAULT_WEIGHTS.is_file():
+            raise InputError(f"{DEFAULT_WEIGHTS}: the shipped normal network weights are missing "
+                             "(reinstall uareme-fusion)")
+        self.model = load_model(self.model_path, self.config.device)
+
+    def estimate_frame(self, frame: Frame) -> NormalMap:
+        """Normals of a `Frame`'s RGB image; `InputError` if it has none."""
+        source = f"frame {frame.index} (t = {frame.t:g} s)"
+        if frame.rgb is None:
+            raise InputError(f"{source}: learned normals need an RGB image, the frame has none")
+        return dataclasses.replace(self.estimate(frame.rgb, source=source), t=frame.t)
+
+    def estimate(self, rgb_uint8, source: str = "image") -> NormalMap:
+        """Unit normals (H, W, 3) float32 in the OpenCV camera frame and kappa (H, W) float32 in
+        [0, kappa_cap] for an RGB uint8 image (H, W, 3) of any size (at least 8x8)."""
+        rgb = _check_rgb(rgb_uint8, source)
+        out = self.infer(rgb)
+        return self.to_normal_map(out, rgb.shape[:2])
+
+    def infer(self, rgb: np.ndarray) -> np.ndarray:
+        """Raw network output (4, h, w) float32 at the internal size for a checked RGB uint8 image."""
+        import torch
+
+        cfg = self.config
+        small = cv2.resize(rgb, (cfg.width_px, cfg.height_px), interpolation=cv2.INTER_AREA)
+        x = torch.from_numpy(small).to(cfg.device).permute(2, 0, 1)[None].float().div_(255.0)
+        with torch.inference_mode():
+            out = self.model(x)
+        return out[0].float().cpu().numpy()
+
+    def to_normal_map(self, out: np.ndarray, shape_hw: tuple[int, int]) -> NormalMap:
+        """Upsample a (4, h, w) network output to `shape_hw`, renormalise, cap kappa."""
+        H, W = shape_hw
+        hwc = np.ascontiguousarray(out.transpose(1, 2, 0))
+        if hwc.shape[:2] != (H, W):
+            hwc = cv2.resize(hwc, (W, H), interpolation=cv2.INTER_LINEAR)
+        normals, kappa = hwc[..., :3], hwc[..., 3]
+        norm = np.linalg.norm(normals, axis=-1, keepdims=True)
+        ok = np.isfinite(norm[..., 0]) & (norm[..., 0] > 1e-6) & np.isfinite(kappa)
+        normals = np.where(ok[..., None], normals / np.where(ok[..., None], norm, 1.0), 0.0).astype(np.float32)
+        kappa = np.where(ok, np.clip(kappa, 0.0, self.config.kappa_cap), 0.0).astype(np.float32)
+        return NormalMap(normals, kappa, independent_regions=self.config.independent_regions)
+
+
+def _check_rgb(rgb, source: str) -> np.ndarray:
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise InputError(f"{source}: expected an RGB image of shape (H, W, 3), got {rgb.shape}")
+    if rgb.dtype != np.uint8:
+        raise InputError(f"{source}: expected an 8-bit (uint8) RGB image, got {rgb.dtype}")
+    if min(rgb.shape[:2]) < 8:
+        raise InputError(f"{source}: image of {rgb.shape[1]}x{rgb.shape[0]} pixels is too small (at least 8x8)")
+    return np.ascontiguousarray(rgb)
