@@ -2,20 +2,29 @@
 
 from __future__ import annotations
 
+from contextlib import ExitStack
 from pathlib import Path
 
 import typer
 
 from .app import app, fail
+from .progress import frame_progress
 
 
 @app.command()
 def demo(
-    out: Path = typer.Option(Path("uareme-demo"), help="Folder for the demo's plot."),
+    out: Path = typer.Option(Path("uareme-demo"), help="Folder for the demo's plot and overlay video."),
+    normals: str = typer.Option("learned", help="learned (the shipped network) or source (the simulator's exact normals)."),
 ) -> None:
-    """Run the method on built-in synthetic data and print what it gets right (under a minute)."""
+    """Run the method on built-in synthetic data and print what it gets right (about a minute)."""
     if out.exists() and not out.is_dir():
         raise fail(f"--out {out} exists and is not a folder")
+    if normals not in ("learned", "source"):
+        raise fail(f"--normals {normals!r}: use learned or source")
     from ..demo import run_demo
 
-    run_demo(out_dir=out)
+    with ExitStack() as stack:
+        def progress(scene, total):
+            return stack.enter_context(frame_progress(f"demo {scene}", total))
+
+        run_demo(out_dir=out, normals=normals, progress=progress)
