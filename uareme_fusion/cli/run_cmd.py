@@ -28,12 +28,16 @@ def run_config(config: Optional[Path], **overrides) -> RunConfig:
 
 
 def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Optional[float], evaluate: bool,
-            command: str, extra_sinks_factory=None) -> dict:
-    """Open the source, run it with a progress bar, report how it ended; exits non-zero when it failed."""
-    from ..drivers import open_source
+            command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None) -> dict:
+    """Open the source, run it with a progress bar, report how it ended; exits non-zero when it failed.
+
+    With `record_dir` the source's frames and IMU are also written there as they pass (our dataset
+    layout: a live session replays exactly with `run RECORD_DIR`)."""
+    from ..drivers import open_source, record
 
     out_dir = make_output_folder(out)
-    with open_source(source, imu=None if imu is None else str(imu), fps=fps) as src:
+    opened = open_source(source, imu=None if imu is None else str(imu), fps=fps)
+    with (opened if record_dir is None else record(opened, record_dir)) as src:
         sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
         total = src.info.n_frames if src.info.has_frames else None
         if cfg.max_frames and total:
@@ -77,6 +81,8 @@ def _options():
         preset=typer.Option(None, "--preset", help="EKF preset: building, vehicle, handheld or a YAML path."),
         max_frames=typer.Option(None, "--max-frames", help="Stop after this many frames."),
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
+        record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
+                                                     "(replay it later with 'run FOLDER')."),
     )
 
 
@@ -90,10 +96,11 @@ def run_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    record: Optional[Path] = _o["record"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
-    execute(source, out, cfg, imu, fps, evaluate=False, command="run")
+    execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record)
 
 
 @app.command("eval")
