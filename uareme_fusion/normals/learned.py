@@ -23,6 +23,7 @@ weights or outputs do not fit, raises `InputError` naming the file and the probl
 from __future__ import annotations
 
 import dataclasses
+import warnings
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -89,7 +90,9 @@ def load_model(path: str | Path, device: str = "cpu"):
         raise InputError(f"{path}: model file not found")
     if _is_torchscript(path):
         try:
-            model = torch.jit.load(str(path), map_location=device)
+            with warnings.catch_warnings():  # torch 2.13 marks TorchScript deprecated; users still ship it
+                warnings.simplefilter("ignore", DeprecationWarning)
+                model = torch.jit.load(str(path), map_location=device)
         except Exception as exc:  # torch raises RuntimeError and others for broken archives
             raise InputError(f"{path}: cannot load this TorchScript module ({_first_line(exc)})") from None
     else:

@@ -37,8 +37,8 @@ LITE0_STAGES = ((1, 3, 1, 1, 16), (2, 3, 2, 6, 24), (2, 5, 2, 6, 40), (3, 3, 2, 
 class NetworkConfig:
     """Architecture of `NormalNet` (stored with the weights so a file rebuilds its own network)."""
 
-    encoder_blocks: int = 11
-    """How many of Lite0's 16 MBConv blocks to keep (11: stride 16, 112 channels)."""
+    encoder_blocks: int = 16
+    """How many of Lite0's 16 MBConv blocks to keep (16: all, stride 32, 320 channels; 11: stride 16)."""
     decoder_channels: tuple = (96, 64, 48, 32)
     """Channels after each x2 upsampling step, from the coarsest scale to stride 2."""
 

@@ -1,0 +1,174 @@
+"""LearnedNormals: shipped weights on rendered views, output contract, kappa cap, drop-in models, bad input."""
+
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from uareme_fusion import solve_manhattan
+from uareme_fusion.errors import ConfigError, InputError
+from uareme_fusion.normals import LearnedNormals, LearnedNormalsConfig
+from uareme_fusion.normals.learned import DEFAULT_WEIGHTS, WEIGHTS_FORMAT
+from uareme_fusion.normals.network import KAPPA_FLOOR, NetworkConfig, NormalNet
+from uareme_fusion.rotations import angle_between, nearest_symmetric
+from uareme_fusion.sim.render import Renderer, intrinsics_from_fov
+from uareme_fusion.sim.scenarios import build_scenario
+from uareme_fusion.types import Frame
+
+SEED_BASE = 50_000
+"""Scene seeds far from the training seeds (0..39) and the bench's held-out ones (10000+)."""
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    return LearnedNormals()
+
+
+@pytest.fixture(scope="module")
+def rendered_views():
+    """Three 320x240 views (room, office, corridor): (rgb, exact normals, R_cm)."""
+    views = []
+    for k, scene in enumerate(("room", "office", "corridor")):
+        world = build_scenario(scene, 10.0, SEED_BASE + k)
+        renderer = Renderer(world.scene, intrinsics_from_fov(320, 240, 70.0), 320, 240)
+        t = 2.0 + 3.0 * k
+        sample = world.trajectory.sample(t)
+        R_wc, R_wm = sample.R_wc[0], world.trajectory.R_wm(t)[0]
+        frame = renderer.render(R_wc, sample.p_w[0], R_wm=R_wm, noise_std_dn=1.5, rng=np.random.default_rng(k))
+        views.append((frame.rgb, frame.normals_c, R_wc.T @ R_wm))
+    return views
+
+
+def angle_deg(a, b):
+    return np.degrees(np.arccos(np.clip(np.sum(a * b, axis=-1), -1.0, 1.0)))
+
+
+def test_shipped_weights_load_offline_and_fit_the_budget():
+    assert DEFAULT_WEIGHTS.is_file() and DEFAULT_WEIGHTS.stat().st_size <= 25e6
+    payload = torch.load(DEFAULT_WEIGHTS, map_location="cpu", weights_only=True)
+    assert payload["format"] == WEIGHTS_FORMAT
+
+
+def test_shipped_weights_on_rendered_views(shipped, rendered_views):
+    errors, rotation_errors = [], []
+    for rgb, n_true, R_cm in rendered_views:
+        nm = shipped.estimate(rgb)
+        valid = np.abs(n_true).sum(-1) > 0.5
+        errors.append(angle_deg(nm.normals[valid], n_true[valid]))
+        visual = solve_manhattan(nm)
+        R_est, _ = nearest_symmetric(visual.R_cm, R_cm)
+        rotation_errors.append(np.degrees(angle_between(R_est, R_cm)))
+    errors = np.concatenate(errors)
+    assert np.median(errors) < 20.0
+    assert np.median(rotation_errors) < 8.0
+
+
+def test_kappa_ranks_errors(shipped, rendered_views):
+    errors, kappa = [], []
+    for rgb, n_true, _ in rendered_views:
+        nm = shipped.estimate(rgb)
+        valid = np.abs(n_true).sum(-1) > 0.5
+        errors.append(angle_deg(nm.normals[valid], n_true[valid]))
+        kappa.append(nm.kappa[valid])
+    errors, kappa = np.concatenate(errors), np.concatenate(kappa)
+    confident = kappa >= np.median(kappa)
+    assert np.median(errors[~confident]) > 1.2 * np.median(errors[confident])
+
+
+@pytest.mark.parametrize("height, width", [(37, 53), (241, 319), (480, 640)])
+def test_output_shapes_for_any_input_size(shipped, height, width):
+    rgb = np.random.default_rng(height).integers(0, 256, (height, width, 3), dtype=np.uint8)
+    nm = shipped.estimate(rgb)
+    assert nm.normals.shape == (height, width, 3) and nm.normals.dtype == np.float32
+    assert nm.kappa.shape == (height, width) and nm.kappa.dtype == np.float32
+    np.testing.assert_allclose(np.linalg.norm(nm.normals, axis=-1), 1.0, atol=1e-4)
+    assert nm.kappa.min() >= 0.0 and nm.kappa.max() <= 75.0
+    assert nm.independent_regions == LearnedNormalsConfig().independent_regions
+
+
+def test_kappa_is_capped_and_non_negative(rendered_views):
+    est = LearnedNormals(config=LearnedNormalsConfig(kappa_cap=2.0))
+    nm = est.estimate(rendered_views[0][0])
+    assert nm.kappa.max() == pytest.approx(2.0)  # rendered walls are confident well beyond 2
+    assert nm.kappa.min() >= 0.0
+
+
+def test_estimate_frame_keeps_time_and_names_missing_rgb(shipped, rendered_views):
+    nm = shipped.estimate_frame(Frame(t=2.5, rgb=rendered_views[0][0], index=4))
+    assert nm.t == 2.5
+    with pytest.raises(InputError, match="frame 4.*RGB"):
+        shipped.estimate_frame(Frame(t=2.5, index=4))
+
+
+def test_bad_images(shipped):
+    with pytest.raises(InputError, match=r"shape \(H, W, 3\)"):
+        shipped.estimate(np.zeros((40, 40), np.uint8))
+    with pytest.raises(InputError, match="uint8.*float32"):
+        shipped.estimate(np.zeros((40, 40, 3), np.float32))
+    with pytest.raises(InputError, match="too small"):
+        shipped.estimate(np.zeros((4, 40, 3), np.uint8))
+    with pytest.raises(ConfigError, match="kappa_cap"):
+        LearnedNormalsConfig(kappa_cap=0.0)
+
+
+class ConstantModel(nn.Module):
+    """A drop-in with the contract: every pixel faces the camera (0, 0, -1) with kappa 5."""
+
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        b, _, h, w = rgb.shape
+        normal = torch.tensor([0.0, 0.0, -1.0, 5.0]).view(1, 4, 1, 1)
+        return normal.expand(b, 4, h, w) + 0.0 * rgb.mean()
+
+
+class ThreeChannels(nn.Module):
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        return rgb
+
+
+def test_drop_in_torchscript(tmp_path):
+    path = tmp_path / "constant.pt"
+    torch.jit.save(torch.jit.script(ConstantModel()), str(path))
+    nm = LearnedNormals(model=path).estimate(np.full((30, 50, 3), 128, np.uint8))
+    np.testing.assert_allclose(nm.normals, np.broadcast_to([0.0, 0.0, -1.0], (30, 50, 3)), atol=1e-6)
+    np.testing.assert_allclose(nm.kappa, 5.0, atol=1e-5)
+
+
+def test_drop_in_state_dict_matches_the_network(tmp_path):
+    torch.manual_seed(0)
+    net = NormalNet().eval()
+    path = tmp_path / "state.pt"
+    torch.save(net.state_dict(), path)
+    est = LearnedNormals(model=path)
+    rgb = np.random.default_rng(1).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    with torch.no_grad():
+        expected = net(torch.from_numpy(rgb).permute(2, 0, 1)[None].float() / 255.0)[0].numpy()
+    np.testing.assert_allclose(est.infer(rgb), expected, atol=1e-5)
+    assert expected[3].min() >= KAPPA_FLOOR
+    np.testing.assert_allclose(np.linalg.norm(expected[:3], axis=0), 1.0, atol=1e-5)
+
+
+def test_wrong_models_name_the_file_and_the_problem(tmp_path):
+    other = NormalNet(NetworkConfig(encoder_blocks=11))
+    path = tmp_path / "other.pt"
+    torch.save(other.state_dict(), path)
+    with pytest.raises(InputError, match=r"other\.pt: weights of another architecture.*missing"):
+        LearnedNormals(model=path)
+    shipped_format = tmp_path / "shipped_format.pt"
+    torch.save(dict(format=WEIGHTS_FORMAT, config=NormalNet().config_dict(), state_dict=other.state_dict()),
+               shipped_format)
+    with pytest.raises(InputError, match="shipped_format.pt: weights of another architecture"):
+        LearnedNormals(model=shipped_format)
+    text = tmp_path / "notes.pt"
+    text.write_text("not a model")
+    with pytest.raises(InputError, match="notes.pt: not a TorchScript module or a torch weights file"):
+        LearnedNormals(model=text)
+    three = tmp_path / "three.pt"
+    torch.jit.save(torch.jit.script(ThreeChannels()), str(three))
+    with pytest.raises(InputError, match=r"three.pt: the model must map .*\(1, 4, 48, 64\).*\(1, 3, 48, 64\)"):
+        LearnedNormals(model=three)
+    listing = tmp_path / "list.pt"
+    torch.save([1, 2, 3], listing)
+    with pytest.raises(InputError, match="list.pt: expected a"):
+        LearnedNormals(model=listing)
+    with pytest.raises(InputError, match="missing.pt: model file not found"):
+        LearnedNormals(model=tmp_path / "missing.pt")
