@@ -1,4 +1,9 @@
-"""`uareme-fusion bench WHAT`: speed benchmarks that print absolute figures and ratios."""
+"""`uareme-fusion bench WHAT`: benchmarks that print absolute figures and ratios to their goals.
+
+- `solver`: the single-frame solver's stages (one core), medians and p90;
+- `pipeline`: end-to-end fps and per-stage ms at 640x480, and memory over a long stream (issue 7);
+- `soak`: one simulated hour through the full pipeline: RSS growth, state sizes, accuracy (issue 8).
+"""
 
 from __future__ import annotations
 
@@ -9,22 +14,41 @@ import typer
 
 from .app import app, fail
 
-BENCHMARKS = ("solver",)
+BENCHMARKS = ("solver", "pipeline", "soak")
 
 
 @app.command()
 def bench(
     what: str = typer.Argument("solver", help=f"Which benchmark: {', '.join(BENCHMARKS)}."),
-    repeats: int = typer.Option(100, min=5, help="Timed runs per figure."),
+    repeats: int = typer.Option(100, min=5, help="solver: timed runs per figure."),
+    seconds: float = typer.Option(10.0, "--seconds", min=1.0, max=600.0,
+                                  help="pipeline: length of the timed 640x480 room walk, s."),
+    memory_minutes: float = typer.Option(10.0, "--memory-minutes", min=0.0, max=600.0,
+                                         help="pipeline: length of the memory stream, min (0: skip)."),
+    normals: str = typer.Option("learned", "--normals", help="pipeline: learned or a model file (.pt)."),
+    minutes: float = typer.Option(60.0, "--minutes", min=0.1, max=1440.0,
+                                  help="soak: simulated stream length (30 fps, 400 Hz IMU), min."),
+    normals_noise_deg: float = typer.Option(2.0, "--normals-noise-deg", min=0.0, max=90.0,
+                                            help="soak: angular noise on the simulator's normals, deg."),
+    preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
     json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
 ) -> None:
-    """Time a stage on this machine (one core) and print medians, p90 and ratios to references."""
+    """Time a benchmark on this machine and print its figures against the goals."""
     if what not in BENCHMARKS:
         raise typer.BadParameter(f"unknown benchmark '{what}'; choose from {', '.join(BENCHMARKS)}")
     if json_out is not None and (json_out.is_dir() or not json_out.parent.is_dir()):
         raise fail(f"--json {json_out}: cannot write a file there (a folder, or its folder does not exist)")
-    from ..benchmarks import solver
+    if what == "solver":
+        from ..benchmarks import solver
 
-    results = solver.run(repeats=repeats)
+        results = solver.run(repeats=repeats)
+    elif what == "pipeline":
+        from ..benchmarks import pipeline
+
+        results = pipeline.run(seconds, memory_minutes, normals)
+    else:
+        from ..benchmarks import soak
+
+        results = soak.run(seconds=minutes * 60.0, normals_noise_deg=normals_noise_deg, preset=preset)
     if json_out is not None:
-        json_out.write_text(json.dumps(results, indent=2))
+        json_out.write_text(json.dumps(results, indent=2, default=float))
