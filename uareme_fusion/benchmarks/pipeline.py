@@ -1,0 +1,127 @@
+"""End-to-end pipeline benchmark: frames per second and per-stage milliseconds for 640x480 input
+(learned normals at their internal 320x240, the solver, the EKF with a 200 Hz IMU, the file sinks),
+and the memory growth over a long stream.
+
+Frames are rendered by the simulator before timing starts and replayed from memory, so the figures
+are the pipeline's own (a video decoder adds about 2 ms per 640x480 frame). The memory run loops a
+few rendered frames of a camera held still (`static`), with the IMU simulated for the whole stream,
+and reads the resident set size (RSS) every `sample_every` frames after a warm-up.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..drivers.base import ImuBatch, Source, SourceInfo
+from ..pipeline import RunConfig
+from ..pipeline.session import run_source
+from ..sim.imu import simulate_imu
+from ..sim.render import Renderer, intrinsics_from_fov
+from ..sim.scenarios import SCENARIOS, build_scenario
+from ..types import Frame
+
+
+def rss_mb() -> float:
+    """Resident set size of this process, MB (Linux /proc; NaN elsewhere)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            pages = int(fh.read().split()[1])
+    except OSError:
+        return float("nan")
+    import os
+
+    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+class ReplaySource(Source):
+    """Pre-rendered frames of a scenario replayed (looped when the stream is longer) with its IMU."""
+
+    def __init__(self, scenario: str, seconds: float, fps: float = 30.0, width: int = 640, height: int = 480,
+                 distinct_frames: int | None = None, imu_rate_hz: float = 200.0, seed: int = 0):
+        n = int(round(seconds * fps))
+        distinct = n if distinct_frames is None else min(n, distinct_frames)
+        world = build_scenario(scenario, seconds + 1.0, seed)
+        K = intrinsics_from_fov(width, height, SCENARIOS[scenario].hfov_deg)
+        renderer = Renderer(world.scene, K, width, height)
+        rng = np.random.default_rng(seed)
+        self.rgb = [Renderer.to_uint8(world.render_radiance(renderer, k / fps)[0], 1.0, 2.0, rng)
+                    for k in range(distinct)]
+        self.t_frame = np.arange(n) / fps
+        self.imu = simulate_imu(world.trajectory, rate_hz=imu_rate_hz, seed=seed)
+        self.R_wc_true = world.trajectory.sample(self.t_frame[:distinct]).R_wc
+        self.K = K
+        self.info = SourceInfo(name=f"replay:{scenario}", n_frames=n, fps=fps, K=K, has_imu=True,
+                               image_size=(height, width))
+
+    def events(self):
+        t_imu, gyro, accel = self.imu
+        ends = np.searchsorted(t_imu, self.t_frame, side="right")
+        start = 0
+        for k, t in enumerate(self.t_frame):
+            if ends[k] > start:
+                yield ImuBatch(t_imu[start:ends[k]], gyro[start:ends[k]], accel[start:ends[k]])
+                start = ends[k]
+            yield Frame(float(t), rgb=self.rgb[k % len(self.rgb)], K=self.K, index=k)
+
+
+class MemoryProbe:
+    """A sink that samples RSS every `every` estimates after `warmup` of them."""
+
+    def __init__(self, every: int = 300, warmup: int = 300):
+        self.every, self.warmup, self.count, self.samples = every, warmup, 0, []
+
+    def write(self, result) -> None:
+        self.count += 1
+        if self.count >= self.warmup and (self.count - self.warmup) % self.every == 0:
+            self.samples.append((self.count, rss_mb()))
+
+    def close(self) -> None:
+        pass
+
+
+def throughput(seconds: float = 10.0, normals: str = "learned") -> dict:
+    """fps and per-stage ms over a rendered room walk at 640x480 (30 fps, 200 Hz IMU)."""
+    source = ReplaySource("room", seconds)
+    with tempfile.TemporaryDirectory() as tmp:
+        summary = run_source(source, Path(tmp), RunConfig(normals=normals, mekf_preset="handheld"))
+    pipeline_ms = {k: v for k, v in summary["timing_ms"].items() if k not in ("source", "total")}
+    pipeline_total = sum(pipeline_ms.values())
+    return {"frames": summary["frames"], "timing_ms": pipeline_ms, "pipeline_ms": pipeline_total,
+            "fps": 1e3 / pipeline_total, "frames_without_visual": summary["frames_without_visual"],
+            "status_counts": summary["status_counts"]}
+
+
+def memory(minutes: float = 10.0, normals: str = "learned", fps: float = 30.0) -> dict:
+    """RSS growth (MB) from after the warm-up to the end of a `minutes` stream, and its slope."""
+    source = ReplaySource("static", minutes * 60.0, fps=fps, distinct_frames=30)
+    probe = MemoryProbe()
+    with tempfile.TemporaryDirectory() as tmp:
+        summary = run_source(source, Path(tmp), RunConfig(normals=normals, mekf_preset="handheld"),
+                             extra_sinks=[probe])
+    frames, rss = np.array(probe.samples).T if probe.samples else (np.zeros(0), np.zeros(0))
+    slope = float(np.polyfit(frames, rss, 1)[0] * 1000) if len(frames) > 2 else float("nan")
+    return {"stream_minutes": minutes, "frames": summary["frames"],
+            "rss_start_mb": float(rss[0]) if len(rss) else float("nan"),
+            "rss_end_mb": float(rss[-1]) if len(rss) else float("nan"),
+            "growth_mb": float(rss[-1] - rss[0]) if len(rss) else float("nan"),
+            "slope_mb_per_1000_frames": slope, "wall_s": summary["wall_s"]}
+
+
+def run(seconds: float = 10.0, memory_minutes: float = 10.0, normals: str = "learned") -> dict:
+    """Print and return both figures against the issue's goals (>= 15 fps, < 20 MB growth)."""
+    result = {"throughput": throughput(seconds, normals)}
+    tp = result["throughput"]
+    stages = ", ".join(f"{k} {v:.1f}" for k, v in tp["timing_ms"].items())
+    print(f"pipeline, 640x480 input, {normals} normals, mekf + 200 Hz IMU, {tp['frames']} frames:")
+    print(f"  ms per frame: {stages}; total {tp['pipeline_ms']:.1f} ms")
+    print(f"  {tp['fps']:.1f} fps (goal >= 15: ratio {tp['fps'] / 15:.2f})")
+    if memory_minutes > 0:
+        result["memory"] = mem = memory(memory_minutes, normals)
+        print(f"memory over a {mem['stream_minutes']:g}-minute stream ({mem['frames']} frames, "
+              f"{mem['wall_s']:.0f} s wall): RSS {mem['rss_start_mb']:.1f} -> {mem['rss_end_mb']:.1f} MB, "
+              f"growth {mem['growth_mb']:.2f} MB (goal < 20), slope {mem['slope_mb_per_1000_frames']:.3f} MB "
+              "per 1000 frames")
+    return result
