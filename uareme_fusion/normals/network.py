@@ -112,6 +112,7 @@ class NormalNet(nn.Module):
             self.decoder.append(SeparableConv(c + skip, dec[step]))
             c = dec[step]
         self.head = nn.Conv2d(c, 4, 1)
+        self.kappa_floor = KAPPA_FLOOR
         self.register_buffer("rgb_mean", torch.tensor([0.5, 0.5, 0.5]).view(1, 3, 1, 1), persistent=False)
         self.register_buffer("rgb_std", torch.tensor([0.5, 0.5, 0.5]).view(1, 3, 1, 1), persistent=False)
 
@@ -130,7 +131,7 @@ class NormalNet(nn.Module):
             x = conv(torch.cat([x, skip], dim=1))
         out = F.interpolate(self.head(x), size=(height, width), mode="bilinear", align_corners=False)
         normals = F.normalize(out[:, :3], dim=1, eps=1e-6)
-        kappa = F.softplus(out[:, 3:]) + KAPPA_FLOOR
+        kappa = F.softplus(out[:, 3:]) + self.kappa_floor
         return torch.cat([normals, kappa], dim=1)
 
     def config_dict(self) -> dict:
