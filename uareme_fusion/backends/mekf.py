@@ -20,6 +20,7 @@ See DESIGN.md "Backends: mekf". Conventions:
 from __future__ import annotations
 
 import enum
+import math
 
 import numpy as np
 from filterpy.kalman import predict as kf_predict
@@ -39,6 +40,11 @@ N_STATE = 12
 I3 = np.eye(3)
 _ZERO_STATE = np.zeros(N_STATE)
 _NO_ROWS = np.zeros((0, COLUMNS))
+_ORTHONORMALISE_EVERY = 16
+"""Chunks of gyro integration between re-orthonormalisations of R_wc (each update also does one):
+rounding drift grows by ~1e-16 per product, far below anything that matters in 16."""
+_TH_AND_MF = np.array([[0, 1, 2], [6, 7, 8]])
+"""Indices that gather the two rotation blocks of the error state as a (2, 3) stack."""
 _PERIOD_TOLERANCE_S = 1e-9
 """An accelerometer period counts as complete this close to its length (sums of sample steps round)."""
 
@@ -214,6 +220,7 @@ class Mekf(Backend):
         self.omega_c = np.zeros(3)
         self.P = np.zeros((N_STATE, N_STATE))
         self._F = np.eye(N_STATE)  # transition buffer: only its TH rows change between chunks
+        self._chunks_unnormalised = 0
         self.t_state: float | None = None
         self.initialised = False
         self.manhattan_initialised = False
@@ -231,6 +238,7 @@ class Mekf(Backend):
         self._acc_sum_c = np.zeros(3)
         self._acc_time_s = 0.0  # time covered by accelerometer samples since the last update, s
         self._acc_elapsed_s = 0.0  # time elapsed since the last update (frame extrapolations too), s
+        self._accel_due = False  # a completed period's update waits for the frame's visual update
         # Rest detection over the same period: raw gyro and accelerometer sums (camera frame), sums
         # of squared norms, sample count; time rest began (None when moving).
         self._rest_sums = np.zeros(8)
@@ -268,6 +276,8 @@ class Mekf(Backend):
         """Release and integrate every buffered IMU sample (end of an IMU-only stream)."""
         self._queue(self.stream.flush())
         self._integrate_pending(force_init=True)
+        if self._accel_due:
+            self._accel_update()
 
     def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
         """Propagate to `t_s`, fuse `visual` (None for a dropped frame) and return the estimate.
@@ -281,15 +291,18 @@ class Mekf(Backend):
             seen_imu = self.initialised or self._pending or self.stream.newest_s > -np.inf or self._init_samples
             self.mode = MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY
         self.propagate_to(t_s)
+        if visual is not None and self.manhattan_initialised and self.mode != MekfMode.IMU_ONLY:
+            self._visual_update(visual)  # stacks a due accelerometer update into its own
+            return self._estimate(t_s)
+        if self._accel_due:
+            self._accel_update()
         if visual is None or self.mode == MekfMode.IMU_ONLY:
             if self.mode != MekfMode.IMU_ONLY:
                 self._flags |= Status.VISUAL_MISSING
         elif not self.initialised:
             self._initialise_from_visual(t_s, visual)
-        elif not self.manhattan_initialised:
-            self._initialise_manhattan(visual)
         else:
-            self._visual_update(visual)
+            self._initialise_manhattan(visual)
         return self._estimate(t_s)
 
     def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
@@ -346,13 +359,19 @@ class Mekf(Backend):
         extra_s = extrapolate_to_s - last_t if extrapolate_to_s is not None and extrapolate_to_s > last_t else 0.0
         if t.size == 0 and extra_s == 0.0:
             return
+        if self._accel_due:  # a deferred update that no frame took: apply it before moving on
+            self._accel_update()
         period = self.config.accel_update_period_s
         due_s = period - _PERIOD_TOLERANCE_S
+        # Propagating to a frame: an update due at its end waits for the frame's visual update.
+        defer = extrapolate_to_s is not None
         if t.size < 2 or last_t - self.t_state <= period:
             # Short batch (a frame's worth): one chunk, then the update if the period is complete.
             self._integrate_chunk(t, gyro_c, accel_c, saturated, extra_s)
             if self._acc_elapsed_s >= due_s:
-                self._accel_update()
+                self._accel_due = True
+                if not defer:
+                    self._accel_update()
             return
         # Long batch: split at accelerometer-update boundaries. A sample belongs to the chunk in
         # which its interval starts, so a chunk ends on the sample whose interval crosses the
@@ -368,7 +387,9 @@ class Mekf(Backend):
             last = i == len(bounds) - 2
             self._integrate_chunk(t[a:b], gyro_c[a:b], accel_c[a:b], saturated[a:b], extra_s if last else 0.0)
             if not last or self._acc_elapsed_s >= due_s:
-                self._accel_update()
+                self._accel_due = True
+                if not (last and defer):
+                    self._accel_update()
 
     def _integrate_chunk(self, t, gyro_c, accel_c, saturated, extra_s: float = 0.0) -> None:
         """Integrate samples (camera frame) over (t_state, t[-1]]: sample k covers (t_{k-1}, t_k]
@@ -419,7 +440,11 @@ class Mekf(Backend):
         if cfg.record_imu_estimates and n:
             self._record_t.append(t.copy())
             self._record_R.append(self.R_wc @ C[:n])
-        self.R_wc = _orthonormal(self.R_wc @ C_N)
+        self.R_wc = self.R_wc @ C_N
+        self._chunks_unnormalised += 1
+        if self._chunks_unnormalised >= _ORTHONORMALISE_EVERY:
+            self.R_wc = _orthonormal(self.R_wc)
+            self._chunks_unnormalised = 0
         T = T_elapsed if unknown_var == 0.0 else float(dt.sum())
         # Error transition over the chunk (right perturbations), per sample
         # dtheta_{k+1} = M_k^T dtheta_k - dt_k db, composed: dtheta_N = C_N^T dtheta_0 - C_N^T sum_k dt_k C_k db.
@@ -438,7 +463,7 @@ class Mekf(Backend):
         # Accelerometer: time-weighted sum of specific force, rotated into the chunk's end frame.
         if n:
             self._acc_sum_c = C_N.T @ (self._acc_sum_c + np.einsum("kjl,kl,k->j", C[:n], accel_c, dt[:n]))
-            self._acc_time_s += float(dt[:n].sum())
+            self._acc_time_s += T_elapsed - extra_s if unknown_var == 0.0 else float(dt[:n].sum())
         else:
             self._acc_sum_c = C_N.T @ self._acc_sum_c
         self._acc_elapsed_s += T_elapsed
@@ -514,9 +539,25 @@ class Mekf(Backend):
 
     # ------------------------------------------------------------------ updates
     def _accel_update(self) -> None:
+        """Apply the accelerometer update of the period just completed (see `_accel_rows`)."""
+        self._accel_due = False
+        rows = self._accel_rows()
+        if rows is not None:
+            self._kalman_update(*rows)
+
+    def _take_due_accel_rows(self):
+        """The deferred accelerometer update's rows, to stack into a frame's visual update (one
+        filterpy update instead of two at the same state time), or None when none is due."""
+        if not self._accel_due:
+            return None
+        self._accel_due = False
+        return self._accel_rows()
+
+    def _accel_rows(self):
         """Tilt from the accelerometer direction (the period's mean, or its low-passed value with
         `accel_lowpass_tau_s`), noise inflated continuously by how far |a| and the innovation are
-        from pure gravity."""
+        from pure gravity: (residual (3,), covariance (3, 3), H (3, 12)), or None (near free fall).
+        Consumes the period's sums."""
         cfg = self.config
         T = self._acc_time_s
         acc_c = self._acc_sum_c / T if T > 0 else self._acc_sum_c
@@ -536,16 +577,16 @@ class Mekf(Backend):
                 J[0] *= 1.0 - alpha
                 J[1] += alpha * (J[0] - J[1])
             acc_c = lp[1]
-        norm = np.linalg.norm(acc_c)
+        norm = math.sqrt(float(acc_c @ acc_c))
         # |mean specific force| against gravity: the mean is taken in a common (rotating) camera
         # frame, so it is the inertial-frame average and translational accelerations cancel in it.
         norm_dev = abs(norm * self._inv_g - 1.0)
         if not (T > 0 and norm > 0.1 * cfg.gravity_m_s2):  # near free fall: no direction
             self.counters["accel_skipped"] += 1
-            return
+            return None
         z = acc_c / norm
         h = self.R_wc.T @ WORLD_UP
-        angle = float(np.arccos(np.clip(z @ h, -1.0, 1.0)))
+        angle = math.acos(min(1.0, max(-1.0, float(z @ h))))
         var0 = cfg.accel_tilt_noise_rad_sqrt_s**2 / T
         var = var0 * (1.0 + (norm_dev / cfg.accel_norm_scale) ** 2) * (1.0 + (angle / cfg.accel_innovation_scale_rad) ** 2)
         std0 = np.sqrt(var0)
@@ -557,12 +598,13 @@ class Mekf(Backend):
         if self._acc_lp_J is not None and cfg.accel_lowpass_tau_s > 0:
             # z = normalise(lp - J db): the low-passed direction also measures the bias error.
             H[:, BG] = -(I3 - np.outer(z, z)) @ self._acc_lp_J[1] / norm
-        self._kalman_update(z - h, var * I3, H)
         self.counters["accel_updates"] += 1
+        return z - h, var * I3, H
 
     def _visual_update(self, visual: VisualRotation) -> None:
         """Paper's per-frame rotation as a measurement of `R_cm = R_wc^T R_wm` (right perturbation)."""
         cfg = self.config
+        accel_rows = self._take_due_accel_rows()
         R_cm_pred = self.R_wc.T @ self.R_wm
         visual = visual.symmetric_to(R_cm_pred)
         r = log_so3(R_cm_pred.T @ visual.R_cm)
@@ -576,6 +618,8 @@ class Mekf(Backend):
             self._flags |= Status.VISUAL_REJECTED
             self.counters["visual_rejected"] += 1
             self._rejections += 1
+            if accel_rows is not None:
+                self._kalman_update(*accel_rows)
             if self._rejections >= cfg.reinit_after_rejections:
                 self._reinitialise_manhattan(visual)
             return
@@ -583,12 +627,14 @@ class Mekf(Backend):
         d = np.sqrt(d2)
         if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_sigma)
-        vertical = self._manhattan_vertical_rows()
-        if vertical is not None:  # one stacked update: the visual rotation and "m's z is up"
-            r_v, R_v, H_v = vertical
-            R_all = np.zeros((6, 6))
-            R_all[:3, :3], R_all[3:, 3:] = R_vis, R_v
-            r, R_vis, H = np.concatenate([r, r_v]), R_all, np.vstack([H, H_v])
+        # One stacked update: the visual rotation, "m's z is up" and a due accelerometer update.
+        blocks = [(r, R_vis, H), self._manhattan_vertical_rows(), accel_rows]
+        blocks = [b for b in blocks if b is not None]
+        if len(blocks) > 1:
+            R_all = np.zeros((3 * len(blocks), 3 * len(blocks)))
+            for i, b in enumerate(blocks):
+                R_all[3 * i:3 * i + 3, 3 * i:3 * i + 3] = b[1]
+            r, R_vis, H = np.concatenate([b[0] for b in blocks]), R_all, np.vstack([b[2] for b in blocks])
         self._kalman_update(r, R_vis, H)
         self.counters["visual_updates"] += 1
 
@@ -611,11 +657,15 @@ class Mekf(Backend):
             return
         # Reset Jacobian of the right-perturbation error: G = I - skew(dtheta)/2 on rotation blocks.
         G = np.eye(N_STATE)
-        self.R_wc = _orthonormal(self.R_wc @ exp_so3(dx[TH]))
-        G[TH, TH] -= 0.5 * skew(dx[TH])
         if self.manhattan_initialised:
-            self.R_wm = _orthonormal(self.R_wm @ exp_so3(dx[MF]))
-            G[MF, MF] -= 0.5 * skew(dx[MF])
+            dtheta = dx[_TH_AND_MF]
+            (dR_c, dR_m), (half_c, half_m) = exp_so3(dtheta), 0.5 * skew(dtheta)
+            self.R_wm = _orthonormal(self.R_wm @ dR_m)
+            G[MF, MF] -= half_m
+        else:
+            dR_c, half_c = exp_so3(dx[TH]), 0.5 * skew(dx[TH])
+        self.R_wc = _orthonormal(self.R_wc @ dR_c)
+        G[TH, TH] -= half_c
         self.b_c = self.b_c + dx[BG]
         if self._acc_lp_c is not None:  # re-carry the low-passed accelerometer with the new bias
             self._acc_lp_c += self._acc_lp_J @ dx[BG]
