@@ -49,28 +49,29 @@ def test_shipped_weights_load_offline_and_fit_the_budget():
     assert payload["format"] == WEIGHTS_FORMAT
 
 
-def test_shipped_weights_on_rendered_views(shipped, rendered_views):
-    errors, rotation_errors = [], []
+@pytest.fixture(scope="module")
+def shipped_on_views(shipped, rendered_views):
+    """Per-pixel angular errors (deg) and kappa of the shipped model on the rendered views, and the
+    single-frame rotation error (deg) of each view."""
+    errors, kappa, rotation_errors = [], [], []
     for rgb, n_true, R_cm in rendered_views:
         nm = shipped.estimate(rgb)
         valid = np.abs(n_true).sum(-1) > 0.5
         errors.append(angle_deg(nm.normals[valid], n_true[valid]))
-        visual = solve_manhattan(nm)
-        R_est, _ = nearest_symmetric(visual.R_cm, R_cm)
+        kappa.append(nm.kappa[valid])
+        R_est, _ = nearest_symmetric(solve_manhattan(nm).R_cm, R_cm)
         rotation_errors.append(np.degrees(angle_between(R_est, R_cm)))
-    errors = np.concatenate(errors)
+    return np.concatenate(errors), np.concatenate(kappa), np.array(rotation_errors)
+
+
+def test_shipped_weights_on_rendered_views(shipped_on_views):
+    errors, _, rotation_errors = shipped_on_views
     assert np.median(errors) < 20.0
     assert np.median(rotation_errors) < 8.0
 
 
-def test_kappa_ranks_errors(shipped, rendered_views):
-    errors, kappa = [], []
-    for rgb, n_true, _ in rendered_views:
-        nm = shipped.estimate(rgb)
-        valid = np.abs(n_true).sum(-1) > 0.5
-        errors.append(angle_deg(nm.normals[valid], n_true[valid]))
-        kappa.append(nm.kappa[valid])
-    errors, kappa = np.concatenate(errors), np.concatenate(kappa)
+def test_kappa_ranks_errors(shipped_on_views):
+    errors, kappa, _ = shipped_on_views
     confident = kappa >= np.median(kappa)
     assert np.median(errors[~confident]) > 1.2 * np.median(errors[confident])
 
