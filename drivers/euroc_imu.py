@@ -64,6 +64,9 @@ def read_euroc_imu(path: str | Path) -> EurocImu:
             if candidate.is_file():
                 path = candidate
                 break
+    if path.is_dir():
+        raise InputError(f"EuRoC IMU file {path}: is a folder, and an IMU file inside it (data.csv, "
+                         "imu0/data.csv or mav0/imu0/data.csv) does not exist")
     if not path.is_file():
         raise InputError(f"EuRoC IMU file {path} does not exist")
     table = read_table(path, EUROC_IMU_COLUMNS, delimiter=",", kind="an EuRoC IMU file")

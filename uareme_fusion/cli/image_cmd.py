@@ -11,6 +11,7 @@ import numpy as np
 import typer
 
 from ..errors import InputError
+from ..pipeline.session import make_output_folder
 from ..pipeline.single_image import analyse_image, image_overlay
 from .app import app
 
@@ -24,12 +25,14 @@ def image_command(
     fov_deg: float = typer.Option(60.0, "--fov-deg", help="Assumed horizontal field of view for drawing, degrees."),
 ) -> None:
     """Manhattan rotation, its covariance and the up vector of one image, with an optional overlay."""
+    if not 1.0 < fov_deg < 179.0:  # also refuses NaN
+        raise InputError(f"--fov-deg must be between 1 and 179 degrees, got {fov_deg}")
+    if out is not None and out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        raise InputError(f"{out}: the overlay is an image; use a .png or .jpg name")
     result = analyse_image(image, normals)
     if out is not None:
         overlay = image_overlay(result, fov_deg=fov_deg)
-        if out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
-            raise InputError(f"{out}: the overlay is an image; use a .png or .jpg name")
-        out.parent.mkdir(parents=True, exist_ok=True)
+        make_output_folder(out.parent)
         if not cv2.imwrite(str(out), overlay[..., ::-1]):
             raise InputError(f"{out}: cannot write the overlay")
     doc = result.as_dict()

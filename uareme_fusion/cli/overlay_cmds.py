@@ -7,9 +7,16 @@ from typing import Optional
 
 import typer
 
-from ..pipeline.drawing_sinks import GroundSink, HorizonVideoSink
+from ..errors import InputError
+from ..pipeline.drawing_sinks import VIDEO_CODECS, GroundSink, HorizonVideoSink
 from .app import app
 from .run_cmd import _o, execute, run_config
+
+
+def needs_frames(src, command: str) -> None:
+    """`InputError` when the source has no images to draw on (an IMU log)."""
+    if not src.info.has_frames:
+        raise InputError(f"{src.info.name}: '{command}' draws on images, and this source has none (IMU only)")
 
 
 @app.command("horizon")
@@ -26,8 +33,11 @@ def horizon_command(
     """Draw the horizon and the Manhattan axes on every frame of a video."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      assumed_fov_deg=fov_deg)
+    if out.suffix.lower() not in VIDEO_CODECS:
+        raise InputError(f"--out {out}: unsupported video extension; use one of {', '.join(VIDEO_CODECS)}")
 
     def sinks(src, out_dir, cfg):
+        needs_frames(src, "horizon")
         return [HorizonVideoSink(out, src.info.fps or 30.0, cfg.assumed_fov_deg, panes)]
 
     execute(source, out.parent / f"{out.stem}.run", cfg, imu, fps, evaluate=False, command="horizon",
@@ -51,6 +61,7 @@ def ground_command(
                      ground_threshold_deg=threshold_deg)
 
     def sinks(src, out_dir, cfg):
+        needs_frames(src, "ground")
         return [GroundSink(out_dir, cfg.ground_threshold_deg, out_dir / "ground.mp4" if video else None,
                            src.info.fps or 30.0)]
 

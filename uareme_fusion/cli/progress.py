@@ -11,16 +11,29 @@ from .app import err_console
 
 @contextmanager
 def frame_progress(description: str, total: int | None):
-    """Yields `on_result(result, stats)` that advances a progress bar on stderr."""
+    """Yields `on_result(result, stats)` that advances a progress bar on stderr.
+
+    The bar appears with the first result, so a run that fails while it is being set up (a bad
+    preset, normals the source cannot feed) prints its error line alone."""
     columns = [TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                TextColumn("{task.fields[fps]:.1f} fps"), TimeElapsedColumn()]
     if total:
         columns.append(TimeRemainingColumn())
-    with Progress(*columns, console=err_console, transient=False) as progress:
-        task = progress.add_task(description, total=total or None, fps=0.0)
+    progress = Progress(*columns, console=err_console, transient=False)
+    task = progress.add_task(description, total=total or None, fps=0.0, start=False)
+    started = False
 
-        def on_result(result, stats):
-            elapsed = progress.tasks[task].elapsed or 0.0
-            progress.update(task, completed=stats.estimates, fps=stats.estimates / elapsed if elapsed > 0 else 0.0)
+    def on_result(result, stats):
+        nonlocal started
+        if not started:
+            progress.start()
+            progress.start_task(task)
+            started = True
+        elapsed = progress.tasks[task].elapsed or 0.0
+        progress.update(task, completed=stats.estimates, fps=stats.estimates / elapsed if elapsed > 0 else 0.0)
 
+    try:
         yield on_result
+    finally:
+        if started:
+            progress.stop()

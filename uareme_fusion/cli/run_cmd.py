@@ -17,7 +17,7 @@ from .progress import frame_progress
 
 SOURCE_HELP = ("A video file, webcam:N, an image, folder or glob of images, a dataset folder (TUM RGB-D, "
                "ICL-NUIM, EuRoC, one written by 'simulate'), a BROAD .hdf5 or IMU .csv, sim:SCENARIO, or oak[:ID].")
-STOP_EXIT_CODES = {"end": 0, "max_frames": 0, "source_error": 1, "interrupted": 130}
+STOP_EXIT_CODES = {"end": 0, "max_frames": 0, "source_error": 1, "input_error": 2, "interrupted": 130}
 
 
 def run_config(config: Optional[Path], **overrides) -> RunConfig:

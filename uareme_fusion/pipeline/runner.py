@@ -1,8 +1,9 @@
 """The streaming loop: each frame's normals, visual rotation and estimate, handed to the sinks.
 
 Memory is bounded: nothing per frame is kept here (sinks write and forget; timings are running
-sums). A source that fails mid-stream or Ctrl-C ends the run cleanly: the sinks are closed, so
-everything written so far stays complete and valid, and `RunStats.stopped` says why it ended.
+sums). A source that fails mid-stream, input found bad mid-stream (an `InputError`: e.g. fewer normal
+maps than frames) or Ctrl-C ends the run cleanly: the sinks are closed, so everything written so far
+stays complete and valid, and `RunStats.stopped` says why it ended.
 """
 
 from __future__ import annotations
@@ -54,7 +55,8 @@ class StageTimes:
 
 @dataclass
 class RunStats:
-    """Counts and timings of one run; `stopped` is end, max_frames, interrupted or source_error."""
+    """Counts and timings of one run; `stopped` is end, max_frames, interrupted, source_error or
+    input_error (`error` holds the message of the last two)."""
 
     source: str = ""
     normals: str = ""
@@ -146,7 +148,8 @@ class Pipeline:
     def run(self, source: Source, max_frames: int | None = None,
             on_result: Callable[[FrameResult, RunStats], None] | None = None) -> RunStats:
         """Consume `source` to its end (or `max_frames`), then close the sinks; never raises for a
-        source failure or Ctrl-C: `stats.stopped` and `stats.error` say what happened."""
+        source failure, bad input met mid-stream or Ctrl-C: `stats.stopped` and `stats.error` say
+        what happened."""
         stats = self.stats
         stats.source = source.info.name
         imu_only = not source.info.has_frames
@@ -170,6 +173,8 @@ class Pipeline:
                 stats.stopped = "max_frames"
         except SourceError as exc:
             stats.stopped, stats.error = "source_error", str(exc)
+        except InputError as exc:
+            stats.stopped, stats.error = "input_error", str(exc)
         except KeyboardInterrupt:
             stats.stopped, stats.error = "interrupted", "interrupted by the user (Ctrl-C)"
         finally:

@@ -1,7 +1,7 @@
 """One run from a source to an output folder: `trajectory.tum`, `estimates.csv`, `summary.json`.
 
 `summary.json` is written however the run ends (end of source, `max_frames`, a source failure,
-Ctrl-C), with `stopped` saying which; the trajectory and CSV are flushed frame by frame. With
+bad input met mid-stream, Ctrl-C), with `stopped` saying which; the trajectory and CSV are flushed frame by frame. With
 `evaluate=True` the source's ground truth scores the run (`metrics.attitude_errors`).
 """
 
