@@ -343,3 +343,18 @@ def test_config_yaml_syntax_error_is_one_line(world, tmp_path):
     result = invoke(world, tmp_path, ["run", "W/sim4", "--config", "T/c.yaml", *out_args(tmp_path)],
                     {"c.yaml": "backend: [mekf\n"})
     assert_error(result, 2, r"c.yaml is not valid YAML.*line 1, column 10")
+
+
+BENCH_CASES = [
+    ("soak_minutes_zero", ["soak", "--minutes", "0"], "Invalid value for '--minutes'"),
+    ("soak_noise_above_90", ["soak", "--normals-noise-deg", "120"], "Invalid value for '--normals-noise-deg'"),
+    ("pipeline_seconds_zero", ["pipeline", "--seconds", "0"], "Invalid value for '--seconds'"),
+    ("pipeline_memory_negative", ["pipeline", "--memory-minutes", "-1"], "Invalid value for '--memory-minutes'"),
+]
+
+
+@pytest.mark.parametrize("case, args, message", BENCH_CASES, ids=[c[0] for c in BENCH_CASES])
+def test_bench_pipeline_and_soak_refuse_bad_options_before_running(case, args, message):
+    result = runner.invoke(app, ["bench", *args])
+    assert_error(result, 2, message)
+    assert result.stdout == ""
