@@ -21,7 +21,7 @@ err_console = Console(stderr=True, highlight=False, soft_wrap=True)
 
 def error_line(message: str) -> None:
     """Print one error line on stderr."""
-    err_console.print(f"[bold red]error:[/] {message}", markup=True)
+    err_console.print(f"[bold red]error:[/] {message}", markup=True, emoji=False)
 
 
 # Usage errors from click, and from the copy of click that recent typer versions carry inside.
