@@ -16,6 +16,7 @@ Units: seconds, rad/s, m/s^2, in whatever frame the caller uses (the IMU frame `
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,6 +110,7 @@ class ImuStream:
         self.watermark_s = -np.inf
         """Time of the newest released sample (or of the last `release_until`): older stamps are late."""
         self._held = _EMPTY_ROWS
+        self._saturation_seen = False  # whether any sample reached the gyro range (else no column scan)
 
     @property
     def held_span_s(self) -> float:
@@ -132,17 +134,22 @@ class ImuStream:
         """Add samples to the buffer (dropping and counting non-finite, duplicate and late ones)
         without releasing any."""
         t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
+        if not t.shape[0]:
+            return
         rows = np.empty((t.shape[0], COLUMNS))
         rows[:, 0], rows[:, 1:4], rows[:, 4:7], rows[:, 7] = t, gyro, accel, 0.0
-        finite = np.isfinite(rows)
-        if not finite.all():
-            finite = finite.all(axis=1)
+        # One pass for both checks: the largest |value| per column (NaN propagates, inf is not finite).
+        largest = np.abs(rows).max(axis=0).tolist()
+        if not all(map(math.isfinite, largest)):
+            finite = np.isfinite(rows).all(axis=1)
             self.counts.nonfinite += int((~finite).sum())
             rows = rows[finite]
-        if not rows.shape[0]:
-            return
-        if np.abs(rows[:, 1:4]).max() >= self.gyro_range_rad_s:
+            if not rows.shape[0]:
+                return
+            largest = np.abs(rows).max(axis=0).tolist()
+        if max(largest[1:4]) >= self.gyro_range_rad_s:
             rows[:, 7] = np.abs(rows[:, 1:4]).max(axis=1) >= self.gyro_range_rad_s
+            self._saturation_seen = True
         held = self._held
         t = rows[:, 0]
         newest = held[-1, 0] if held.shape[0] else self.watermark_s
@@ -170,9 +177,9 @@ class ImuStream:
         self._held = held[k:]
         if k:
             self.watermark_s = max(self.watermark_s, float(out[-1, 0]))
-            if out[:, 7].any():
+            if self._saturation_seen:
                 self.counts.saturated += int(np.count_nonzero(out[:, 7]))
-        if move_watermark and np.isfinite(t_s):
+        if move_watermark and math.isfinite(t_s):
             self.watermark_s = max(self.watermark_s, float(t_s))
         return ImuBatch(out)
 

@@ -28,7 +28,7 @@ from filterpy.kalman import update as kf_update
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 from scipy.spatial.transform import Rotation
 
-from ..rotations import WORLD_UP, exp_so3, log_so3, skew
+from ..rotations import WORLD_UP, exp_so3, nearest_symmetric, skew
 from ..solver.manhattan import R_CM_UPRIGHT
 from ..types import Estimate, Status, VisualRotation
 from .base import Backend
@@ -41,8 +41,8 @@ I3 = np.eye(3)
 _ZERO_STATE = np.zeros(N_STATE)
 _NO_ROWS = np.zeros((0, COLUMNS))
 _ORTHONORMALISE_EVERY = 16
-"""Chunks of gyro integration between re-orthonormalisations of R_wc (each update also does one):
-rounding drift grows by ~1e-16 per product, far below anything that matters in 16."""
+"""Products (integration chunks and update corrections) between re-orthonormalisations of R_wc and
+R_wm: rounding drift grows by ~1e-16 per product, far below anything that matters in 16."""
 _TH_AND_MF = np.array([[0, 1, 2], [6, 7, 8]])
 """Indices that gather the two rotation blocks of the error state as a (2, 3) stack."""
 _PERIOD_TOLERANCE_S = 1e-9
@@ -57,9 +57,8 @@ def _block_pattern(*blocks: tuple[slice, slice]) -> np.ndarray:
     return E
 
 
-_E_TH = _block_pattern((TH, TH))
-_E_BG = _block_pattern((BG, BG))
-_E_TH_BG = _block_pattern((TH, BG), (BG, TH))
+_E_TH_CROSS_BG = np.stack([_block_pattern((TH, TH)), _block_pattern((TH, BG), (BG, TH)), _block_pattern((BG, BG))]).reshape(3, -1)
+"""Attitude, attitude-bias and bias process-noise patterns, flattened: `Q = (c @ this).reshape(12, 12)`."""
 
 
 class MekfMode(str, enum.Enum):
@@ -210,6 +209,7 @@ class Mekf(Backend):
         self._q_gyro = cfg.gyro_noise_rad_s_sqrt_hz**2
         self._q_bias = cfg.gyro_bias_rw_rad_s2_sqrt_hz**2
         self._q_rate = cfg.gyro_rate_noise_sqrt_s**2
+        self._manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_sqrt_s or cfg.manhattan_tilt_rw_rad_sqrt_s)
         self._inv_g = 1.0 / cfg.gravity_m_s2
         self._trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
         self.stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
@@ -220,7 +220,7 @@ class Mekf(Backend):
         self.omega_c = np.zeros(3)
         self.P = np.zeros((N_STATE, N_STATE))
         self._F = np.eye(N_STATE)  # transition buffer: only its TH rows change between chunks
-        self._chunks_unnormalised = 0
+        self._products_unnormalised = 0
         self.t_state: float | None = None
         self.initialised = False
         self.manhattan_initialised = False
@@ -316,6 +316,8 @@ class Mekf(Backend):
     def propagate_to(self, t_s: float) -> None:
         """Integrate IMU samples up to `t_s` (then hold the last rate), or run the constant-rate
         model in visual-only mode."""
+        if t_s == self.t_state and not self._pending:
+            return  # already there (a frame's prediction, then its update); later stamps are late
         if self.mode in (MekfMode.VISUAL_IMU, MekfMode.IMU_ONLY, MekfMode.AUTO):
             self._queue(self.stream.release_until(t_s))
             self._integrate_pending(extrapolate_to_s=t_s, force_init=True)
@@ -336,11 +338,10 @@ class Mekf(Backend):
 
     # ------------------------------------------------------------------ IMU propagation
     def _queue(self, batch: ImuBatch) -> None:
-        if len(batch):
+        rows = batch.rows
+        if rows.shape[0]:
             self._pending.append(batch)
-            self._pending_span_s += float(batch.t_s[-1] - batch.t_s[0]) + 1e-12
-            if len(self._pending) > 1:
-                self._pending_span_s = float(batch.t_s[-1] - self._pending[0].t_s[0])
+            self._pending_span_s = float(rows[-1, 0] - self._pending[0].rows[0, 0]) + 1e-12
 
     def _integrate_pending(self, extrapolate_to_s: float | None = None, force_init: bool = False) -> None:
         """Integrate the released samples; with `extrapolate_to_s`, then hold the last gyro rate up
@@ -355,7 +356,7 @@ class Mekf(Backend):
             t, gyro_c, accel_c, saturated = self._initialise_from_accel(t, gyro_c, accel_c, saturated, force_init)
             if not self.initialised:
                 return
-        last_t = t[-1] if t.size else self.t_state
+        last_t = float(t[-1]) if t.size else self.t_state
         extra_s = extrapolate_to_s - last_t if extrapolate_to_s is not None and extrapolate_to_s > last_t else 0.0
         if t.size == 0 and extra_s == 0.0:
             return
@@ -400,27 +401,26 @@ class Mekf(Backend):
         cfg = self.config
         n = t.size
         m = n + 1 if extra_s > 0 else n
-        dt = np.empty(m)
-        rate_c = np.empty((m, 3))
-        if n:
-            dt[0] = t[0] - self.t_state
-            np.subtract(t[1:], t[:-1], out=dt[1:n])
-            if self._trapezoid:
-                rate_c[0] = self._last_gyro_c
-                rate_c[1:n] = gyro_c[:-1]
-                rate_c[:n] += gyro_c
-                rate_c[:n] *= 0.5
-            else:
-                rate_c[:n] = gyro_c
-            self._last_gyro_c = gyro_c[-1]
+        # Sample times from the state time (and to the extrapolated end), and the gyro readings with
+        # the previous one in front (and the last one held over the extrapolation).
+        t_all = np.empty(m + 1)
+        t_all[0], t_all[1:n + 1] = self.t_state, t
+        g_all = np.empty((m + 1, 3))
+        g_all[0], g_all[1:n + 1] = self._last_gyro_c, gyro_c
         if m > n:
-            dt[n] = extra_s
-            rate_c[n] = self._last_gyro_c
-        rate_c -= self.b_c
+            t_all[m], g_all[m] = t_all[n] + extra_s, g_all[n]
+        dt = t_all[1:] - t_all[:-1]
+        if self._trapezoid:
+            rate_c = g_all[1:] + g_all[:-1]
+            rate_c *= 0.5
+            rate_c -= self.b_c
+        else:
+            rate_c = g_all[1:] - self.b_c
+        self._last_gyro_c = g_all[n]
         unknown_var = 0.0
-        gap = dt > cfg.imu_gap_limit_s
-        if gap.any() or saturated.any():
+        if dt.max() > cfg.imu_gap_limit_s or (self.stream.counts.saturated and saturated.any()):
             # Do not integrate garbage: skip gaps, and grow the attitude variance by an unknown rate.
+            gap = dt > cfg.imu_gap_limit_s
             unknown = gap.copy()
             unknown[:n] |= saturated > 0
             unknown_var = float(np.sum((cfg.unknown_rate_std_rad_s * dt[unknown]) ** 2))
@@ -441,10 +441,9 @@ class Mekf(Backend):
             self._record_t.append(t.copy())
             self._record_R.append(self.R_wc @ C[:n])
         self.R_wc = self.R_wc @ C_N
-        self._chunks_unnormalised += 1
-        if self._chunks_unnormalised >= _ORTHONORMALISE_EVERY:
-            self.R_wc = _orthonormal(self.R_wc)
-            self._chunks_unnormalised = 0
+        self._products_unnormalised += 1
+        if self._products_unnormalised >= _ORTHONORMALISE_EVERY:
+            self._reorthonormalise()
         T = T_elapsed if unknown_var == 0.0 else float(dt.sum())
         # Error transition over the chunk (right perturbations), per sample
         # dtheta_{k+1} = M_k^T dtheta_k - dt_k db, composed: dtheta_N = C_N^T dtheta_0 - C_N^T sum_k dt_k C_k db.
@@ -455,10 +454,10 @@ class Mekf(Backend):
         # White gyro noise is isotropic, so its rotated sum is q_g T I; bias random walk to 2nd order.
         q_g, q_b = self._q_gyro, self._q_bias
         rate_var = self._q_rate * float(np.einsum("ki,ki,k->", rate_c, rate_c, dt)) if self._q_rate else 0.0
-        Q = (q_g * T + q_b * T**3 / 3.0 + unknown_var + rate_var) * _E_TH
-        Q += (-q_b * T**2 / 2.0) * _E_TH_BG
-        Q += (q_b * T) * _E_BG
-        self._add_manhattan_noise(Q, T_elapsed)
+        coefficients = np.array([q_g * T + q_b * T**3 / 3.0 + unknown_var + rate_var, -q_b * T**2 / 2.0, q_b * T])
+        Q = (coefficients @ _E_TH_CROSS_BG).reshape(N_STATE, N_STATE)
+        if self._manhattan_walks and self.manhattan_initialised:
+            self._add_manhattan_noise(Q, T_elapsed)
         _, self.P = kf_predict(_ZERO_STATE, self.P, F, Q)
         # Accelerometer: time-weighted sum of specific force, rotated into the chunk's end frame.
         if n:
@@ -513,6 +512,12 @@ class Mekf(Backend):
         var = self._q_gyro / T + cfg.rest_rate_std_rad_s**2
         self._kalman_update(g_mean - self.b_c, var * I3, H)
         self.counters["rest_updates"] += 1
+
+    def _reorthonormalise(self) -> None:
+        """Remove the rounding drift that products of rotations accumulate in R_wc and R_wm."""
+        self.R_wc = _orthonormal(self.R_wc)
+        self.R_wm = _orthonormal(self.R_wm)
+        self._products_unnormalised = 0
 
     def _add_manhattan_noise(self, Q: np.ndarray, dt: float) -> None:
         """Manhattan-frame random walk: yaw about world up and tilt, in m's right-perturbation."""
@@ -606,12 +611,13 @@ class Mekf(Backend):
         cfg = self.config
         accel_rows = self._take_due_accel_rows()
         R_cm_pred = self.R_wc.T @ self.R_wm
-        visual = visual.symmetric_to(R_cm_pred)
-        r = log_so3(R_cm_pred.T @ visual.R_cm)
+        R_cm, P_sym = nearest_symmetric(visual.R_cm, R_cm_pred)  # as VisualRotation.symmetric_to
+        # Log of a product of rotations: scipy may skip its orthogonalisation (assume_valid).
+        r = Rotation.from_matrix(R_cm_pred.T @ R_cm, assume_valid=True).as_rotvec()
         H = np.zeros((3, N_STATE))
         H[:, TH] = -R_cm_pred.T
         H[:, MF] = I3
-        R_vis = 0.5 * (visual.cov + visual.cov.T)
+        R_vis = P_sym.T @ (0.5 * (visual.cov + visual.cov.T)) @ P_sym
         S = H @ self.P @ H.T + R_vis
         d2 = float(r @ np.linalg.solve(S, r))
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
@@ -644,7 +650,7 @@ class Mekf(Backend):
         if self.mode == MekfMode.VISUAL_ONLY:
             return None  # the world is the Manhattan frame there
         h = self.R_wm.T @ WORLD_UP
-        if np.arccos(np.clip(h[2], -1.0, 1.0)) > self.config.manhattan_vertical_max_rad:
+        if math.acos(min(1.0, max(-1.0, float(h[2])))) > self.config.manhattan_vertical_max_rad:
             return None
         H = np.zeros((3, N_STATE))
         H[:, MF] = _direction_update_jacobian(h)
@@ -660,11 +666,14 @@ class Mekf(Backend):
         if self.manhattan_initialised:
             dtheta = dx[_TH_AND_MF]
             (dR_c, dR_m), (half_c, half_m) = exp_so3(dtheta), 0.5 * skew(dtheta)
-            self.R_wm = _orthonormal(self.R_wm @ dR_m)
+            self.R_wm = self.R_wm @ dR_m
             G[MF, MF] -= half_m
         else:
             dR_c, half_c = exp_so3(dx[TH]), 0.5 * skew(dx[TH])
-        self.R_wc = _orthonormal(self.R_wc @ dR_c)
+        self.R_wc = self.R_wc @ dR_c
+        self._products_unnormalised += 1
+        if self._products_unnormalised >= _ORTHONORMALISE_EVERY:
+            self._reorthonormalise()
         G[TH, TH] -= half_c
         self.b_c = self.b_c + dx[BG]
         if self._acc_lp_c is not None:  # re-carry the low-passed accelerometer with the new bias
