@@ -265,6 +265,104 @@ def test_inertial_lowpass_of_the_accelerometer_rejects_translational_acceleratio
     assert rms[1.5] < 1.0, rms
 
 
+def test_long_imu_batch_gets_one_accelerometer_update_per_period():
+    """A whole IMU-only recording in one call: one update per `accel_update_period_s` (none skipped
+    when a chunk falls a sample short of the period)."""
+    t, R_wc = constant_rate_truth(np.array([0.2, -0.1, 0.3]), 20.0)
+    accel = np.einsum("nji,j->ni", R_wc, 9.81 * WORLD_UP)
+    for period in (0.1, 0.2, 0.23):
+        filt = Mekf(MekfConfig(mode="imu_only", accel_update_period_s=period))
+        filt.process_imu(t, np.tile([0.2, -0.1, 0.3], (t.size, 1)), accel)
+        filt.flush()
+        expected = (t[-1] - t[0]) / period
+        assert expected - 2 <= filt.counters["accel_updates"] <= expected + 1, (period, filt.counters)
+
+
+def test_lowpass_bias_sensitivity_matches_finite_differences():
+    """`_acc_lp_J` (how the low-passed accelerometer, carried along by the gyro, depends on the gyro
+    bias) against re-running the same stream with a perturbed bias."""
+    rng = np.random.default_rng(4)
+    t = np.arange(1, 401) / RATE_HZ
+    gyro = 0.5 * rng.normal(size=(t.size, 3))
+    accel = rng.normal(size=(t.size, 3)) + [0.0, -9.81, 0.0]
+    # The model takes each period's own mean as bias-free: short periods against long low-pass stages.
+    cfg = MekfConfig(mode="imu_only", accel_lowpass_tau_s=1.0, accel_update_period_s=0.02)
+
+    def run(b):
+        f = Mekf(cfg)
+        f.initialised, f.t_state, f.b_c, f._last_gyro_c = True, 0.0, b.copy(), gyro[0]
+        f.P = np.eye(N_STATE) * 1e-6
+        f._kalman_update = lambda *rows: None  # keep the nominal state fixed: only the low-pass moves
+        f._queue(f.stream.push(t, gyro, accel))
+        f._queue(f.stream.flush())
+        f._integrate_pending()
+        return f
+
+    b0 = 0.01 * rng.normal(size=3)
+    nominal = run(b0)
+    eps = 1e-6
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = eps
+        # Were the true bias b0 + d, the low-pass would read lp + J d: that run is the truth.
+        fd = (run(b0 + d)._acc_lp_c - nominal._acc_lp_c) / eps
+        np.testing.assert_allclose(fd, nominal._acc_lp_J[:, :, i], rtol=0.03, atol=0.02)
+
+
+def test_zero_rate_update_learns_every_bias_axis_at_rest():
+    """At rest the accelerometer only sees the horizontal bias components; with rest detection the
+    mean gyro reading measures all three."""
+    t = np.arange(0.0, 10.0, 1.0 / RATE_HZ)
+    rng = np.random.default_rng(5)
+    bias = np.array([0.004, -0.003, 0.006])
+    gyro = bias + 2e-4 * np.sqrt(RATE_HZ) * rng.standard_normal((t.size, 3))
+    accel = np.tile([0.0, -9.81, 0.0], (t.size, 1)) + 0.02 * rng.standard_normal((t.size, 3))
+    learned = {}
+    for rest in (0.0, 0.035):
+        filt = Mekf(MekfConfig(mode="imu_only", rest_gyro_max_rad_s=rest))
+        filt.process_imu(t, gyro, accel)
+        filt.flush()
+        learned[rest] = (filt.b_c, filt.counters["rest_updates"])
+    b_rest, n_rest = learned[0.035]
+    assert n_rest > 30
+    np.testing.assert_allclose(b_rest, bias, atol=3e-4)
+    b_off, n_off = learned[0.0]
+    assert n_off == 0 and abs(b_off[1] - bias[1]) > 0.5 * abs(bias[1])  # y is vertical here: unobserved
+
+
+def test_rate_proportional_gyro_noise_grows_the_attitude_variance():
+    """`gyro_rate_noise_sqrt_s` adds (this |omega|)^2 per second to each attitude variance."""
+    omega = np.array([0.0, 0.0, 3.0])
+    t = np.arange(1, 21) / RATE_HZ
+    traces = {}
+    for q in (0.0, 0.01):
+        f = Mekf(MekfConfig(gyro_sampling="interval", gyro_rate_noise_sqrt_s=q))
+        f.initialised, f.t_state, f._last_gyro_c = True, 0.0, omega
+        f._integrate_chunk(t, np.tile(omega, (t.size, 1)), np.zeros((t.size, 3)), np.zeros(t.size))
+        traces[q] = np.trace(f.P[TH, TH])
+    assert traces[0.01] - traces[0.0] == pytest.approx(3 * 0.01**2 * 9.0 * t[-1], rel=1e-9)
+
+
+def test_accelerometer_update_stacked_into_the_visual_update_matches_sequential_updates():
+    """An accelerometer update due at a frame rides in that frame's visual update: the result equals
+    applying the two updates one after the other (to first order)."""
+    ests, truth, filt = run_fused([0.1, 0.2, -0.1], 2.0, seed=6)
+    rng = np.random.default_rng(7)
+    vis = visual_measurement(truth[-1].T, 1e-4 * np.eye(3), rng)
+    filt._acc_sum_c = 0.1 * (filt.R_wc.T @ (9.81 * WORLD_UP) + np.array([0.05, 0.0, 0.02]))
+    filt._acc_time_s, filt._accel_due = 0.1, True
+    import copy
+
+    sequential = copy.deepcopy(filt)
+    sequential._accel_update()
+    sequential._visual_update(vis)
+    filt._visual_update(vis)
+    assert not filt._accel_due
+    assert filt.counters["accel_updates"] == sequential.counters["accel_updates"]
+    assert np.degrees(angle_between(filt.R_wc, sequential.R_wc)) < 1e-4
+    np.testing.assert_allclose(filt.P, sequential.P, rtol=1e-3, atol=1e-12)
+
+
 # ------------------------------------------------------------------------------------ presets
 @pytest.mark.parametrize("preset", ["building", "vehicle", "handheld", "imu_only"])
 def test_presets_load(preset):

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from uareme_fusion.backends.imu_stream import ImuStream
 from uareme_fusion.backends.mekf import TH, Mekf, MekfConfig
+from uareme_fusion.config import load_config
 from uareme_fusion.errors import InputError
 from uareme_fusion.types import Status
 
@@ -84,6 +85,7 @@ def test_saturated_gyro_is_flagged_and_inflates_the_covariance():
     assert est.cov[1, 1] > before.cov[1, 1] + 0.8 * 5 * (2.0 * 0.005) ** 2  # yaw axis: 5 samples of unknown rate
 
 
+@pytest.mark.parametrize("preset", [None, "imu_only"])  # defaults; low-pass, rest and rate noise on
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     st.lists(
@@ -96,8 +98,8 @@ def test_saturated_gyro_is_flagged_and_inflates_the_covariance():
     ),
     st.lists(st.floats(0.0, 6.0), min_size=1, max_size=5),
 )
-def test_no_input_stream_makes_the_state_nan(samples, frame_times):
-    filt = Mekf(MekfConfig(mode="imu_only"))
+def test_no_input_stream_makes_the_state_nan(preset, samples, frame_times):
+    filt = Mekf(MekfConfig(mode="imu_only") if preset is None else load_config(preset, MekfConfig))
     t = np.array([s[0] for s in samples])
     values = np.array([s[1] for s in samples], dtype=float)
     half = len(samples) // 2

@@ -260,11 +260,10 @@ class Mekf(Backend):
         if self.mode == MekfMode.VISUAL_ONLY:
             self.counters["imu_ignored"] += int(np.size(t_s))
             return
-        t = np.atleast_1d(np.asarray(t_s, float))
         if self.config.imu_time_offset_s:
-            t = t - self.config.imu_time_offset_s
+            t_s = np.asarray(t_s, float) - self.config.imu_time_offset_s
         stream = self.stream
-        stream.add(t, gyro_rad_s, accel_m_s2)
+        stream.add(t_s, gyro_rad_s, accel_m_s2)
         # Samples wait in the reorder buffer; a frame's `propagate_to` releases them, or, in an
         # IMU-only stream, this does once an accelerometer period's worth is older than the window.
         if stream.held_span_s + self._pending_span_s >= self.config.accel_update_period_s + stream.reorder_window_s:
