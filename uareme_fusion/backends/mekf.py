@@ -15,6 +15,12 @@ See DESIGN.md "Backends: mekf". Conventions:
 - Visual measurement: `R_cm = R_wc^T R_wm`, covariance from the solver; Manhattan labelling resolved
   against the prediction. The IMU: `omega_c = R_ci (gyro_i - b_i)`, `accel_c = R_ci accel_i`; an
   IMU sample stamped `t` measures the camera time `t - imu_time_offset_s`.
+- Updates: gyro samples are integrated in one chunk per frame (or per accelerometer period in a long
+  batch); the accelerometer updates once per `accel_update_period_s`, and an update that falls due
+  at a frame is stacked into that frame's visual update (one filterpy update, same state time). With
+  `accel_lowpass_tau_s` the update measures the low-passed direction, whose sensitivity to the gyro
+  bias (it was carried along by the gyro) enters H; with `rest_gyro_max_rad_s` the mean gyro reading
+  at rest measures the bias (zero-rate update).
 """
 
 from __future__ import annotations
@@ -57,7 +63,9 @@ def _block_pattern(*blocks: tuple[slice, slice]) -> np.ndarray:
     return E
 
 
-_E_TH_CROSS_BG = np.stack([_block_pattern((TH, TH)), _block_pattern((TH, BG), (BG, TH)), _block_pattern((BG, BG))]).reshape(3, -1)
+_E_TH_CROSS_BG = np.stack(
+    [_block_pattern((TH, TH)), _block_pattern((TH, BG), (BG, TH)), _block_pattern((BG, BG))]
+).reshape(3, -1)
 """Attitude, attitude-bias and bias process-noise patterns, flattened: `Q = (c @ this).reshape(12, 12)`."""
 
 
@@ -346,7 +354,10 @@ class Mekf(Backend):
         """Integrate the released samples; with `extrapolate_to_s`, then hold the last gyro rate up
         to that time (a synthetic sample that carries no accelerometer weight)."""
         batches, self._pending, self._pending_span_s = self._pending, [], 0.0
-        batch = batches[0] if len(batches) == 1 else ImuBatch(np.concatenate([b.rows for b in batches]) if batches else _NO_ROWS)
+        if len(batches) == 1:
+            batch = batches[0]
+        else:
+            batch = ImuBatch(np.concatenate([b.rows for b in batches]) if batches else _NO_ROWS)
         t, gyro_i, accel_i, saturated = batch.t_s, batch.gyro_rad_s, batch.accel_m_s2, batch.saturated
         gyro_c, accel_c = (gyro_i, accel_i) if self._imu_is_camera else (gyro_i @ self.R_ci.T, accel_i @ self.R_ci.T)
         if not self.initialised:
