@@ -136,8 +136,7 @@ class ImuStream:
         t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
         if not t.shape[0]:
             return
-        rows = np.empty((t.shape[0], COLUMNS))
-        rows[:, 0], rows[:, 1:4], rows[:, 4:7], rows[:, 7] = t, gyro, accel, 0.0
+        rows = np.concatenate((t[:, None], gyro, accel, np.zeros((t.shape[0], 1))), axis=1)
         # One pass for both checks: the largest |value| per column (NaN propagates, inf is not finite).
         largest = np.abs(rows).max(axis=0).tolist()
         if not all(map(math.isfinite, largest)):
