@@ -171,7 +171,12 @@ class ImuStream:
         """Release every held sample stamped at or before `t_s`; later arrivals older than `t_s`
         then count as late when `move_watermark`."""
         held = self._held
-        k = int(np.searchsorted(held[:, 0], t_s, side="right")) if held.shape[0] else 0
+        if not held.shape[0]:
+            k = 0
+        elif held[-1, 0] <= t_s:  # all of it (a frame after its samples): no search
+            k = held.shape[0]
+        else:
+            k = int(np.searchsorted(held[:, 0], t_s, side="right"))
         out = held[:k]
         self._held = held[k:]
         if k:
