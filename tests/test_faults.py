@@ -171,28 +171,25 @@ def test_gyro_saturating_in_fast_turns_is_flagged_and_inflated(tmp_path, clean):
 
 
 def test_gyro_stuck_at_full_scale_for_a_shock_recovers(tmp_path):
-    """0.2 s of full-scale readings (a knock): flagged, covariance blown up, vision brings tilt back."""
+    """0.2 s of full-scale readings (a knock): flagged, the covariance grows by the unknown rate while the
+    last unsaturated reading is held (the pinned one is not integrated), so tilt never leaves the bound."""
     shock = (3.0, 3.2)
     trace = run_faulty(tmp_path, FaultySource(stuck_gyro=shock))
     k, before = trace.at(shock[1]), trace.at(shock[0]) - 1
     assert trace.flagged(Status.GYRO_SATURATED)[before + 1:k + 1].all()
     assert not trace.flagged(Status.GYRO_SATURATED)[:before + 1].any()
-    assert trace.std_deg[k] > 10 * trace.std_deg[before]
-    assert trace.tilt_deg[trace.at(shock[1] + 0.5):].max() < RECOVERED_TILT_DEG
+    assert trace.std_deg[k] > 2.5 * trace.std_deg[before]
+    assert trace.tilt_deg[trace.at(1.0):].max() < RECOVERED_TILT_DEG
 
 
-@pytest.mark.xfail(strict=True, reason="mekf.py: an IMU gap while frames keep coming is not a gap: the last gyro "
-                   "rate is held (frame extrapolation) for the whole gap, with no IMU_GAP flag or inflation; "
-                   "visual updates are then gated out and tilt stays ~22 deg off after the IMU returns")
 def test_imu_gap_while_frames_continue_is_flagged_and_recovers(tmp_path):
     trace = run_faulty(tmp_path, FaultySource(imu_gap=FAULT))
-    assert trace.flagged(Status.IMU_GAP)[_inside(trace.t, FAULT)].any()
+    late = _inside(trace.t, (FAULT[0] + 0.1 + 1 / 30, FAULT[1]))  # past imu_gap_limit_s, before the IMU is back
+    assert trace.flagged(Status.IMU_GAP)[late].all() and trace.flagged(Status.IMU_GAP).sum() <= late.sum() + 2
+    assert not trace.flagged(Status.VISUAL_REJECTED | Status.REINITIALISED)[trace.at(FAULT[0]):].any()
     assert trace.tilt_deg[trace.at(FAULT[1] + 1.0):].max() < RECOVERED_TILT_DEG
 
 
-@pytest.mark.xfail(strict=True, reason="mekf.py: after 0.5 s of a gyro stuck at full scale the tilt error is "
-                   "over 100 deg and neither the accelerometer (innovation inflation) nor vision (gate, "
-                   "Manhattan re-initialisation) brings it back")
 def test_gyro_stuck_for_half_a_second_recovers(tmp_path):
     trace = run_faulty(tmp_path, FaultySource(stuck_gyro=(3.0, 3.5)))
     assert trace.tilt_deg[trace.at(6.0):].max() < 5.0

@@ -237,6 +237,8 @@ class Mekf(Backend):
                              rest_updates=0)
         self._flags = Status.OK
         self._last_gyro_c: np.ndarray | None = None
+        self._imu_t_s = -np.inf  # time of the newest integrated IMU sample (camera clock), s
+        self._in_imu_gap = False  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
         self._pending: list[ImuBatch] = []
         self._pending_span_s = 0.0
         self._init_samples: list[ImuBatch] = []
@@ -411,6 +413,16 @@ class Mekf(Backend):
         cfg = self.config
         n = t.size
         m = n + 1 if extra_s > 0 else n
+        resumed = bool(n and self._in_imu_gap)  # first samples after frames bridged an IMU gap
+        if n:
+            self._imu_t_s = float(t[-1])
+            self._in_imu_gap = False
+            if self.stream.counts.saturated and saturated.any():
+                gyro_c = self._hold_unsaturated(gyro_c, saturated)
+        # A frame more than `imu_gap_limit_s` past the newest IMU sample: the IMU stopped, so the
+        # extrapolation is an unknown rotation, not the last rate held.
+        stale = (m > n and math.isfinite(self._imu_t_s)
+                 and self.t_state + extra_s - self._imu_t_s > cfg.imu_gap_limit_s)
         # Sample times from the state time (and to the extrapolated end), and the gyro readings with
         # the previous one in front (and the last one held over the extrapolation).
         t_all = np.empty(m + 1)
@@ -419,6 +431,8 @@ class Mekf(Backend):
         g_all[0], g_all[1:n + 1] = self._last_gyro_c, gyro_c
         if m > n:
             t_all[m], g_all[m] = t_all[n] + extra_s, g_all[n]
+        if resumed:  # the reading before the gap is stale: the step to the first new one is unknown
+            g_all[0] = g_all[1]
         dt = t_all[1:] - t_all[:-1]
         if self._trapezoid:
             rate_c = g_all[1:] + g_all[:-1]
@@ -428,15 +442,20 @@ class Mekf(Backend):
             rate_c = g_all[1:] - self.b_c
         self._last_gyro_c = g_all[n]
         unknown_var = 0.0
-        if dt.max() > cfg.imu_gap_limit_s or (self.stream.counts.saturated and saturated.any()):
-            # Do not integrate garbage: skip gaps, and grow the attitude variance by an unknown rate.
+        if stale or resumed or dt.max() > cfg.imu_gap_limit_s or (self.stream.counts.saturated and saturated.any()):
+            # Do not integrate garbage: skip gaps (saturated samples hold the last unsaturated
+            # reading), and grow the attitude variance by an unknown rate.
             gap = dt > cfg.imu_gap_limit_s
+            if stale:
+                gap[m - 1] = True
             unknown = gap.copy()
             unknown[:n] |= saturated > 0
+            unknown[0] |= resumed
             unknown_var = float(np.sum((cfg.unknown_rate_std_rad_s * dt[unknown]) ** 2))
             if gap.any():
                 self._flags |= Status.IMU_GAP
-                self.counters["imu_gaps"] += int(gap.sum())
+                self.counters["imu_gaps"] += int(gap[:n].sum()) + int(stale and not self._in_imu_gap)
+                self._in_imu_gap |= bool(stale)
             if saturated.any():
                 self._flags |= Status.GYRO_SATURATED
             T_elapsed = float(dt.sum())
@@ -487,6 +506,15 @@ class Mekf(Backend):
         if cfg.rest_gyro_max_rad_s > 0 and n:
             self._accumulate_rest(gyro_c, accel_c)
         self.t_state = float(t[-1]) + extra_s if n else self.t_state + extra_s
+
+    def _hold_unsaturated(self, gyro_c: np.ndarray, saturated: np.ndarray) -> np.ndarray:
+        """Gyro readings (camera frame, rad/s) with each saturated sample replaced by the last
+        unsaturated reading before it: beyond the range the true rate is unknown, and a reading
+        pinned at full scale (a shock, a stuck sensor) would spin the attitude by its whole range."""
+        index = np.where(saturated > 0, -1, np.arange(saturated.size))
+        np.maximum.accumulate(index, out=index)
+        held = np.where((index >= 0)[:, None], gyro_c[np.maximum(index, 0)], self._last_gyro_c)
+        return held
 
     def _accumulate_rest(self, gyro_c, accel_c) -> None:
         """Add a chunk's raw readings to the rest statistics."""
@@ -715,7 +743,7 @@ class Mekf(Backend):
         self.P = np.zeros((N_STATE, N_STATE))
         self.P[TH, TH] = cfg.initial_tilt_std_rad**2 * (I3 - np.outer(up_c, up_c))
         self.P[BG, BG] = cfg.gyro_bias_initial_std_rad_s**2 * I3
-        self.t_state = float(t_all[0])
+        self.t_state = self._imu_t_s = float(t_all[0])
         self._last_gyro_c = g_all[0]
         self.initialised = True
         if self.mode == MekfMode.AUTO:
