@@ -24,7 +24,6 @@ is "IMU clock minus camera clock", so `imu_time_offset_s = -time_offset_s`.
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -37,7 +36,7 @@ from uareme_fusion.types import Frame, NormalMap
 from .base import GroundTruth, ImuBatch, Source, SourceInfo
 from .euroc_imu import read_euroc_imu
 from .interleave import interleave
-from .tum_rgbd import TumSequence, load_tum_rgbd, read_tum_list
+from .tum_rgbd import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
 
 SIM_META = "scene.json"
 RECORD_META = "source.json"
@@ -78,12 +77,7 @@ def read_metadata(root: Path) -> dict:
             break
     else:
         return {}
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{path}: not a readable JSON file ({exc})") from None
-    if not isinstance(meta, dict):
-        raise InputError(f"{path}: expected a JSON object, got {type(meta).__name__}")
+    meta = read_json_object(path)
     if name == SIM_META:
         offset = -_number(meta, "time_offset_s", path, 0.0)
         gravity_aligned = True

@@ -161,14 +161,20 @@ class TumSequence:
         return Slerp(t_gt, Rotation.from_quat(q))(t).as_matrix()
 
 
-def _read_scene_json(path: Path) -> dict:
-    """The simulator's scene.json: `depth_scale` (> 0) and `K` (3, 3) are checked when present."""
+def read_json_object(path: Path) -> dict:
+    """A JSON file holding one object (scene.json, source.json); `InputError` naming the file otherwise."""
     try:
         meta = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(f"{path}: not a readable JSON file ({exc})") from None
     if not isinstance(meta, dict):
         raise InputError(f"{path}: expected a JSON object, got {type(meta).__name__}")
+    return meta
+
+
+def _read_scene_json(path: Path) -> dict:
+    """The simulator's scene.json: `depth_scale` (> 0) and `K` (3, 3) are checked when present."""
+    meta = read_json_object(path)
     out = {}
     if "depth_scale" in meta:
         scale = meta["depth_scale"]
