@@ -9,7 +9,6 @@ a user mistake never shows a traceback; Ctrl-C exits with 130 after the command'
 
 from __future__ import annotations
 
-import click
 import typer
 from rich.console import Console
 from typer.core import TyperGroup
@@ -24,8 +23,14 @@ def error_line(message: str) -> None:
     err_console.print(f"[bold red]error:[/] {message}", markup=True, emoji=False)
 
 
-# Usage errors from click, and from the copy of click that recent typer versions carry inside.
-_USAGE_ERRORS = tuple({click.UsageError, typer.BadParameter.__base__})
+# Usage errors from the copy of click that recent typer versions carry inside, and from click itself
+# when it is installed (older typer versions use it; it is not a dependency of this package).
+try:
+    import click
+
+    _USAGE_ERRORS = tuple({click.UsageError, typer.BadParameter.__base__})
+except ImportError:
+    _USAGE_ERRORS = (typer.BadParameter.__base__,)
 
 
 def _usage_error_line(exc) -> None:
