@@ -66,14 +66,15 @@ def shipped_on_views(shipped, rendered_views):
 
 def test_shipped_weights_on_rendered_views(shipped_on_views):
     errors, _, rotation_errors = shipped_on_views
-    assert np.median(errors) < 20.0
-    assert np.median(rotation_errors) < 8.0
+    assert np.median(errors) < 10.0  # tools/bench_normals.py: 4.8 degrees on 60 held-out views
+    assert np.median(rotation_errors) < 6.0
 
 
 def test_kappa_ranks_errors(shipped_on_views):
     errors, kappa, _ = shipped_on_views
     confident = kappa >= np.median(kappa)
-    assert np.median(errors[~confident]) > 1.2 * np.median(errors[confident])
+    # 1.6 on these three views; tools/bench_normals.py measures 2.3 on 60 held-out views (goal 1.5).
+    assert np.median(errors[~confident]) > 1.3 * np.median(errors[confident])
 
 
 @pytest.mark.parametrize("height, width", [(37, 53), (241, 319), (480, 640)])
@@ -139,7 +140,7 @@ def test_drop_in_state_dict_matches_the_network(tmp_path):
     net = NormalNet().eval()
     path = tmp_path / "state.pt"
     torch.save(net.state_dict(), path)
-    est = LearnedNormals(model=path)
+    est = LearnedNormals(model=path, config=LearnedNormalsConfig(width_px=320, height_px=240))
     rgb = np.random.default_rng(1).integers(0, 256, (240, 320, 3), dtype=np.uint8)
     with torch.no_grad():
         expected = net(torch.from_numpy(rgb).permute(2, 0, 1)[None].float() / 255.0)[0].numpy()

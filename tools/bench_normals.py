@@ -46,6 +46,9 @@ from uareme_fusion.rotations import align_constant, angle_between, are_deg, matr
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 SIZE = (320, 240)
+"""Size of the rendered held-out views and of the timing images."""
+CHI2_3_MEDIAN = 2.366
+"""Median of the chi-square distribution with 3 degrees of freedom (what a consistent NEES has)."""
 
 
 def kappa_halves(errors_deg: np.ndarray, kappa: np.ndarray) -> tuple[float, float]:
@@ -82,7 +85,8 @@ def synthetic_heldout(est: LearnedNormals, seeds: int, views: int) -> dict:
                 raw_kappa_ratio=raw_lo / raw_hi, kappa_at_cap=float(np.mean(kappas >= est.config.kappa_cap)),
                 rotation_median_deg=float(np.median(rot_err)), rotation_mean_deg=float(np.mean(rot_err)),
                 nees_mean=float(nees_values.mean()), nees_median=float(np.median(nees_values)),
-                independent_regions=ir, independent_regions_for_nees3=ir * 3.0 / float(nees_values.mean()))
+                independent_regions=ir, independent_regions_for_nees3=ir * 3.0 / float(nees_values.mean()),
+                independent_regions_for_median=ir * CHI2_3_MEDIAN / float(np.median(nees_values)))
 
 
 def icsl_last20(est: LearnedNormals) -> dict | None:
@@ -145,18 +149,20 @@ def main(argv=None) -> None:
     if args.independent_regions is not None:
         cfg = LearnedNormalsConfig(threads=args.threads, independent_regions=args.independent_regions)
     est = LearnedNormals(model=args.model, config=cfg)
-    print(f"model: {est.model_path}")
+    size = f"{cfg.width_px}x{cfg.height_px}"
+    print(f"model: {est.model_path}, internal size {size}")
 
     syn = synthetic_heldout(est, args.seeds, args.views)
-    print(f"held-out synthetic ({syn['frames']} views of {', '.join(SCENES)}, 320x240):")
+    print(f"held-out synthetic ({syn['frames']} views of {', '.join(SCENES)} rendered at 320x240):")
     print(f"  median angular error {syn['median_deg']:.2f} deg (goal <= 15), mean {syn['mean_deg']:.2f}")
     print(f"  kappa: lower half median {syn['kappa_low_half_deg']:.2f} deg, upper half "
           f"{syn['kappa_high_half_deg']:.2f} deg, ratio {syn['kappa_ratio']:.2f} (goal >= 1.5; uncapped kappa "
           f"{syn['raw_kappa_ratio']:.2f}; {100 * syn['kappa_at_cap']:.0f}% of pixels at the cap)")
     print(f"  single-frame rotation error median {syn['rotation_median_deg']:.2f} deg, mean "
           f"{syn['rotation_mean_deg']:.2f}; NEES mean {syn['nees_mean']:.2f} (goal ~3), median "
-          f"{syn['nees_median']:.2f}; independent_regions {syn['independent_regions']:g} "
-          f"(mean NEES 3 at {syn['independent_regions_for_nees3']:.1f})")
+          f"{syn['nees_median']:.2f} (chi2(3) median {CHI2_3_MEDIAN}); independent_regions "
+          f"{syn['independent_regions']:g} (mean NEES 3 at {syn['independent_regions_for_nees3']:.2f}, median "
+          f"NEES {CHI2_3_MEDIAN} at {syn['independent_regions_for_median']:.2f})")
 
     icsl = icsl_last20(est)
     if icsl is None:
@@ -188,14 +194,17 @@ def main(argv=None) -> None:
 
     rng = np.random.default_rng(0)
     rgb = rng.integers(0, 256, (240, 320, 3), dtype=np.uint8)
-    ms = median_ms(lambda: est.estimate(rgb), args.repeats)
+    est_320 = LearnedNormals(model=args.model, config=LearnedNormalsConfig(threads=args.threads, width_px=320,
+                                                                           height_px=240))
+    ms_320 = median_ms(lambda: est_320.estimate(rgb), args.repeats)
     rgb_vga = rng.integers(0, 256, (480, 640, 3), dtype=np.uint8)
     ms_vga = median_ms(lambda: est.estimate(rgb_vga), args.repeats)
     depth = (1.0 + rng.random((480, 640))).astype(np.float32)
     ms_depth = median_ms(lambda: depth_est.estimate(depth, ICL_NUIM_K_OPENCV), args.repeats)
     print(f"timing (median of {args.repeats}, {args.threads} torch threads, shared machine: noisy): learned "
-          f"normals {ms:.1f} ms per 320x240 frame (goal <= 40), {ms_vga:.1f} ms per 640x480 frame (resize to "
-          f"320x240 and back included); depth normals {ms_depth:.1f} ms per 640x480 frame (goal <= 10)")
+          f"normals {ms_320:.1f} ms per frame at a 320x240 internal size (goal <= 40); {ms_vga:.1f} ms per "
+          f"640x480 frame at the {size} internal size (resizing both ways included); depth normals "
+          f"{ms_depth:.1f} ms per 640x480 frame (goal <= 10)")
 
 
 if __name__ == "__main__":

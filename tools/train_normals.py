@@ -347,16 +347,23 @@ def cmd_train(args) -> None:
 
 
 def cmd_export(args) -> None:
-    """Write the shipped weights file: {format, config, state_dict (fp16), meta}."""
+    """Write the shipped weights file: {format, config, state_dict (fp16), meta}. Several checkpoints
+    are averaged tensor by tensor (weights and BatchNorm statistics; stochastic weight averaging of
+    snapshots along the end of the schedule)."""
     import torch
 
     from uareme_fusion.normals.learned import WEIGHTS_FORMAT
 
-    ckpt = torch.load(Path(args.run) / args.checkpoint, map_location="cpu", weights_only=False)
-    state_dict = {k: v.half() if v.is_floating_point() else v for k, v in ckpt["model"].items()}
+    paths = [Path(args.run) / c for c in args.checkpoint]
+    ckpts = [torch.load(p, map_location="cpu", weights_only=False) for p in paths]
+    ckpt = max(ckpts, key=lambda c: c["state"]["iteration"])
+    averaged = {k: (torch.stack([c["model"][k].float() for c in ckpts]).mean(0) if v.is_floating_point() else v)
+                for k, v in ckpt["model"].items()}
+    state_dict = {k: v.half() if v.is_floating_point() else v for k, v in averaged.items()}
     meta = dict(iterations=ckpt["state"]["iteration"], train_minutes=round(ckpt["state"]["elapsed_s"] / 60, 1),
                 val_median_deg=ckpt["state"]["best_val_deg"], train_size=list(TRAIN_SIZE),
-                args={k: v for k, v in ckpt["args"].items() if isinstance(v, (int, float, str, bool))})
+                averaged_checkpoints=[f"{p.name} (iteration {c['state']['iteration']})" for p, c in zip(paths, ckpts)],
+                args={k: v if isinstance(v, (int, float, str, bool)) else str(v) for k, v in ckpt["args"].items()})
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.save(dict(format=WEIGHTS_FORMAT, config=ckpt["config"], state_dict=state_dict, meta=meta), out)
@@ -392,7 +399,8 @@ def main(argv=None) -> None:
     t.add_argument("--init", default=None, help="start from this checkpoint's weights (new optimiser and schedule)")
     e = sub.add_parser("export", help="write a checkpoint as the shipped fp16 weights file")
     e.add_argument("--run", required=True)
-    e.add_argument("--checkpoint", default="ckpt_best.pt")
+    e.add_argument("--checkpoint", nargs="+", default=["ckpt_last.pt"],
+                   help="checkpoint file(s) in --run; several are averaged")
     e.add_argument("--out", required=True)
     args = parser.parse_args(argv)
     dict(render=cmd_render, train=cmd_train, export=cmd_export)[args.command](args)

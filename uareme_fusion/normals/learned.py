@@ -4,7 +4,8 @@
     normal_map = est.estimate(rgb_uint8)        # NormalMap: normals (H, W, 3), kappa (H, W)
     est = LearnedNormals(model="my_model.pt")   # a drop-in model (TorchScript or state dict)
 
-The image (any size) is resized to `LearnedNormalsConfig.width_px` x `height_px` (320 x 240), run
+The image (any size) is resized to `LearnedNormalsConfig.width_px` x `height_px` (160 x 120, the
+size the shipped network was trained at; configurable), run
 through the network, and the output is upsampled back to the input size. No intrinsics are used.
 Returned normals are unit vectors in the OpenCV camera frame (x right, y down, z forward), facing
 the camera; kappa (the paper's eq. 3 concentration) is capped at `kappa_cap` (default 75, the
@@ -45,15 +46,18 @@ PROBE_SIZE_PX = (64, 48)
 class LearnedNormalsConfig:
     """Parameters of `LearnedNormals` (units in the names)."""
 
-    width_px: int = 320
-    """Network input width; images are resized to width_px x height_px and back."""
-    height_px: int = 240
+    width_px: int = 160
+    """Network input width; images are resized to width_px x height_px and back. The shipped network
+    was trained on 160x120 crops: at 320x240 its held-out synthetic error triples (15 vs 5 degrees,
+    tools/bench_normals.py), so 160x120 is the default; raise it only for a model trained larger."""
+    height_px: int = 120
     kappa_cap: float = 75.0
     """kappa is capped here before the solver (paper: 100; its released config: 75)."""
-    independent_regions: float = 60.0
-    """Effective number of independent normal errors in a full map (errors of a network are
-    correlated over large regions); sets the solver's covariance scale. Fitted so that the NEES of
-    single-frame rotations on held-out synthetic views is about 3 (tools/bench_normals.py)."""
+    independent_regions: float = 3.0
+    """Effective number of independent normal errors in a full map: a network's errors are correlated
+    over whole surfaces (a wall slightly mis-oriented as a block), so few. Sets the solver's covariance
+    scale; fitted so that the median NEES of single-frame rotations on held-out synthetic views is the
+    chi-square(3) median 2.37 (tools/bench_normals.py; the mean is dominated by a few gross failures)."""
     threads: int | None = None
     """torch CPU threads (None: leave torch's setting)."""
     device: str = "cpu"
