@@ -1,5 +1,5 @@
 """End-to-end pipeline benchmark: frames per second and per-stage milliseconds for 640x480 input
-(learned normals at their internal 320x240, the solver, the EKF with a 200 Hz IMU, the file sinks),
+(learned normals at their internal size, 160x120 by default, the solver, the EKF with a 200 Hz IMU, the file sinks),
 and the memory growth over a long stream.
 
 Frames are rendered by the simulator before timing starts and replayed from memory, so the figures
