@@ -34,6 +34,7 @@ from filterpy.kalman import update as kf_update
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 from scipy.spatial.transform import Rotation
 
+from ..errors import InputError
 from ..rotations import WORLD_UP, exp_so3, nearest_symmetric, skew
 from ..solver.manhattan import R_CM_UPRIGHT
 from ..types import Estimate, Status, VisualRotation
@@ -296,6 +297,9 @@ class Mekf(Backend):
         Manhattan frame was seen.
         """
         t_s = float(t_s)
+        if visual is not None and (np.shape(visual.R_cm) != (3, 3) or np.shape(visual.cov) != (3, 3)):
+            raise InputError(f"visual rotation at t = {t_s:g} s: expected R_cm and cov of shape (3, 3), got "
+                             f"{np.shape(visual.R_cm)} and {np.shape(visual.cov)}")
         if self.mode == MekfMode.AUTO:
             seen_imu = self.initialised or self._pending or self.stream.newest_s > -np.inf or self._init_samples
             self.mode = MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY
