@@ -23,6 +23,7 @@ from ..solver.manhattan import up_candidate
 from ..types import Frame, NormalMap, VisualRotation
 from .stages import CappedNormals, make_normal_estimator
 from ..drivers.base import SourceInfo
+from ..drivers.video import to_rgb8
 
 
 @dataclass(frozen=True)
@@ -46,19 +47,13 @@ class ImageAnalysis:
 
 
 def read_rgb(path: str | Path) -> np.ndarray:
-    """An image file as RGB uint8 (grayscale, RGBA and 16-bit converted)."""
-    image = read_image(path, cv2.IMREAD_UNCHANGED)
-    if image.dtype == np.uint16:
-        image = (image / 257).round().astype(np.uint8)
-    elif image.dtype != np.uint8:
-        raise InputError(f"{path}: unsupported pixel type {image.dtype} (expected 8- or 16-bit)")
-    if image.ndim == 2:
-        image = cv2.cvtColor(image, cv2.COLOR_GRAY2RGB)
-    elif image.shape[2] == 4:
-        image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGB)
-    else:
-        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
-    return image
+    """An image file as RGB uint8 (grayscale, RGBA and 16-bit converted as the image sources do)."""
+    try:
+        return to_rgb8(read_image(path, cv2.IMREAD_UNCHANGED))
+    except InputError as exc:
+        if str(path) in str(exc):
+            raise
+        raise InputError(f"{path}: {exc}") from None
 
 
 def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0) -> ImageAnalysis:
