@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from uareme_fusion.benchmarks.peers import vqf_6d_R_wi
 from uareme_fusion.backends.mekf import Mekf, MekfConfig
 from uareme_fusion.backends.single import SingleFrame
 from uareme_fusion.config import load_config
@@ -138,12 +139,10 @@ def peer_tilt_errors(t_imu, gyro, accel, traj, rate_hz: float) -> dict[str, np.n
     """Tilt error (deg) per IMU sample of IMU-only peers (IMU frame = camera frame here)."""
     import ahrs
     import imufusion
-    from vqf import VQF
 
     up_true = up_in_camera(traj.sample(t_imu).R_wc)
+    errors = {"vqf 6D": tilt_error_deg(up_in_camera(vqf_6d_R_wi(gyro, accel, 1.0 / rate_hz)), up_true)}
     out = {}
-    quat_wxyz = VQF(1.0 / rate_hz).updateBatch(np.ascontiguousarray(gyro), np.ascontiguousarray(accel))["quat6D"]
-    out["vqf 6D"] = quat_wxyz
     out["madgwick"] = ahrs.filters.Madgwick(gyr=gyro, acc=accel, frequency=rate_hz).Q
     out["mahony"] = ahrs.filters.Mahony(gyr=gyro, acc=accel, frequency=rate_hz).Q
     # imufusion takes deg/s and g; settings as in its README example (10 deg rejection, 5 s timeout).
@@ -160,7 +159,6 @@ def peer_tilt_errors(t_imu, gyro, accel, traj, rate_hz: float) -> dict[str, np.n
         fusion.update_no_magnetometer(gyro_deg_s[i], accel_g[i])
         q[i] = fusion.get_quaternion()
     out["imufusion"] = q
-    errors = {}
     for name, q in out.items():
         R_wi = Rotation.from_quat(q, scalar_first=True).as_matrix()
         errors[name] = tilt_error_deg(up_in_camera(R_wi), up_true)
@@ -175,8 +173,6 @@ def read_broad_trial(path: Path):
 
 def broad_inclination(trial, config: MekfConfig) -> tuple[float, float, float]:
     """(mekf RMSE deg, vqf 6D RMSE deg, mekf us/sample CPU time) of inclination over the movement samples."""
-    from vqf import VQF
-
     filt = Mekf(config.model_copy(update={"mode": "imu_only", "record_imu_estimates": True}))
     c0 = time.thread_time()
     filt.process_imu(trial.t_s, trial.gyro_rad_s, trial.accel_m_s2)
@@ -187,9 +183,7 @@ def broad_inclination(trial, config: MekfConfig) -> tuple[float, float, float]:
     R_ref = trial.R_ref_imu
     ok = trial.movement[idx] & np.all(np.isfinite(R_ref[idx]), axis=(1, 2))
     err_mekf = tilt_error_deg(up_in_camera(R_rec[ok]), up_in_camera(R_ref[idx][ok]))
-    q = VQF(1.0 / trial.sampling_rate_hz).updateBatch(
-        np.ascontiguousarray(trial.gyro_rad_s), np.ascontiguousarray(trial.accel_m_s2))["quat6D"]
-    R_vqf = Rotation.from_quat(q, scalar_first=True).as_matrix()
+    R_vqf = vqf_6d_R_wi(trial.gyro_rad_s, trial.accel_m_s2, 1.0 / trial.sampling_rate_hz)
     ok_v = trial.movement & np.all(np.isfinite(R_ref), axis=(1, 2))
     err_vqf = tilt_error_deg(up_in_camera(R_vqf[ok_v]), up_in_camera(R_ref[ok_v]))
     rmse = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731

@@ -16,6 +16,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from .benchmarks.peers import vqf_6d_R_wi
 from .drivers.base import ImuBatch, Source
 from .rotations import angle_between, exp_so3, nees, tilt_error_deg, up_in_camera
 from .sim.normal_maps import manhattan_normal_map
@@ -61,17 +62,11 @@ def solver_demo(console: Console, seed: int = 0) -> dict:
 def _vqf_tilt_deg(seq, R_wc_true_at_frames) -> np.ndarray | None:
     """Tilt error (deg) of vqf's 6D filter on the sequence's IMU at the frame times, or None."""
     try:
-        from vqf import VQF
+        R_wi = vqf_6d_R_wi(seq.imu_gyro_rad_s, seq.imu_accel_m_s2, float(np.median(np.diff(seq.imu_t_s))))
     except ImportError:
         return None
-    from scipy.spatial.transform import Rotation
-
-    dt = float(np.median(np.diff(seq.imu_t_s)))
-    quat_wxyz = VQF(dt).updateBatch(np.ascontiguousarray(seq.imu_gyro_rad_s),
-                                    np.ascontiguousarray(seq.imu_accel_m_s2))["quat6D"]
     idx = np.clip(np.searchsorted(seq.imu_t_s, seq.t_frame_s), 0, len(seq.imu_t_s) - 1)
-    R_wi = Rotation.from_quat(quat_wxyz[idx], scalar_first=True).as_matrix()  # IMU = camera frame here
-    return tilt_error_deg(up_in_camera(R_wi), up_in_camera(R_wc_true_at_frames))
+    return tilt_error_deg(up_in_camera(R_wi[idx]), up_in_camera(R_wc_true_at_frames))  # IMU = camera frame here
 
 
 class _TeeImu(Source):
