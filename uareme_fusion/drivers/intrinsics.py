@@ -265,3 +265,10 @@ class Undistorter:
         rgb = None if frame.rgb is None else self.image(frame.rgb)
         depth = None if frame.depth is None else self.image(frame.depth, nearest=True)
         return replace(frame, rgb=rgb, depth=depth, K=self.camera.K)
+
+
+def undistorted_image(camera: CameraModel, image: np.ndarray) -> np.ndarray:
+    """One image undistorted with the same K (the principal point checked against its size); for
+    a stream of frames keep an `Undistorter` instead (its maps are computed once)."""
+    check_camera(camera, camera.origin, image.shape[:2])
+    return Undistorter(camera, image.shape[:2]).image(image) if camera.distorted else image

@@ -167,5 +167,5 @@ def _open_table(path: Path, spec: str, options: dict) -> Source:
     except InputError as exc:
         if path.suffix.lower() in TABLE_SUFFIXES:
             raise
-        reason = str(exc).replace(f"{path} ", "").replace(f"{path}: ", "")
+        reason = str(exc).replace(f"{path}: ", "").replace(f"{path} ", "").split(";")[0]
         raise InputError(f"{path}: neither a video (it holds text) nor an IMU table ({reason})") from None
