@@ -119,7 +119,7 @@ def _from_numbers(text: str) -> CameraModel:
         raise InputError(f"{OPTION} {text!r}: expected 4 numbers fx,fy,cx,cy, optionally followed by 4, 5 or 8 "
                          f"distortion coefficients (k1,k2,p1,p2[,k3...]); got {len(values)}")
     camera = CameraModel(pinhole(*values[:4]), np.array(values[4:]), "radtan", f"{OPTION} {text}")
-    return check_camera(camera, f"{OPTION} {text!r}")
+    return check_camera(camera, camera.origin)
 
 
 def check_camera(camera: CameraModel, where: str, image_size: tuple[int, int] | None = None) -> CameraModel:
