@@ -101,9 +101,9 @@ def published_camera(folder: Path) -> CameraModel | None:
 def parse_intrinsics(value: str) -> CameraModel:
     """`--intrinsics` as `fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]` or a camera file path (module docstring)."""
     text = str(value).strip()
-    if re.fullmatch(r"[-+0-9.eE,\s]+", text) and "," in text:
-        return _from_numbers(text)
     path = Path(text).expanduser()
+    if "," in text and not path.exists():
+        return _from_numbers(text)
     if not path.exists():
         raise InputError(f"{OPTION} {text!r}: expected fx,fy,cx,cy (pixels) or a camera file, and no such file "
                          "exists")
