@@ -42,7 +42,8 @@ def turning_imu(seed: int = 0):
 
 
 def write_log(path, t_ns, first, second):
-    rows = [f"{t},{a[0]:.9g},{a[1]:.9g},{a[2]:.9g},{b[0]:.9g},{b[1]:.9g},{b[2]:.9g}" for t, a, b in zip(t_ns, first, second)]
+    rows = [f"{t},{a[0]:.9g},{a[1]:.9g},{a[2]:.9g},{b[0]:.9g},{b[1]:.9g},{b[2]:.9g}"
+            for t, a, b in zip(t_ns, first, second)]
     path.write_text(HEADER + "\n".join(rows) + "\n")
 
 

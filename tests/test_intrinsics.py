@@ -213,6 +213,21 @@ def test_frames_without_depth_use_the_other_cues_and_are_counted(tmp_path, tum_f
     assert summary["are_deg"]["max"] < 2.0
 
 
+def test_freiburg1_frames_are_undistorted_with_the_published_distortion(tmp_path, tum_fr3):
+    folder = tmp_path / "rgbd_dataset_freiburg1_desk"
+    shutil.copytree(tum_fr3, folder)
+    with open_source(str(folder)) as src:
+        assert "published TUM RGB-D freiburg1 intrinsics" in src.info.K_origin
+        frame = src.read_frame(0)
+        raw = src.seq.read_frame(0)
+    np.testing.assert_array_equal(frame.K, PUBLISHED["TUM RGB-D freiburg1"].K)
+    expected = Undistorter(PUBLISHED["TUM RGB-D freiburg1"], (480, 640))
+    np.testing.assert_array_equal(frame.rgb, expected.image(raw.rgb))
+    np.testing.assert_array_equal(frame.depth, expected.image(raw.depth, nearest=True))
+    assert np.isin(frame.depth, np.r_[0.0, raw.depth.ravel()]).all()  # nearest: no blended depths
+    assert not np.array_equal(frame.rgb, raw.rgb)
+
+
 def test_intrinsics_option_replaces_the_source_k_and_says_so(tmp_path, tum_fr3):
     (tmp_path / "sensor.yaml").write_text(EUROC_SENSOR.replace("[752, 480]", "[640, 480]"))
     with open_source(str(tum_fr3), intrinsics=str(tmp_path / "sensor.yaml")) as src:

@@ -94,8 +94,8 @@ def test_a_file_that_is_neither_video_nor_table_is_refused_naming_it(tmp_path, n
     assert len(lines) == 1 and re.search(message, lines[0]), result.stderr
 
 
-@pytest.mark.parametrize("unit, scale, start", [("ms", 1_000, 1_700_000_000_000), ("us", 1_000_000, 1_700_000_000_000_000),
-                                                ("ms", 1_000, 0), ("us", 1_000_000, 0)])
+@pytest.mark.parametrize("unit, scale, start", [("ms", 1_000, 1_700_000_000_000), ("ms", 1_000, 0),
+                                                ("us", 1_000_000, 1_700_000_000_000_000), ("us", 1_000_000, 0)])
 def test_image_names_in_ms_or_us_are_read_with_their_unit(tmp_path, unit, scale, start):
     frames = tmp_path / "frames"
     maps = tmp_path / "maps"

@@ -32,7 +32,8 @@ class CalibratedSource(Source):
         self.notes, self.fixes = source.report()
         K_before = source.info.K
         if K_before is not None and not np.allclose(K_before, camera.K):
-            self.notes.append(f"{camera.origin} replaces the source's own K ({source.info.K_origin or 'unknown origin'})")
+            self.notes.append(f"{camera.origin} replaces the source's own K "
+                              f"({source.info.K_origin or 'unknown origin'})")
         self.info = dataclasses.replace(source.info, K=camera.K, K_origin=camera.origin)
         self._checked = False
         self._undistorter: Undistorter | None = None

@@ -25,7 +25,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 from scipy.spatial.transform import Rotation
 
 from uareme_fusion.errors import InputError, SourceError
@@ -35,7 +34,7 @@ from uareme_fusion.types import Frame
 
 from .base import GroundTruth, ImuBatch, Source, SourceInfo
 from .imu_csv import non_increasing_note, read_imu_log
-from .intrinsics import CameraModel, Undistorter, read_camera_file
+from .intrinsics import CameraModel, Undistorter, read_camera_file, read_camera_mapping
 from .interleave import IMU_ONLY_BATCH_S, interleave, split_by_span
 from .video import to_rgb8
 
@@ -52,23 +51,10 @@ def find_mav0(path: Path) -> Path | None:
     return None
 
 
-def read_sensor_yaml(path: Path) -> dict:
-    """An ASL `sensor.yaml` as a dict (its `%YAML:1.0` first line is OpenCV's, not PyYAML's)."""
-    try:
-        text = path.read_text(encoding="utf-8")
-        lines = [s for s in text.splitlines() if not s.startswith("%YAML")]
-        data = yaml.safe_load("\n".join(lines))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise InputError(f"{path}: not a readable sensor.yaml ({exc})") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{path}: expected a YAML mapping")
-    return data
-
-
 def camera_calibration(path: Path) -> tuple[CameraModel, np.ndarray]:
     """(camera model: K and distortion, R_BS (3, 3) camera to body) from cam0/sensor.yaml."""
     camera = read_camera_file(path)
-    data = read_sensor_yaml(path)
+    data = read_camera_mapping(path)
     try:
         T_BS = np.asarray(data["T_BS"]["data"], float).reshape(4, 4)
     except (KeyError, TypeError, ValueError) as exc:
@@ -109,7 +95,8 @@ class EurocSource(Source):
         has_frames = len(self.frame_paths) > 0
         fps = float(1.0 / np.median(np.diff(self.frame_t_s))) if len(self.frame_t_s) > 1 else None
         self.info = SourceInfo(name=str(root), n_frames=len(self.frame_paths) if has_frames else 0,
-                               fps=fps, K=self.K, K_origin=self.K_origin, has_frames=has_frames, has_imu=self.imu is not None,
+                               fps=fps, K=self.K, K_origin=self.K_origin, has_frames=has_frames,
+                               has_imu=self.imu is not None,
                                R_ci=self.R_BS_cam.T.copy(), image_size=self._size)
 
     def _open_camera(self, cam0: Path, undistort: bool) -> None:

@@ -148,14 +148,18 @@ _CameraYamlLoader.add_constructor("tag:yaml.org,2002:opencv-matrix", lambda load
                                   loader.construct_mapping(node, deep=True))
 
 
-def _load_mapping(path: Path) -> dict:
+def read_camera_mapping(path: Path) -> dict:
+    """A camera file's YAML (OpenCV's `%YAML:1.0` line and `!!opencv-matrix` accepted) or JSON mapping."""
     try:
         text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"camera file {path}: cannot read it as text ({exc})") from None
     text = "\n".join(line for line in text.splitlines() if not line.startswith("%YAML"))
     try:
-        data = json.loads(text) if path.suffix.lower() == ".json" else yaml.load(text, Loader=_CameraYamlLoader)  # noqa: S506
+        if path.suffix.lower() == ".json":
+            data = json.loads(text)
+        else:
+            data = yaml.load(text, Loader=_CameraYamlLoader)  # noqa: S506 (a SafeLoader subclass)
     except (json.JSONDecodeError, yaml.YAMLError) as exc:
         first = str(exc).splitlines()[0]
         raise ConfigError(f"camera file {path}: not valid {'JSON' if path.suffix.lower() == '.json' else 'YAML'} "
@@ -217,7 +221,7 @@ def read_camera_file(path: str | Path) -> CameraModel:
     path = Path(path)
     if path.is_dir():
         raise InputError(f"camera file {path}: is a folder (for EuRoC, pass mav0/cam0/sensor.yaml)")
-    data = _load_mapping(path)
+    data = read_camera_mapping(path)
     if "camera_matrix" in data or "K" in data:
         key = "camera_matrix" if "camera_matrix" in data else "K"
         K = _numbers(path, key, data[key], 9).reshape(3, 3)
