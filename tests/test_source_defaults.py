@@ -17,10 +17,10 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from uareme_fusion.cli import app
+from uareme_fusion.drivers.base import SourceInfo
 from uareme_fusion.drivers.images import ImageSource
 from uareme_fusion.io.images import read_image
 from uareme_fusion.pipeline.stages import mekf_preset_for
-from uareme_fusion.drivers.base import SourceInfo
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 
 runner = CliRunner()
@@ -60,6 +60,11 @@ def test_broad_default_equals_imu_only_and_vehicle_is_no_worse(tmp_path, broad_t
     assert tilts["default"] == tilts["imu_only"] == tilts["vehicle"]
     assert tilts["default"]["mean"] < 1.0
     assert any("preset 'vehicle' tunes camera + IMU fusion" in note for note in summary["notes"])
+
+
+def test_broad_benchmark_needs_trials(tmp_path):
+    result = run_cli("bench", "broad", "--data", tmp_path)
+    assert result.exit_code == 2 and re.search(r"--data .*: holds no BROAD .hdf5 trials", result.stderr)
 
 
 def test_an_imu_table_is_recognised_by_content_whatever_its_name(tmp_path, shared_data):
