@@ -197,6 +197,20 @@ def test_eval_depth_normals_on_a_tum_named_folder(tmp_path, tum_fr3):
     assert summary["are_deg"]["max"] < 1.5 and summary["tilt_deg"]["max"] < 1.0
 
 
+def test_a_plain_tum_folder_needs_intrinsics_for_depth_normals(tmp_path, tum_fr3):
+    folder = tmp_path / "my_room"
+    shutil.copytree(tum_fr3, folder)
+    result = runner.invoke(app, ["eval", str(folder), "--normals", "depth", "--out", str(tmp_path / "a")])
+    assert re.search(r"my_room: --normals depth needs the camera intrinsics, and this source does not know them: "
+                     r"give --intrinsics fx,fy,cx,cy or a camera file", one_error_line(result))
+    result = runner.invoke(app, ["eval", str(folder), "--normals", "depth", "--intrinsics", "535.4,539.2,320.1,247.6",
+                                 "--out", str(tmp_path / "b")])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert summary["source_info"]["intrinsics_from"] == "--intrinsics 535.4,539.2,320.1,247.6"
+    assert summary["are_deg"]["max"] < 1.5
+
+
 def test_frames_without_depth_use_the_other_cues_and_are_counted(tmp_path, tum_fr3):
     folder = tmp_path / tum_fr3.name
     shutil.copytree(tum_fr3, folder)

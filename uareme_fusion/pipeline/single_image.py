@@ -58,7 +58,8 @@ def read_rgb(path: str | Path) -> np.ndarray:
         raise InputError(f"{path}: {exc}") from None
 
 
-def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0, camera=None) -> ImageAnalysis:
+def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0,
+                  camera=None) -> ImageAnalysis:
     """One image's rotation and up; `camera` (`drivers.intrinsics.CameraModel`) undistorts it first."""
     from ..drivers.intrinsics import undistorted_image
 
@@ -76,7 +77,8 @@ def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float =
     t2 = time.perf_counter()
     _, up_c = up_candidate(visual.R_cm)
     return ImageAnalysis(path, rgb, normal_map, visual, up_c,
-                         {"normals": 1e3 * (t1 - t0), "solver": 1e3 * (t2 - t1)}, None if camera is None else camera.K)
+                         {"normals": 1e3 * (t1 - t0), "solver": 1e3 * (t2 - t1)},
+                         None if camera is None else camera.K)
 
 
 def image_overlay(analysis: ImageAnalysis, K: np.ndarray | None = None, fov_deg: float = 60.0,

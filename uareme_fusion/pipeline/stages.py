@@ -112,6 +112,9 @@ def make_normal_estimator(spec: str, info: SourceInfo):
         if not info.has_depth:
             raise InputError(f"{info.name}: --normals depth needs a depth map, and this source has none "
                              "(use --normals learned)")
+        if info.K is None:
+            raise InputError(f"{info.name}: --normals depth needs the camera intrinsics, and this source does not "
+                             "know them: give --intrinsics fx,fy,cx,cy or a camera file")
         return DepthWhereAvailable(DepthNormals())
     if spec == "learned":
         return _learned()
@@ -143,8 +146,8 @@ def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str |
 
     Chosen from what the source holds: with frames, `requested` or handheld; without frames (an IMU
     log), `requested` when it is the user's own file or imu_only, and imu_only instead of a camera
-    preset (building, handheld, vehicle: their IMU settings assume a camera corrects the attitude, and
-    alone they give up to 11x the tilt error of imu_only on real IMU logs)."""
+    preset (building, handheld, vehicle: their IMU settings assume a camera corrects the attitude; alone
+    they give about twice the tilt error of imu_only on BROAD, `bench broad`)."""
     if info.has_frames:
         return requested or DEFAULT_CAMERA_PRESET, None
     if requested in CAMERA_PRESETS:
