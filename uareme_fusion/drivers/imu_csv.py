@@ -25,10 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from uareme_fusion.errors import InputError
-
-from .base import GroundTruth, ImuBatch, Source, SourceInfo
 from uareme_fusion.io.text_tables import sniff_delimiter
 
+from .base import GroundTruth, ImuBatch, Source, SourceInfo
 from .euroc_imu import EurocImu, read_euroc_imu
 from .imu_checks import check_imu_log
 from .interleave import IMU_ONLY_BATCH_S, interleave, split_by_span

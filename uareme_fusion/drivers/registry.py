@@ -31,10 +31,9 @@ from pathlib import Path
 import numpy as np
 
 from uareme_fusion.errors import InputError
-
-from .base import Source
 from uareme_fusion.io.text_tables import is_text_file
 
+from .base import Source
 from .broad_source import BroadSource
 from .calibrated import with_intrinsics
 from .euroc import EurocSource, find_mav0
