@@ -109,7 +109,8 @@ SOURCE_CASES = [
     ("rgb_and_depth_without_index", ["W/rgbd_no_index"], "has depth/ and rgb/ but no index file"),
     ("rgb_without_index", ["W/rgb_only"], "has rgb/ but no index file: expected rgb.txt"),
     ("euroc_without_data", ["W/euroc_empty"], "EuRoC folder .*found no cam0/data.csv or imu0/data.csv"),
-    ("text_named_mp4", ["W/text.mp4"], r"video .*text.mp4: OpenCV cannot open it"),
+    ("text_named_mp4", ["W/text.mp4"], r"text.mp4: neither a video \(it holds text\) nor an IMU table \(is not an "
+                                       r"EuRoC IMU file: line 1 has 3 column"),
     ("zero_byte_video", ["W/zero.avi"], r"video .*zero.avi: OpenCV cannot open it"),
     ("text_named_png", ["W/text.png"], "text.png"),
     ("zero_byte_png", ["W/zero.png"], "zero.png"),

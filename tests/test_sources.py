@@ -101,6 +101,9 @@ def test_video_truncated_mid_file_raises_source_error_with_frame_index(video, tm
 def test_video_bad_inputs_name_the_path(tmp_path):
     bad = tmp_path / "notavideo.mp4"
     bad.write_text("hello")
+    with pytest.raises(InputError, match="notavideo.mp4: neither a video .* nor an IMU table"):
+        open_source(str(bad))
+    bad.write_bytes(b"\x00\x01 binary, not a video")
     with pytest.raises(InputError, match="notavideo.mp4: OpenCV cannot open it"):
         open_source(str(bad))
     with pytest.raises(InputError, match="missing.mp4: no such file"):

@@ -40,7 +40,7 @@ def attitude_errors(R_wc_est: np.ndarray, cov_rad2: np.ndarray, valid: np.ndarra
 
 
 def error_summary(errors: dict) -> dict:
-    """The eval summary: `are_deg` {mean, median, max}, `tilt_deg` {mean, p95, max}, `nees` {mean},
+    """The eval summary: `are_deg` {mean, median, max}, `tilt_deg` {mean, rmse, p95, max}, `nees` {mean},
     `jumps_over_10deg` and `frames_scored`, as plain floats for JSON (empty dicts with no valid frame)."""
     ok = errors["valid"]
     a, t, ne = errors["are_deg"][ok], errors["tilt_deg"][ok], errors["nees"][ok]
@@ -48,6 +48,7 @@ def error_summary(errors: dict) -> dict:
         return {"frames_scored": 0, "are_deg": {}, "tilt_deg": {}, "nees": {}, "jumps_over_10deg": 0}
     return {"frames_scored": int(ok.sum()),
             "are_deg": {"mean": float(a.mean()), "median": float(np.median(a)), "max": float(a.max())},
-            "tilt_deg": {"mean": float(t.mean()), "p95": float(np.percentile(t, 95)), "max": float(t.max())},
+            "tilt_deg": {"mean": float(t.mean()), "rmse": float(np.sqrt(np.mean(t**2))),
+                         "p95": float(np.percentile(t, 95)), "max": float(t.max())},
             "nees": {"mean": float(np.mean(ne)), "median": float(np.median(ne))},
             "jumps_over_10deg": int(np.sum(a > JUMP_DEG))}

@@ -109,6 +109,8 @@ class Status(enum.IntFlag):
     """The filter has not seen enough data to know its attitude."""
     OPTIMISER_FAILED = enum.auto()
     """A smoother optimisation failed; the window restarted from the last good estimate."""
+    DEPTH_MISSING = enum.auto()
+    """Depth normals were asked for and this frame has no depth map: it used the remaining cues."""
 
 
 @dataclass(frozen=True)

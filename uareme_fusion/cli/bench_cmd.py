@@ -2,7 +2,8 @@
 
 - `solver`: the single-frame solver's stages (one core), medians and p90;
 - `pipeline`: end-to-end fps and per-stage ms at 640x480, and memory over a long stream (issue 7);
-- `soak`: one simulated hour through the full pipeline: RSS growth, state sizes, accuracy (issue 8).
+- `soak`: one simulated hour through the full pipeline: RSS growth, state sizes, accuracy (issue 8);
+- `broad`: BROAD IMU trials with default options beside imu_only, vehicle and vqf 6D (issue 14).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import typer
 
 from .app import app, fail
 
-BENCHMARKS = ("solver", "pipeline", "soak")
+BENCHMARKS = ("solver", "pipeline", "soak", "broad")
 
 
 @app.command()
@@ -31,6 +32,8 @@ def bench(
     normals_noise_deg: float = typer.Option(2.0, "--normals-noise-deg", min=0.0, max=90.0,
                                             help="soak: angular noise on the simulator's normals, deg."),
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
+    data: Path = typer.Option(Path("../shared/data/broad_subset"), "--data",
+                              help="broad: folder of BROAD .hdf5 trials (needs the bench extra for vqf)."),
     json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
 ) -> None:
     """Time a benchmark on this machine and print its figures against the goals."""
@@ -46,6 +49,10 @@ def bench(
         from ..benchmarks import pipeline
 
         results = pipeline.run(seconds, memory_minutes, normals)
+    elif what == "broad":
+        from ..benchmarks import broad
+
+        results = broad.run(data)
     else:
         from ..benchmarks import soak
 

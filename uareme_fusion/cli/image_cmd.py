@@ -10,10 +10,12 @@ import cv2
 import numpy as np
 import typer
 
+from ..drivers.intrinsics import parse_intrinsics
 from ..errors import InputError
 from ..pipeline.session import make_output_folder
 from ..pipeline.single_image import analyse_image, image_overlay
 from .app import app
+from .run_cmd import _o
 
 
 @app.command("image")
@@ -23,13 +25,15 @@ def image_command(
     out: Optional[Path] = typer.Option(None, "--out", help="Write the overlay (horizon, axes, normal panes) here."),
     normals: str = typer.Option("learned", "--normals", help="learned or a model file (.pt)."),
     fov_deg: float = typer.Option(60.0, "--fov-deg", help="Assumed horizontal field of view for drawing, degrees."),
+    intrinsics: Optional[str] = _o["intrinsics"],
 ) -> None:
     """Manhattan rotation, its covariance and the up vector of one image, with an optional overlay."""
     if not 1.0 < fov_deg < 179.0:  # also refuses NaN
         raise InputError(f"--fov-deg must be between 1 and 179 degrees, got {fov_deg}")
     if out is not None and out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise InputError(f"{out}: the overlay is an image; use a .png or .jpg name")
-    result = analyse_image(image, normals)
+    camera = parse_intrinsics(intrinsics) if intrinsics is not None else None
+    result = analyse_image(image, normals, camera=camera)
     if out is not None:
         overlay = image_overlay(result, fov_deg=fov_deg)
         make_output_folder(out.parent)

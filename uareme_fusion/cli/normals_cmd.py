@@ -9,6 +9,7 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from .app import app, err_console
+from .run_cmd import _o
 
 
 @app.command("normals")
@@ -18,15 +19,19 @@ def normals_command(
     model: Optional[Path] = typer.Option(None, "--model", help="A drop-in model file (TorchScript or state "
                                          "dict, RGB in [0, 1] -> normal + kappa); default: the shipped weights."),
     kappa_cap: float = typer.Option(75.0, "--kappa-cap", min=1e-3, help="kappa cap; white in the confidence image."),
+    intrinsics: Optional[str] = _o["intrinsics"],
 ) -> None:
     """Surface normals (coloured X-Y-Z to R-G-B, OpenCV camera frame) and confidence (white = confident)."""
+    from ..drivers.intrinsics import parse_intrinsics
     from ..normals.export import export_normals
     from ..normals.learned import LearnedNormals, LearnedNormalsConfig
 
+    camera = parse_intrinsics(intrinsics) if intrinsics is not None else None
     estimator = LearnedNormals(model=model, config=LearnedNormalsConfig(kappa_cap=kappa_cap))
     columns = [TextColumn("[bold]normals"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()]
     with Progress(*columns, console=err_console) as progress:
         task = progress.add_task("normals", total=None)
         written = export_normals(input_path, out, estimator, kappa_cap,
-                                 progress=lambda done, total: progress.update(task, completed=done, total=total))
+                                 progress=lambda done, total: progress.update(task, completed=done, total=total),
+                                 camera=camera)
     typer.echo(f"wrote {written} frame(s) to {out}")

@@ -11,8 +11,8 @@ from rich.table import Table
 
 from ..config import load_config, validate_config
 from ..pipeline import RunConfig
-from ..pipeline.session import make_output_folder, run_source
-from .app import app, fail
+from ..pipeline.session import make_output_folder, run_notes, run_source
+from .app import app, err_console, fail
 from .progress import frame_progress
 
 SOURCE_HELP = ("A video file, webcam:N, an image, folder or glob of images, a dataset folder (TUM RGB-D, "
@@ -36,8 +36,9 @@ def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Op
     from ..drivers import open_source, record
 
     out_dir = make_output_folder(out)
-    opened = open_source(source, imu=None if imu is None else str(imu), fps=fps)
+    opened = open_source(source, imu=None if imu is None else str(imu), fps=fps, intrinsics=cfg.intrinsics)
     with (opened if record_dir is None else record(opened, record_dir)) as src:
+        print_notes(*run_notes(src, cfg))
         sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
         total = src.info.n_frames if src.info.has_frames else None
         if cfg.max_frames and total:
@@ -52,11 +53,23 @@ def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Op
     return summary
 
 
+def print_notes(notes: list[str], fixes: list[str]) -> None:
+    """The source's notes and automatic fixes, one line each on stderr (also in summary.json)."""
+    for fix in fixes:
+        err_console.print(f"warning: {fix}", markup=False, emoji=False, style="yellow")
+    for note in notes:
+        err_console.print(f"note: {note}", markup=False, emoji=False)
+
+
 def print_summary(summary: dict) -> None:
     console = Console()
     table = Table(title=f"{summary['command']}: {summary['source']}", show_header=False)
     table.add_row("frames / estimates", f"{summary['frames']} / {summary['estimates']}")
     table.add_row("without visual rotation", str(summary["frames_without_visual"]))
+    if summary.get("frames_without_depth"):
+        table.add_row("without depth (flagged)", str(summary["frames_without_depth"]))
+    if summary["source_info"].get("intrinsics_from"):
+        table.add_row("intrinsics from", summary["source_info"]["intrinsics_from"])
     table.add_row("normals / backend", f"{summary['normals']} / {summary['backend']}")
     table.add_row("speed", f"{summary['fps']:.1f} fps")
     table.add_row("ms per frame", ", ".join(f"{k} {v:.1f}" for k, v in summary["timing_ms"].items()))
@@ -78,7 +91,11 @@ def _options():
         normals=typer.Option(None, "--normals",
                              help="auto (default), learned, depth, source, a model file (.pt) or a folder of normal maps."),
         config=typer.Option(None, "--config", help="YAML run configuration (keys of RunConfig)."),
-        preset=typer.Option(None, "--preset", help="EKF preset: building, vehicle, handheld or a YAML path."),
+        preset=typer.Option(None, "--preset", help="EKF preset: building, vehicle, handheld, imu_only or a YAML path "
+                                                    "(default: handheld with a camera, imu_only for an IMU log)."),
+        intrinsics=typer.Option(None, "--intrinsics", help="Camera intrinsics: fx,fy,cx,cy in pixels (optionally "
+                                "followed by k1,k2,p1,p2[,k3]) or a camera file (OpenCV YAML/JSON, Kalibr camchain, "
+                                "EuRoC sensor.yaml); frames are undistorted."),
         max_frames=typer.Option(None, "--max-frames", help="Stop after this many frames."),
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
@@ -96,10 +113,11 @@ def run_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
-    record: Optional[Path] = _o["record"],
+    record: Optional[Path] = _o["record"], intrinsics: Optional[str] = _o["intrinsics"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
-    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
+    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
+                     intrinsics=intrinsics)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record)
 
 
@@ -110,7 +128,9 @@ def eval_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    intrinsics: Optional[str] = _o["intrinsics"],
 ) -> None:
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
-    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
+    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
+                     intrinsics=intrinsics)
     execute(source, out, cfg, imu, fps, evaluate=True, command="eval")

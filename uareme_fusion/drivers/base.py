@@ -69,6 +69,8 @@ class SourceInfo:
     fps: float | None = None
     K: np.ndarray | None = None
     """(3, 3) intrinsics in pixels of the frames as yielded (OpenCV convention), None when unknown."""
+    K_origin: str | None = None
+    """Where K came from (--intrinsics, a camera file, published dataset values, scene.json), for summaries."""
     has_frames: bool = True
     """False for IMU-only sources (BROAD, an IMU CSV): the pipeline then reports one estimate per IMU
     batch, so such sources should yield batches at about the rate estimates are wanted (e.g. 30 Hz)."""
@@ -86,6 +88,10 @@ class Source(ABC):
     """A stream of `Frame` and `ImuBatch` events in timestamp order. Use as a context manager."""
 
     info: SourceInfo
+    notes: list[str]
+    """What the driver left out or did not use (printed and put in summary.json); sources set it."""
+    fixes: list[str]
+    """Automatic repairs of the input (e.g. IMU units), printed as warnings and put in summary.json."""
 
     @abstractmethod
     def events(self) -> Iterator[Frame | ImuBatch]:
@@ -98,6 +104,10 @@ class Source(ABC):
 
     def close(self) -> None:
         """Release files, decoders and devices. Safe to call twice."""
+
+    def report(self) -> tuple[list[str], list[str]]:
+        """(notes, fixes) of this source, empty lists where a driver sets none."""
+        return list(getattr(self, "notes", [])), list(getattr(self, "fixes", []))
 
     def __enter__(self):
         return self

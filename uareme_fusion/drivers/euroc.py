@@ -25,7 +25,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 from scipy.spatial.transform import Rotation
 
 from uareme_fusion.errors import InputError, SourceError
@@ -34,7 +33,8 @@ from uareme_fusion.io.text_tables import read_table
 from uareme_fusion.types import Frame
 
 from .base import GroundTruth, ImuBatch, Source, SourceInfo
-from .euroc_imu import read_euroc_imu
+from .imu_csv import non_increasing_note, read_imu_log
+from .intrinsics import CameraModel, Undistorter, read_camera_file, read_camera_mapping
 from .interleave import IMU_ONLY_BATCH_S, interleave, split_by_span
 from .video import to_rgb8
 
@@ -51,34 +51,19 @@ def find_mav0(path: Path) -> Path | None:
     return None
 
 
-def read_sensor_yaml(path: Path) -> dict:
-    """An ASL `sensor.yaml` as a dict (its `%YAML:1.0` first line is OpenCV's, not PyYAML's)."""
-    try:
-        text = path.read_text(encoding="utf-8")
-        lines = [s for s in text.splitlines() if not s.startswith("%YAML")]
-        data = yaml.safe_load("\n".join(lines))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise InputError(f"{path}: not a readable sensor.yaml ({exc})") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{path}: expected a YAML mapping")
-    return data
-
-
-def camera_calibration(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(K (3, 3), distortion (4,) radtan, R_BS (3, 3) camera to body) from cam0/sensor.yaml."""
-    data = read_sensor_yaml(path)
+def camera_calibration(path: Path) -> tuple[CameraModel, np.ndarray]:
+    """(camera model: K and distortion, R_BS (3, 3) camera to body) from cam0/sensor.yaml."""
+    camera = read_camera_file(path)
+    data = read_camera_mapping(path)
     try:
         T_BS = np.asarray(data["T_BS"]["data"], float).reshape(4, 4)
-        fu, fv, cu, cv = (float(v) for v in data["intrinsics"])
-        dist = np.asarray(data.get("distortion_coefficients", [0, 0, 0, 0]), float).reshape(-1)
     except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"{path}: expected T_BS.data (16 numbers), intrinsics [fu, fv, cu, cv] and "
-                         f"distortion_coefficients ({exc!r})") from None
+        raise InputError(f"{path}: expected T_BS.data (16 numbers) ({exc!r})") from None
     R_BS = T_BS[:3, :3]
     if not np.allclose(R_BS @ R_BS.T, np.eye(3), atol=1e-4):
         raise InputError(f"{path}: T_BS's rotation block is not a rotation: {R_BS.tolist()}")
     U, _, Vt = np.linalg.svd(R_BS)  # re-orthonormalise the printed digits
-    return np.array([[fu, 0, cu], [0, fv, cv], [0, 0, 1.0]]), dist, U @ Vt
+    return camera, U @ Vt
 
 
 class EurocSource(Source):
@@ -93,24 +78,25 @@ class EurocSource(Source):
             raise InputError(f"EuRoC folder {root}: neither {root}/mav0/ nor {root} holds cam0/ or imu0/")
         self.mav0 = mav0
         self.notes: list[str] = []
-        self.K = None
+        self.K, self.K_origin = None, None
         self.R_BS_cam = np.eye(3)
-        self._undistort_maps = None
+        self._undistorter: Undistorter | None = None
         self._size: tuple[int, int] | None = None
         self.frame_t_s, self.frame_paths = np.zeros(0), []
         cam0 = mav0 / "cam0"
         if cam0.is_dir():
             self._open_camera(cam0, undistort)
         imu_csv = mav0 / "imu0" / "data.csv"
-        self.imu = read_euroc_imu(imu_csv) if use_imu and imu_csv.is_file() else None
+        self.imu, self.fixes = read_imu_log(imu_csv) if use_imu and imu_csv.is_file() else (None, [])
         if self.imu is None and not self.frame_paths:
             raise InputError(f"EuRoC folder {mav0}: has neither cam0/data.csv nor imu0/data.csv")
-        if self.imu is not None and self.imu.n_non_increasing:
-            self.notes.append(f"{imu_csv}: {self.imu.n_non_increasing} IMU timestamps do not increase")
+        if self.imu is not None:
+            self.notes += non_increasing_note(self.imu)
         has_frames = len(self.frame_paths) > 0
         fps = float(1.0 / np.median(np.diff(self.frame_t_s))) if len(self.frame_t_s) > 1 else None
         self.info = SourceInfo(name=str(root), n_frames=len(self.frame_paths) if has_frames else 0,
-                               fps=fps, K=self.K, has_frames=has_frames, has_imu=self.imu is not None,
+                               fps=fps, K=self.K, K_origin=self.K_origin, has_frames=has_frames,
+                               has_imu=self.imu is not None,
                                R_ci=self.R_BS_cam.T.copy(), image_size=self._size)
 
     def _open_camera(self, cam0: Path, undistort: bool) -> None:
@@ -134,10 +120,10 @@ class EurocSource(Source):
         self._size = first.shape[:2]
         sensor = cam0 / "sensor.yaml"
         if sensor.is_file():
-            self.K, dist, self.R_BS_cam = camera_calibration(sensor)
-            if undistort and np.any(dist != 0):
-                h, w = self._size
-                self._undistort_maps = cv2.initUndistortRectifyMap(self.K, dist, None, self.K, (w, h), cv2.CV_32FC1)
+            camera, self.R_BS_cam = camera_calibration(sensor)
+            self.K, self.K_origin = camera.K, str(sensor)
+            if undistort and camera.distorted:
+                self._undistorter = Undistorter(camera, self._size)
         else:
             self.notes.append(f"{cam0}: no sensor.yaml: intrinsics unknown, camera assumed aligned with the IMU")
 
@@ -146,8 +132,8 @@ class EurocSource(Source):
             image = read_image(self.frame_paths[i], cv2.IMREAD_UNCHANGED, what=f"EuRoC image {i}")
         except InputError as exc:
             raise SourceError(str(exc)) from None
-        if self._undistort_maps is not None:
-            image = cv2.remap(image, *self._undistort_maps, cv2.INTER_LINEAR)
+        if self._undistorter is not None:
+            image = self._undistorter.image(image)
         return Frame(t=float(self.frame_t_s[i]), rgb=to_rgb8(image), K=self.K, index=i)
 
     def events(self) -> Iterator[Frame | ImuBatch]:

@@ -56,8 +56,9 @@ class EurocImu:
             yield ImuSample(float(t), g, a)
 
 
-def read_euroc_imu(path: str | Path) -> EurocImu:
-    """Read an EuRoC `imu0/data.csv`; raises InputError naming the file when it is not one."""
+def read_euroc_imu(path: str | Path, delimiter: str | None = ",") -> EurocImu:
+    """Read an EuRoC `imu0/data.csv` (`delimiter` None: whitespace-separated columns instead of
+    commas); raises InputError naming the file when it is not one."""
     path = Path(path)
     if path.is_dir():
         for candidate in (path / "data.csv", path / "imu0" / "data.csv", path / "mav0" / "imu0" / "data.csv"):
@@ -69,7 +70,7 @@ def read_euroc_imu(path: str | Path) -> EurocImu:
                          "imu0/data.csv or mav0/imu0/data.csv) does not exist")
     if not path.is_file():
         raise InputError(f"EuRoC IMU file {path} does not exist")
-    table = read_table(path, EUROC_IMU_COLUMNS, delimiter=",", kind="an EuRoC IMU file")
+    table = read_table(path, EUROC_IMU_COLUMNS, delimiter=delimiter, kind="an EuRoC IMU file")
     if len(table) == 0:
         raise InputError(f"{path} holds no IMU samples (only comments or blank lines)")
     t_ns = table.ints(0)

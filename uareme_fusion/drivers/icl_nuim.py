@@ -13,14 +13,16 @@ dataset's world mirrored in y, which is not gravity aligned (evaluation aligns a
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 
 from uareme_fusion.errors import InputError
-from uareme_fusion.normals.depth import ICL_NUIM_K_OPENCV, flip_y_rotation
+from uareme_fusion.normals.depth import flip_y_rotation
 
 from .base import GroundTruth
+from .intrinsics import PUBLISHED, CameraModel
 from .tum import TumSource, ground_truth_from_tum
 
 ICL_NUIM_FPS = 30.0
@@ -39,8 +41,8 @@ class IclNuimSource(TumSource):
         self.time_scale = 1.0 / fps
         super().__init__(root, use_imu=False, use_normals=False, max_dt_s=max_dt_s)
 
-    def _intrinsics(self, K):
-        return ICL_NUIM_K_OPENCV.copy()
+    def _camera(self) -> CameraModel:
+        return dataclasses.replace(PUBLISHED["ICL-NUIM"], origin="published ICL-NUIM intrinsics")
 
     def ground_truth(self) -> GroundTruth | None:
         if self.seq.groundtruth is None:

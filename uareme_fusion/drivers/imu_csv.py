@@ -4,12 +4,16 @@
     with merge_imu(VideoSource("clip.mp4"), ImuCsvSource("imu.csv"), time_offset_s=0.12) as src: ...
 
 Format (`euroc_imu.read_euroc_imu`): `timestamp [ns], w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2]`,
-comma-separated, `#` header; gyro and specific force in the IMU frame. A file with other columns
-is refused with an `InputError` naming the file, line and column.
+comma- or whitespace-separated (any file extension), `#` header; gyro and specific force in the IMU
+frame. A file with other columns is refused with an `InputError` naming the file, line and column.
+`read_imu_log` then checks the data for wrong units, column order and time running backwards
+(`imu_checks.check_imu_log`): the source's `fixes` list what it repaired.
 
 `merge_imu` puts the log's samples between the camera source's frames by camera time: a sample
 stamped `t` (IMU clock, kept as written) happened at camera time `t + time_offset_s`, which becomes
-`info.imu_time_offset_s`. The camera source must not carry an IMU of its own.
+`info.imu_time_offset_s`. The camera source must not carry an IMU of its own. A log whose samples
+do not overlap the frames' span at all (another clock: epoch ns against a video's seconds) is
+refused when the first frame arrives (`InputError` naming the log).
 """
 
 from __future__ import annotations
@@ -21,30 +25,53 @@ from pathlib import Path
 import numpy as np
 
 from uareme_fusion.errors import InputError
+from uareme_fusion.io.text_tables import sniff_delimiter
 
 from .base import GroundTruth, ImuBatch, Source, SourceInfo
-from .euroc_imu import read_euroc_imu
+from .euroc_imu import EurocImu, read_euroc_imu
+from .imu_checks import check_imu_log
 from .interleave import IMU_ONLY_BATCH_S, interleave, split_by_span
+
+
+def read_imu_log(path: str | Path) -> tuple[EurocImu, list[str]]:
+    """An IMU table in EuRoC columns (commas, or whitespace when a file's first data line has no
+    comma), checked and repaired by `check_imu_log`: (imu, fixes)."""
+    path = Path(path)
+    return check_imu_log(read_euroc_imu(path, sniff_delimiter(path) if path.is_file() else ","))
+
+
+def non_increasing_note(imu: EurocImu) -> list[str]:
+    """The note for an IMU log whose timestamps step back (the backends reorder, drop and count them)."""
+    if not imu.n_non_increasing:
+        return []
+    return [f"{imu.path}: {imu.n_non_increasing} IMU timestamps do not increase (passed on; the backend drops "
+            "and counts them)"]
 
 
 class ImuCsvSource(Source):
     """An EuRoC-format IMU CSV as an IMU-only source (`has_frames` False)."""
 
     def __init__(self, path: str | Path, batch_s: float = IMU_ONLY_BATCH_S, R_ci: np.ndarray | None = None):
-        self.imu = read_euroc_imu(path)
+        self.imu, self.fixes = read_imu_log(path)
         self.batch_s = float(batch_s)
-        self.notes: list[str] = []
-        if self.imu.n_non_increasing:
-            self.notes.append(f"{self.imu.path}: {self.imu.n_non_increasing} IMU timestamps do not increase "
-                              "(passed on; the backend drops and counts them)")
+        self.notes = non_increasing_note(self.imu)
         self.info = SourceInfo(name=str(path), n_frames=0, has_frames=False, has_imu=True,
                                R_ci=np.eye(3) if R_ci is None else np.asarray(R_ci, float))
+
+    @property
+    def span_s(self) -> tuple[float, float]:
+        """First and last timestamp of the log (IMU clock), s."""
+        return float(self.imu.t_s.min()), float(self.imu.t_s.max())
 
     def batches(self) -> Iterator[ImuBatch]:
         yield from split_by_span(self.imu.t_s, self.imu.gyro_rad_s, self.imu.accel_m_s2, self.batch_s)
 
     def events(self) -> Iterator[ImuBatch]:
         yield from self.batches()
+
+
+CLOCK_TOLERANCE_S = 1.0
+"""IMU samples may end or start this long beyond the frames before the clocks count as different."""
 
 
 class MergedSource(Source):
@@ -58,7 +85,8 @@ class MergedSource(Source):
         if not np.isfinite(time_offset_s):
             raise InputError(f"IMU time offset must be a finite number of seconds, got {time_offset_s}")
         self.camera, self.imu = camera, imu
-        self.notes = list(getattr(camera, "notes", [])) + list(getattr(imu, "notes", []))
+        (camera_notes, camera_fixes), (imu_notes, imu_fixes) = camera.report(), imu.report()
+        self.notes, self.fixes = camera_notes + imu_notes, camera_fixes + imu_fixes
         self.info = dataclasses.replace(camera.info, has_imu=True, R_ci=imu.info.R_ci,
                                         imu_time_offset_s=float(time_offset_s))
 
@@ -67,8 +95,30 @@ class MergedSource(Source):
             if isinstance(event, ImuBatch):
                 yield event
 
+    def _frames_checked(self) -> Iterator:
+        """The camera's events; the first frame's time is checked against the IMU log's span."""
+        checked = False
+        for event in self.camera.events():
+            if not checked and not isinstance(event, ImuBatch):
+                self._check_overlap(float(event.t))
+                checked = True
+            yield event
+
+    def _check_overlap(self, t_first_frame_s: float) -> None:
+        """`InputError` when no IMU sample falls within the frames' time span (another clock)."""
+        span = getattr(self.imu, "span_s", None)
+        if span is None:
+            return
+        info = self.camera.info
+        t_last = t_first_frame_s + (info.n_frames / info.fps if info.n_frames and info.fps else 0.0)
+        start, end = span[0] + self.info.imu_time_offset_s, span[1] + self.info.imu_time_offset_s
+        if end < t_first_frame_s - CLOCK_TOLERANCE_S or start > t_last + CLOCK_TOLERANCE_S:
+            raise InputError(f"{self.imu.info.name}: column 1 (timestamp): the IMU samples span {start:.6g} to "
+                             f"{end:.6g} s and the frames {t_first_frame_s:.6g} to {t_last:.6g} s, with no overlap: "
+                             "the IMU log is on another clock than the video (shift its timestamps to the video's)")
+
     def events(self) -> Iterator:
-        yield from interleave(self.camera.events(), self._imu_batches(), self.info.imu_time_offset_s)
+        yield from interleave(self._frames_checked(), self._imu_batches(), self.info.imu_time_offset_s)
 
     def ground_truth(self) -> GroundTruth | None:
         return self.camera.ground_truth() or self.imu.ground_truth()

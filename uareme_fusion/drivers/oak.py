@@ -206,8 +206,8 @@ class OakSource(Source):
         self._queues = self._build(dai, device, imu_rate_hz)
         self.sync = FrameImuSync(use_imu=self.use_imu)
         self.imu_counts = ImuConversionCounts()
-        self.info = SourceInfo(name=name, n_frames=None, fps=self.fps, K=K, has_depth=self.depth,
-                               has_imu=self.use_imu, R_ci=R_ci, image_size=(self.height, self.width))
+        self.info = SourceInfo(name=name, n_frames=None, fps=self.fps, K=K, K_origin="OAK device calibration",
+                               has_depth=self.depth, has_imu=self.use_imu, R_ci=R_ci, image_size=(self.height, self.width))
         self.notes: list[str] = []
         self._started = False
 

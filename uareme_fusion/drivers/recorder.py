@@ -155,7 +155,7 @@ class RecordingSource(Source):
     def __init__(self, source: Source, out_dir: str | Path, **recorder_options):
         self.source = source
         self.info = source.info
-        self.notes = getattr(source, "notes", [])
+        self.notes, self.fixes = source.report()
         self.recorder = Recorder(out_dir, source.info, **recorder_options)
 
     def events(self) -> Iterator[Frame | ImuBatch]:

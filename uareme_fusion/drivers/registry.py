@@ -10,11 +10,15 @@ Spec -> driver (first match wins):
 - a folder with `rgb.txt` -> `TumSource` (TUM RGB-D, `simulate` output, `--record` folders);
   with `associations.txt` -> `IclNuimSource` when its timestamps are frame numbers, else `TumSource`;
   with `mav0/` (or `cam0/`/`imu0/`) -> `EurocSource`; holding image files -> `ImageSource`;
-- a `.hdf5`/`.h5` file -> `BroadSource`; a `.csv` file -> `ImuCsvSource`; an image file or a glob
-  -> `ImageSource`; any other file -> `VideoSource`.
+- a `.hdf5`/`.h5` file (or any file with the HDF5 signature) -> `BroadSource`; an image file or a
+  glob -> `ImageSource`; a text file, whatever its extension, is an IMU table -> `ImuCsvSource`
+  (EuRoC columns; one that does not read as one is refused naming the file and line); any other
+  file -> `VideoSource` (refused, naming the file, when OpenCV cannot open it).
 `imu=FILE` merges an EuRoC-format IMU CSV into a camera source (`merge_imu`; option
 `imu_time_offset_s`, added to the IMU stamps to put them on the camera clock). `fps` applies to
 video, images, ICL-NUIM, the simulator and OAK; datasets with their own timestamps refuse it.
+`intrinsics` (`--intrinsics`: fx,fy,cx,cy or a camera file, see `intrinsics.parse_intrinsics`)
+replaces the camera's K and undistorts its frames (`calibrated.with_intrinsics`).
 Every failure to open is an `InputError` naming the spec and what is missing.
 """
 
@@ -27,19 +31,26 @@ from pathlib import Path
 import numpy as np
 
 from uareme_fusion.errors import InputError
+from uareme_fusion.io.text_tables import is_text_file
 
 from .base import Source
 from .broad_source import BroadSource
+from .calibrated import with_intrinsics
 from .euroc import EurocSource, find_mav0
 from .icl_nuim import IclNuimSource
 from .images import IMAGE_SUFFIXES, ImageSource
 from .imu_csv import ImuCsvSource, merge_imu
+from .intrinsics import parse_intrinsics
 from .simulated import SimulatedSource
 from .tum import TumSource
 from .tum_rgbd import read_associations
 from .video import VideoSource, parse_webcam
 
 BROAD_SUFFIXES = (".hdf5", ".h5")
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+TABLE_SUFFIXES = (".csv", ".txt", ".tsv", ".dat", ".log", "")
+"""Names users give IMU tables; a text file under another name is also read as one, with a message
+that says it is not a video when it does not read."""
 
 
 def _construct(cls, where: str, *args, **options) -> Source:
@@ -88,12 +99,17 @@ def _open_folder(path: Path, fps: float | None, options: dict) -> Source:
                      "files")
 
 
-def open_source(spec: str, imu: str | None = None, fps: float | None = None, **options) -> Source:
-    """Open the input `spec` names (see the module docstring); `imu` merges an IMU CSV into it."""
+def open_source(spec: str, imu: str | None = None, fps: float | None = None, intrinsics: str | None = None,
+                **options) -> Source:
+    """Open the input `spec` names (see the module docstring); `imu` merges an IMU CSV into it,
+    `intrinsics` gives the camera's K (and distortion)."""
     imu_offset_s = float(options.pop("imu_time_offset_s", 0.0))
     if fps is not None and not (np.isfinite(fps) and fps > 0):
         raise InputError(f"--fps must be > 0, got {fps}")
+    camera = parse_intrinsics(intrinsics) if intrinsics is not None else None
     source = _open(str(spec).strip(), fps, options)
+    if camera is not None:
+        source = with_intrinsics(source, camera)
     if imu is None:
         return source
     try:
@@ -122,13 +138,33 @@ def _open(spec: str, fps: float | None, options: dict) -> Source:
         if suffix in BROAD_SUFFIXES:
             _no_fps(fps, spec)
             return _construct(BroadSource, spec, path, **options)
-        if suffix == ".csv":
-            _no_fps(fps, spec)
-            return _construct(ImuCsvSource, spec, path, **options)
         if suffix in IMAGE_SUFFIXES:
             return _construct(ImageSource, spec, path, fps=fps, **options)
+        if is_text_file(path):
+            _no_fps(fps, spec)
+            return _open_table(path, spec, options)
+        if _has_hdf5_signature(path):
+            _no_fps(fps, spec)
+            return _construct(BroadSource, spec, path, **options)
         return _construct(VideoSource, spec, path, fps=fps, **options)
     if globlib.has_magic(spec):
         return _construct(ImageSource, spec, spec, fps=fps, **options)
     raise InputError(f"{spec}: no such file or folder (expected a video, images, a dataset folder, a .hdf5 or "
                      ".csv file, webcam:N, sim:SCENARIO or oak[:ID])")
+
+
+def _has_hdf5_signature(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        return fh.read(len(HDF5_SIGNATURE)) == HDF5_SIGNATURE
+
+
+def _open_table(path: Path, spec: str, options: dict) -> Source:
+    """A text file as an IMU table; under a name users do not give tables (`clip.mp4` holding text),
+    the message says it is neither a video nor an IMU table."""
+    try:
+        return _construct(ImuCsvSource, spec, path, **options)
+    except InputError as exc:
+        if path.suffix.lower() in TABLE_SUFFIXES:
+            raise
+        reason = str(exc).replace(f"{path}: ", "").replace(f"{path} ", "").split(";")[0]
+        raise InputError(f"{path}: neither a video (it holds text) nor an IMU table ({reason})") from None

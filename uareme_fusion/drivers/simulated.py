@@ -97,7 +97,7 @@ class SimulatedSource(Source):
         self.notes: list[str] = []
         """What was left out or not used, for the run summary."""
         self.info = SourceInfo(name=f"sim:{scenario}", n_frames=n_frames, fps=o.fps, K=self.K.copy(),
-                               has_depth=self.render, has_imu=self.use_imu, R_ci=self.R_ci.copy(),
+                               K_origin="simulator camera", has_depth=self.render, has_imu=self.use_imu, R_ci=self.R_ci.copy(),
                                image_size=(o.height, o.width))
 
     # ----- frames -------------------------------------------------------------------------------

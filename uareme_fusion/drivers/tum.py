@@ -15,6 +15,9 @@ What is read (built on `tum_rgbd.load_tum_rgbd` and `euroc_imu.read_euroc_imu`):
 - `scene.json` (simulator) or `source.json` (`Recorder`): K, `R_ci`, the IMU time offset, depth
   units, and whether the ground-truth world is gravity aligned (z up); both state it, plain TUM
   folders do not (then evaluation aligns a constant rotation).
+- Without either, K is the published one when the folder's name identifies the dataset
+  (`rgbd_dataset_freiburg{1,2,3}_*`, `intrinsics.published_camera`); frames (rgb and depth) are then
+  undistorted with the published distortion and carry that K. `info.K_origin` says which.
 
 Clocks: frame times are the list's seconds; IMU batches keep the IMU clock
 (`info.imu_time_offset_s` is added to put them on the camera clock). scene.json's `time_offset_s`
@@ -34,8 +37,9 @@ from uareme_fusion.errors import InputError, SourceError
 from uareme_fusion.types import Frame, NormalMap
 
 from .base import GroundTruth, ImuBatch, Source, SourceInfo
-from .euroc_imu import read_euroc_imu
+from .imu_csv import non_increasing_note, read_imu_log
 from .interleave import interleave
+from .intrinsics import CameraModel, Undistorter, published_camera
 from .tum_rgbd import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
 
 SIM_META = "scene.json"
@@ -114,8 +118,8 @@ class TumSource(Source):
             raise InputError(f"dataset folder {self.root}: no such folder")
         self.meta = read_metadata(self.root)
         self.seq: TumSequence = load_tum_rgbd(self.root, depth_scale=self.meta.get("depth_scale"), max_dt_s=max_dt_s)
-        K = self.meta.get("K") if self.meta.get("K") is not None else self.seq.K
-        self.seq = dataclasses.replace(self.seq, K=self._intrinsics(K))
+        self.camera = self._camera()
+        self.seq = dataclasses.replace(self.seq, K=None if self.camera is None else self.camera.K)
         self.t_s = self.seq.t_s * self.time_scale
         self.notes: list[str] = []
         """What was left out or not used, for the run summary (nothing is skipped silently)."""
@@ -126,11 +130,10 @@ class TumSource(Source):
                               f"{max_dt_s} s (yielded without depth)")
         self.imu = None
         imu_csv = self.root / "imu0" / "data.csv"
+        self.fixes: list[str] = []
         if use_imu and imu_csv.is_file():
-            self.imu = read_euroc_imu(imu_csv)
-            if self.imu.n_non_increasing:
-                self.notes.append(f"{imu_csv}: {self.imu.n_non_increasing} IMU timestamps do not increase "
-                                  "(passed on; the backend drops and counts them)")
+            self.imu, self.fixes = read_imu_log(imu_csv)
+            self.notes += non_increasing_note(self.imu)
         self.accelerometer = self.seq.accelerometer
         if self.imu is None and self.accelerometer is not None:
             self.notes.append(f"{self.root}/accelerometer.txt has no gyro: not used as IMU input "
@@ -140,16 +143,25 @@ class TumSource(Source):
         if fps is None and len(self.t_s) > 1:
             fps = float(1.0 / np.median(np.diff(self.t_s)))
         first = self.seq.read_frame(0) if len(self.seq) else None
+        self._undistorter = (Undistorter(self.camera, first.rgb.shape[:2])
+                             if first is not None and self.camera is not None and self.camera.distorted else None)
         self.info = SourceInfo(
             name=str(root), n_frames=len(self.seq), fps=fps, K=self.seq.K,
+            K_origin=None if self.camera is None else self.camera.origin,
             has_depth=any(p is not None for p in self.seq.depth_paths), has_imu=self.imu is not None,
             R_ci=self.meta.get("R_ci") if self.meta.get("R_ci") is not None else np.eye(3),
             imu_time_offset_s=self.meta.get("imu_time_offset_s", 0.0),
             image_size=None if first is None else first.rgb.shape[:2],
         )
 
-    def _intrinsics(self, K):
-        return K
+    def _camera(self) -> CameraModel | None:
+        """K from source.json / scene.json, else the published intrinsics the folder's name identifies
+        (TUM RGB-D freiburg1-3, with their distortion), else None."""
+        if self.meta.get("K") is not None:
+            return CameraModel(self.meta["K"], np.zeros(0), origin=str(self.meta["path"]))
+        if self.seq.K is not None:
+            return CameraModel(self.seq.K, np.zeros(0), origin=str(self.root / SIM_META))
+        return published_camera(self.root)
 
     def _normal_files(self) -> list[Path | None] | None:
         """normals/<i>.npz for each kept frame, i its line in rgb.txt (None where absent)."""
@@ -190,6 +202,8 @@ class TumSource(Source):
             frame = self.seq.read_frame(i)
         except InputError as exc:
             raise SourceError(str(exc)) from None
+        if self._undistorter is not None:
+            frame = self._undistorter.frame(frame)
         t = float(self.t_s[i])
         return dataclasses.replace(frame, t=t, normals=self._normals(i, t))
 

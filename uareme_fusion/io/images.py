@@ -1,6 +1,8 @@
 """Reading image files that users bring, with one clear `InputError` for every way they can be bad.
 
-`read_image(path, flags, what)` is `cv2.imread` plus the checks it leaves out: a missing, empty or
+`read_image(path, flags, what)` is `cv2.imread` plus the checks it leaves out, and the EXIF
+orientation applied in every mode (OpenCV skips it for `IMREAD_UNCHANGED`), so a phone's portrait
+photo comes out upright: a missing, empty or
 non-image file, a truncated or corrupt one, and an image too large to decode. PNG and JPEG headers
 are checked BEFORE decoding (`image_size`), so a file that claims 30000 x 30000 pixels is refused
 without allocating gigabytes; other formats rely on OpenCV's own limit (`cv2.error`, also turned
@@ -67,6 +69,33 @@ def image_size(path: str | Path) -> tuple[int, int] | None:
     return None
 
 
+EXIF_ORIENTATION_TAG = 0x0112
+
+
+def exif_orientation(path: str | Path) -> int:
+    """The EXIF orientation code (1-8; 1 = as stored) of an image file, 1 when it has none."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as image:
+            code = int(image.getexif().get(EXIF_ORIENTATION_TAG, 1))
+    except (OSError, UnidentifiedImageError, ValueError, TypeError):
+        return 1
+    return code if 1 <= code <= 8 else 1
+
+
+def apply_orientation(image: np.ndarray, code: int) -> np.ndarray:
+    """`image` (H, W[, C]) turned as EXIF orientation `code` says, so that it displays upright:
+    2 mirror, 3 rotate 180, 4 flip, 5 transpose, 6 rotate 90 clockwise, 7 transverse, 8 rotate 90
+    counter-clockwise."""
+    turned = {
+        1: lambda a: a, 2: lambda a: a[:, ::-1], 3: lambda a: a[::-1, ::-1], 4: lambda a: a[::-1],
+        5: lambda a: a.swapaxes(0, 1), 6: lambda a: np.rot90(a, -1), 7: lambda a: np.rot90(a, 2).swapaxes(0, 1),
+        8: lambda a: np.rot90(a, 1),
+    }[code](image)
+    return np.ascontiguousarray(turned)
+
+
 def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED, what: str = "image") -> np.ndarray:
     """`cv2.imread(path, flags)` (BGR(A) channel order, the file's bit depth for IMREAD_UNCHANGED).
 
@@ -111,4 +140,6 @@ def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED, what: str = 
             )
         raise InputError(f"{path}: not a readable image, cannot decode it: corrupt or truncated ({n_bytes} bytes); "
                          f"expected {what}")
+    if flags == cv2.IMREAD_UNCHANGED:  # the other modes apply the EXIF orientation in OpenCV itself
+        image = apply_orientation(image, exif_orientation(path))
     return image

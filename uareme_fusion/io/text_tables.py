@@ -135,3 +135,34 @@ def read_table(path: str | Path, columns: tuple[str, ...], delimiter: str | None
     if cells.shape[1] < n_cols:
         raise InputError(f"{path} is not {kind}: line {line[0]} has {cells.shape[1]} column(s); expected {what}")
     return TextTable(path, columns, cells[:, :n_cols], line)
+
+
+TEXT_SNIFF_BYTES = 8192
+"""How much of a file `is_text_file` and `sniff_delimiter` look at."""
+
+
+def _head(path: str | Path) -> bytes:
+    with open(path, "rb") as fh:
+        return fh.read(TEXT_SNIFF_BYTES)
+
+
+def is_text_file(path: str | Path) -> bool:
+    """True when the file's first bytes are UTF-8 text without NUL bytes (a table, not a video)."""
+    head = _head(path)
+    if not head or b"\x00" in head:
+        return False
+    for cut in range(4):  # the sniffed block may end inside a multi-byte character
+        try:
+            head[: len(head) - cut].decode("utf-8")
+            return True
+        except UnicodeDecodeError:
+            continue
+    return False
+
+
+def sniff_delimiter(path: str | Path) -> str | None:
+    """',' when the first data line (not a comment, not blank) holds a comma, else None (whitespace)."""
+    for line in _head(path).decode("utf-8", errors="replace").splitlines():
+        if line.strip() and not line.lstrip().lstrip("\ufeff").startswith("#"):
+            return "," if "," in line else None
+    return ","

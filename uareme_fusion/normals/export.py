@@ -87,11 +87,13 @@ def write_normal_map(out_dir: Path, stem: str, normal_map: NormalMap, kappa_cap:
 
 
 def export_normals(input_path: Path, out_dir: Path, estimator, kappa_cap: float,
-                   progress: Callable[[int, int], None] | None = None) -> int:
+                   progress: Callable[[int, int], None] | None = None, camera=None) -> int:
     """Estimate and write the normals of every frame of `input_path` under `out_dir` (created).
 
-    `estimator.estimate(rgb_uint8) -> NormalMap`; `progress(done, total)` after each frame. Returns
-    the number of frames written."""
+    `estimator.estimate(rgb_uint8) -> NormalMap`; `progress(done, total)` after each frame; `camera`
+    (`drivers.intrinsics.CameraModel`) undistorts each frame first. Returns the number of frames written."""
+    from ..drivers.intrinsics import undistorted_image
+
     total, frames = list_frames(input_path)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -99,6 +101,7 @@ def export_normals(input_path: Path, out_dir: Path, estimator, kappa_cap: float,
     out.mkdir(parents=True, exist_ok=True)
     done = 0
     for stem, rgb in frames:
+        rgb = rgb if camera is None else undistorted_image(camera, rgb)
         write_normal_map(out, stem, estimator.estimate(rgb, source=stem), kappa_cap)
         done += 1
         if progress is not None:

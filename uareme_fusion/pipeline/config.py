@@ -17,8 +17,9 @@ class RunConfig(BaseModel):
     backend: Literal["mekf", "smoother", "single"] = "mekf"
     """mekf: the EKF (with the IMU when the source has one, otherwise its constant-rate model);
     smoother: the paper's sliding-window graph (gyro-aided with an IMU); single: frame by frame."""
-    mekf_preset: str = "handheld"
-    """A preset in configs/ (building, vehicle, handheld) or a YAML path for the EKF."""
+    mekf_preset: str | None = None
+    """A preset in configs/ (building, vehicle, handheld, imu_only) or a YAML path for the EKF; None:
+    chosen from the source (`stages.mekf_preset_for`: handheld with a camera, imu_only without)."""
     mekf: dict[str, Any] = Field(default_factory=dict)
     """Overrides of individual EKF settings (names and units as in the preset files)."""
     smoother: dict[str, Any] = Field(default_factory=dict)
@@ -32,5 +33,8 @@ class RunConfig(BaseModel):
     """Horizontal field of view assumed for drawing when the source has no intrinsics, degrees."""
     ground_threshold_deg: float = Field(15.0, gt=0.0, lt=90.0)
     """A pixel is ground when its normal is within this angle of up, degrees."""
+    intrinsics: str | None = None
+    """Camera intrinsics `fx,fy,cx,cy` (pixels, optionally followed by distortion k1,k2,p1,p2[,k3]) or
+    a camera file (OpenCV YAML/JSON, Kalibr camchain, EuRoC sensor.yaml); None: the source's own."""
     max_frames: int | None = Field(None, gt=0)
     """Stop after this many frames (None: the whole source)."""

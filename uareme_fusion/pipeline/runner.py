@@ -8,6 +8,7 @@ stays complete and valid, and `RunStats.stopped` says why it ended.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import Counter, defaultdict
 from collections.abc import Callable, Iterable
@@ -64,6 +65,8 @@ class RunStats:
     frames: int = 0
     estimates: int = 0
     frames_without_visual: int = 0
+    frames_without_depth: int = 0
+    """Frames that had no depth map while depth normals were asked for (flagged DEPTH_MISSING)."""
     imu_samples: int = 0
     status_counts: Counter = field(default_factory=Counter)
     times: StageTimes = field(default_factory=StageTimes)
@@ -74,7 +77,8 @@ class RunStats:
     def as_dict(self) -> dict:
         return {"source": self.source, "normals": self.normals, "backend": self.backend,
                 "frames": self.frames, "estimates": self.estimates,
-                "frames_without_visual": self.frames_without_visual, "imu_samples": self.imu_samples,
+                "frames_without_visual": self.frames_without_visual,
+                "frames_without_depth": self.frames_without_depth, "imu_samples": self.imu_samples,
                 "status_counts": dict(sorted(self.status_counts.items())),
                 "timing_ms": self.times.mean_ms(self.estimates),
                 "fps": self.estimates / self.wall_s if self.wall_s > 0 else 0.0,
@@ -101,8 +105,10 @@ class Pipeline:
         self.stats.imu_samples += len(batch)
         self.stats.times.add("backend", time.perf_counter() - t0)
 
-    def visual_rotation(self, normal_map: NormalMap, t_s: float) -> VisualRotation | None:
-        """The solver's rotation for one map, None when the map has no valid normals."""
+    def visual_rotation(self, normal_map: NormalMap | None, t_s: float) -> VisualRotation | None:
+        """The solver's rotation for one map, None when there is no map or it has no valid normals."""
+        if normal_map is None:
+            return None
         R_init = self.backend.predicted_R_cm(t_s)
         try:
             visual = solve_manhattan(normal_map, R_init=R_init if R_init is not None else self._R_cm_prev)
@@ -119,6 +125,9 @@ class Pipeline:
         visual = self.visual_rotation(normal_map, frame.t)
         t2 = time.perf_counter()
         estimate = self.backend.process_frame(frame.t, visual)
+        if normal_map is None and frame.depth is None:
+            estimate = dataclasses.replace(estimate, status=estimate.status | Status.DEPTH_MISSING)
+            self.stats.frames_without_depth += 1
         t3 = time.perf_counter()
         times.add("normals", t1 - t0)
         times.add("solver", t2 - t1)
@@ -131,6 +140,8 @@ class Pipeline:
         """An estimate with no image (IMU-only sources)."""
         t0 = time.perf_counter()
         estimate = self.backend.process_frame(t_s, None)
+        # No camera: "no visual rotation" is no news, so the flag is dropped.
+        estimate = dataclasses.replace(estimate, status=estimate.status & ~Status.VISUAL_MISSING)
         self.stats.times.add("backend", time.perf_counter() - t0)
         return self._emit(FrameResult(t_s, estimate))
 

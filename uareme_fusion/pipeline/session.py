@@ -21,7 +21,7 @@ from ..types import Status
 from .config import RunConfig
 from .runner import Pipeline, RunStats
 from .sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
-from .stages import CappedNormals, make_backend, make_normal_estimator
+from .stages import CappedNormals, make_backend, make_normal_estimator, mekf_preset_for
 
 GRAVITY_AWARE_BACKENDS = ("mekf", "smoother")
 """With an IMU these know absolute up: NEES after a yaw-only alignment (compare.GRAVITY_AWARE)."""
@@ -74,15 +74,28 @@ def run_to_folder(source_spec: str, out_dir: str | Path, cfg: RunConfig | None =
 
     cfg = cfg or RunConfig()
     out = make_output_folder(out_dir)
-    with open_source(str(source_spec), imu=imu, **source_options) as source:
+    with open_source(str(source_spec), imu=imu, intrinsics=cfg.intrinsics, **source_options) as source:
         return run_source(source, out, cfg, evaluate, extra_sinks, on_result, command)
+
+
+def run_notes(source: Source, cfg: RunConfig) -> tuple[list[str], list[str]]:
+    """(notes, fixes) of a run: what the source's driver left out or repaired, and the preset choice."""
+    notes, fixes = source.report()
+    if cfg.backend == "mekf":
+        _, preset_note = mekf_preset_for(cfg.mekf_preset, source.info)
+        notes += [preset_note] if preset_note else []
+    return notes, fixes
 
 
 def summary_document(stats: RunStats, cfg: RunConfig, command: str, source: Source) -> dict:
     info = source.info
+    notes, fixes = run_notes(source, cfg)
     doc = {"command": command, **stats.as_dict(),
-           "source_info": {"frames_known": info.n_frames, "fps": info.fps, "has_imu": info.has_imu,
-                           "has_depth": info.has_depth, "intrinsics_known": info.K is not None},
+           "source_info": {"frames_known": info.n_frames, "fps": info.fps, "has_frames": info.has_frames,
+                           "has_imu": info.has_imu, "has_depth": info.has_depth,
+                           "intrinsics_known": info.K is not None, "intrinsics_from": info.K_origin},
+           "mekf_preset": mekf_preset_for(cfg.mekf_preset, info)[0] if cfg.backend == "mekf" else None,
+           "notes": notes, "input_fixes": fixes,
            "config": cfg.model_dump(mode="json")}
     return doc
 

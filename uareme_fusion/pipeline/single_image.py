@@ -34,6 +34,8 @@ class ImageAnalysis:
     visual: VisualRotation
     up_c: np.ndarray
     timing_ms: dict
+    K: np.ndarray | None = None
+    """Intrinsics of `rgb` (undistorted) when given, for drawing the horizon."""
 
     def as_dict(self) -> dict:
         v = self.visual
@@ -56,9 +58,14 @@ def read_rgb(path: str | Path) -> np.ndarray:
         raise InputError(f"{path}: {exc}") from None
 
 
-def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0) -> ImageAnalysis:
+def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0,
+                  camera=None) -> ImageAnalysis:
+    """One image's rotation and up; `camera` (`drivers.intrinsics.CameraModel`) undistorts it first."""
+    from ..drivers.intrinsics import undistorted_image
+
     path = Path(path)
     rgb = read_rgb(path)
+    rgb = rgb if camera is None else undistorted_image(camera, rgb)
     estimator = CappedNormals(make_normal_estimator(normals, SourceInfo(name=str(path))), kappa_cap)
     t0 = time.perf_counter()
     normal_map = estimator.estimate_frame(Frame(0.0, rgb=rgb, index=0))
@@ -70,10 +77,12 @@ def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float =
     t2 = time.perf_counter()
     _, up_c = up_candidate(visual.R_cm)
     return ImageAnalysis(path, rgb, normal_map, visual, up_c,
-                         {"normals": 1e3 * (t1 - t0), "solver": 1e3 * (t2 - t1)})
+                         {"normals": 1e3 * (t1 - t0), "solver": 1e3 * (t2 - t1)},
+                         None if camera is None else camera.K)
 
 
 def image_overlay(analysis: ImageAnalysis, K: np.ndarray | None = None, fov_deg: float = 60.0,
                   panes: bool = True) -> np.ndarray:
+    K = analysis.K if K is None else K
     image = draw_overlay(analysis.rgb, analysis.up_c, analysis.visual.R_cm, K, fov_deg)
     return side_by_side(image, analysis.normal_map) if panes else image

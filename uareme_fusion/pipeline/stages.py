@@ -64,8 +64,10 @@ class CappedNormals:
     def name(self) -> str:
         return getattr(self.estimator, "name", type(self.estimator).__name__)
 
-    def estimate_frame(self, frame: Frame) -> NormalMap:
+    def estimate_frame(self, frame: Frame) -> NormalMap | None:
         nm = self.estimator.estimate_frame(frame)
+        if nm is None:
+            return None
         if nm.kappa is not None and np.nanmax(nm.kappa, initial=0.0) > self.cap:
             nm = NormalMap(nm.normals, np.minimum(nm.kappa, self.cap), nm.t, nm.independent_regions)
         return nm
@@ -85,6 +87,19 @@ class AutoNormals:
         return self._chosen.estimate_frame(frame)
 
 
+class DepthWhereAvailable:
+    """Depth normals for frames with a depth map; None (no normal map: the frame uses the remaining
+    cues, and the pipeline flags it `DEPTH_MISSING`) for frames without one."""
+
+    name = "depth"
+
+    def __init__(self, estimator):
+        self.estimator = estimator
+
+    def estimate_frame(self, frame: Frame) -> NormalMap | None:
+        return None if frame.depth is None else self.estimator.estimate_frame(frame)
+
+
 def make_normal_estimator(spec: str, info: SourceInfo):
     """The normal estimator named by `spec` (see `RunConfig.normals`); checks that the source can feed it."""
     from ..normals.depth import DepthNormals
@@ -97,7 +112,10 @@ def make_normal_estimator(spec: str, info: SourceInfo):
         if not info.has_depth:
             raise InputError(f"{info.name}: --normals depth needs a depth map, and this source has none "
                              "(use --normals learned)")
-        return DepthNormals()
+        if info.K is None:
+            raise InputError(f"{info.name}: --normals depth needs the camera intrinsics, and this source does not "
+                             "know them: give --intrinsics fx,fy,cx,cy or a camera file")
+        return DepthWhereAvailable(DepthNormals())
     if spec == "learned":
         return _learned()
     path = Path(spec)
@@ -117,6 +135,27 @@ def _learned(model_path: Path | None = None):
     return LearnedNormals() if model_path is None else LearnedNormals(model=model_path)
 
 
+CAMERA_PRESETS = ("building", "handheld", "vehicle")
+"""Shipped EKF presets tuned for a camera with (or without) an IMU."""
+DEFAULT_CAMERA_PRESET = "handheld"
+IMU_ONLY_PRESET = "imu_only"
+
+
+def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str | None]:
+    """The EKF preset a run uses and, when it is not the one asked for, a note saying why.
+
+    Chosen from what the source holds: with frames, `requested` or handheld; without frames (an IMU
+    log), `requested` when it is the user's own file or imu_only, and imu_only instead of a camera
+    preset (building, handheld, vehicle: their IMU settings assume a camera corrects the attitude; alone
+    they give about twice the tilt error of imu_only on BROAD, `bench broad`)."""
+    if info.has_frames:
+        return requested or DEFAULT_CAMERA_PRESET, None
+    if requested in CAMERA_PRESETS:
+        return IMU_ONLY_PRESET, (f"preset '{requested}' tunes camera + IMU fusion and {info.name} has no camera: "
+                                 f"ran with the '{IMU_ONLY_PRESET}' preset")
+    return requested or IMU_ONLY_PRESET, None
+
+
 def make_backend(cfg: RunConfig, info: SourceInfo) -> Backend:
     """The backend of `cfg`, given the source's IMU-to-camera rotation and time offset."""
     # SourceInfo adds its offset to IMU stamps to reach camera time; the EKF subtracts its own.
@@ -132,6 +171,6 @@ def make_backend(cfg: RunConfig, info: SourceInfo) -> Backend:
         return Smoother(validate_config({**base, **cfg.smoother}, SmootherConfig, "run config [smoother]"))
     from ..backends.mekf import Mekf, MekfConfig
 
-    base = load_config(cfg.mekf_preset, MekfConfig).model_dump()
+    base = load_config(mekf_preset_for(cfg.mekf_preset, info)[0], MekfConfig).model_dump()
     base.update(imu_geometry)
     return Mekf(validate_config({**base, **cfg.mekf}, MekfConfig, "run config [mekf]"))
