@@ -31,6 +31,8 @@ def bench(
     normals_noise_deg: float = typer.Option(2.0, "--normals-noise-deg", min=0.0, max=90.0,
                                             help="soak: angular noise on the simulator's normals, deg."),
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
+    threads: int = typer.Option(None, "--threads", min=1, max=256,
+                                help="pipeline: torch CPU threads of the learned normals (default 1)."),
     json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
 ) -> None:
     """Time a benchmark on this machine and print its figures against the goals."""
@@ -45,7 +47,7 @@ def bench(
     elif what == "pipeline":
         from ..benchmarks import pipeline
 
-        results = pipeline.run(seconds, memory_minutes, normals)
+        results = pipeline.run(seconds, memory_minutes, normals, threads)
     else:
         from ..benchmarks import soak
 

@@ -11,8 +11,8 @@ from rich.table import Table
 
 from ..config import load_config, validate_config
 from ..pipeline import RunConfig
-from ..pipeline.session import make_output_folder, run_source
-from .app import app, fail
+from ..pipeline.session import configure_imu, make_output_folder, run_source
+from .app import app, err_console, fail
 from .progress import frame_progress
 
 SOURCE_HELP = ("A video file, webcam:N, an image, folder or glob of images, a dataset folder (TUM RGB-D, "
@@ -36,7 +36,7 @@ def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Op
     from ..drivers import open_source, record
 
     out_dir = make_output_folder(out)
-    opened = open_source(source, imu=None if imu is None else str(imu), fps=fps)
+    opened = configure_imu(open_source(source, imu=None if imu is None else str(imu), fps=fps), cfg)
     with (opened if record_dir is None else record(opened, record_dir)) as src:
         sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
         total = src.info.n_frames if src.info.has_frames else None
@@ -69,6 +69,8 @@ def print_summary(summary: dict) -> None:
         table.add_row("NEES mean", f"{summary['nees']['mean']:.2f}")
     table.add_row("outputs", ", ".join(summary["outputs"]))
     console.print(table)
+    for line in summary.get("warnings", []):
+        err_console.print(f"[bold yellow]warning:[/] {line}", markup=True, emoji=False, highlight=False)
 
 
 def _options():
@@ -83,6 +85,16 @@ def _options():
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
                                                      "(replay it later with 'run FOLDER')."),
+        threads=typer.Option(None, "--threads", min=1, max=256,
+                             help="torch CPU threads of the learned normals (default 1: fast beside other busy "
+                                  "programs)."),
+        imu_rotation=typer.Option(None, "--imu-rotation",
+                                  help="Camera-from-IMU rotation: android, ios, axis letters of the IMU seen from "
+                                       "the camera (rub, flu, ...), a 3x3 (9 numbers), a quaternion x,y,z,w or a "
+                                       "Kalibr camchain .yaml (default: the source's own, identity)."),
+        imu_time_offset_s=typer.Option(None, "--imu-time-offset-s",
+                                       help="Seconds added to IMU stamps to put them on the camera clock "
+                                            "(default: the source's own, 0)."),
     )
 
 
@@ -96,10 +108,13 @@ def run_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
+    imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
     record: Optional[Path] = _o["record"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
-    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
+    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
+                     threads=threads, imu_rotation=imu_rotation, imu_time_offset_s=imu_time_offset_s)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record)
 
 
@@ -110,7 +125,10 @@ def eval_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
+    imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
 ) -> None:
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
-    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
+    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
+                     threads=threads, imu_rotation=imu_rotation, imu_time_offset_s=imu_time_offset_s)
     execute(source, out, cfg, imu, fps, evaluate=True, command="eval")

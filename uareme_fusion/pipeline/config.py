@@ -34,3 +34,13 @@ class RunConfig(BaseModel):
     """A pixel is ground when its normal is within this angle of up, degrees."""
     max_frames: int | None = Field(None, gt=0)
     """Stop after this many frames (None: the whole source)."""
+    threads: int = Field(1, ge=1, le=256)
+    """torch CPU threads of the learned normals. 1 by default: beside another busy process, two
+    threads wait on each other and a frame can take 10x longer (README, "Speed on a busy machine")."""
+    imu_rotation: str | None = None
+    """Camera-from-IMU rotation `R_ci` (`v_c = R_ci v_i`): a named convention (android, ios), axis
+    letters (rub, flu, ...), 9 numbers of a 3x3, a quaternion x,y,z,w or a Kalibr camchain .yaml
+    (`drivers.extrinsics.parse_imu_rotation`). None: the source's own (identity unless calibrated)."""
+    imu_time_offset_s: float | None = None
+    """Added to IMU stamps to put them on the camera clock (`SourceInfo.imu_time_offset_s`).
+    None: the source's own (0 unless the recording says otherwise)."""
