@@ -106,7 +106,10 @@ def kalibr_rotation(path: Path, option: str = OPTION) -> np.ndarray:
     """`R_ci` from the first camera with a `T_cam_imu` in a Kalibr camchain-imucam YAML file."""
     from ..config import read_yaml
 
-    data, where = read_yaml(path)
+    try:
+        data, where = read_yaml(path)
+    except ConfigError as exc:
+        raise ConfigError(f"{option}: {exc}") from None
     for name in sorted(data):
         cam = data[name]
         if isinstance(cam, dict) and "T_cam_imu" in cam:

@@ -130,7 +130,7 @@ def make_backend(cfg: RunConfig, info: SourceInfo) -> Backend:
 
         base = load_config("paper", SmootherConfig, section="smoother").model_dump()
         if info.has_imu:
-            base.update(mode=SmootherMode.GYRO, R_ci=imu_geometry["R_ci"])
+            base.update(mode=SmootherMode.GYRO, **imu_geometry)
         return Smoother(validate_config({**base, **cfg.smoother}, SmootherConfig, "run config [smoother]"))
     from ..backends.mekf import Mekf, MekfConfig
 
