@@ -52,6 +52,19 @@ def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Op
     return summary
 
 
+def rerun_sinks(path: Optional[Path]):
+    """The sinks factory of `--rerun PATH` for `execute` (None without it)."""
+    if path is None:
+        return None
+
+    def factory(src, out_dir, cfg):
+        from ..pipeline.rerun_sink import RerunSink
+
+        return [RerunSink(path, cfg.assumed_fov_deg)]
+
+    return factory
+
+
 def print_summary(summary: dict) -> None:
     console = Console()
     table = Table(title=f"{summary['command']}: {summary['source']}", show_header=False)
@@ -92,6 +105,9 @@ def _options():
                                   help="Camera-from-IMU rotation: android, ios, axis letters of the IMU seen from "
                                        "the camera (rub, flu, ...), a 3x3 (9 numbers), a quaternion x,y,z,w or a "
                                        "Kalibr camchain .yaml (default: the source's own, identity)."),
+        rerun=typer.Option(None, "--rerun", help="Also log the run to this rerun recording (.rrd): image with "
+                                                   "horizon and axes, camera in 3D, tilt, std and status over "
+                                                   "time, normals and confidence (needs the 'viewer' extra)."),
         imu_time_offset_s=typer.Option(None, "--imu-time-offset-s",
                                        help="Seconds added to IMU stamps to put them on the camera clock "
                                             "(default: the source's own, 0)."),
@@ -110,12 +126,13 @@ def run_command(
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
-    record: Optional[Path] = _o["record"],
+    record: Optional[Path] = _o["record"], rerun: Optional[Path] = _o["rerun"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      threads=threads, imu_rotation=imu_rotation, imu_time_offset_s=imu_time_offset_s)
-    execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record)
+    execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record,
+            extra_sinks_factory=rerun_sinks(rerun))
 
 
 @app.command("eval")
@@ -126,9 +143,9 @@ def eval_command(
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
-    imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
+    imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"], rerun: Optional[Path] = _o["rerun"],
 ) -> None:
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      threads=threads, imu_rotation=imu_rotation, imu_time_offset_s=imu_time_offset_s)
-    execute(source, out, cfg, imu, fps, evaluate=True, command="eval")
+    execute(source, out, cfg, imu, fps, evaluate=True, command="eval", extra_sinks_factory=rerun_sinks(rerun))
