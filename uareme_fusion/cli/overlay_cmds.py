@@ -43,9 +43,9 @@ def horizon_command(
         needs_frames(src, "horizon")
         return [HorizonVideoSink(out, src.info.fps or 30.0, cfg.assumed_fov_deg, panes)]
 
-    execute(source, out.parent / f"{out.stem}.run", cfg, imu, fps, evaluate=False, command="horizon",
-            extra_sinks_factory=sinks)
-    typer.echo(f"wrote {out}")
+    summary = execute(source, out.parent / f"{out.stem}.run", cfg, imu, fps, evaluate=False, command="horizon",
+                      extra_sinks_factory=sinks)
+    typer.echo(f"wrote {out} ({summary.get('videos', {}).get(out.name, 'no frames')})")
 
 
 @app.command("ground")

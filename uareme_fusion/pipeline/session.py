@@ -54,6 +54,7 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
     if evaluate and truth is None:
         raise InputError(f"{source.info.name}: this source has no ground truth to evaluate against "
                          "(use 'uareme-fusion run' instead)")
+    extra_sinks = list(extra_sinks)
     log = EstimateLog() if evaluate else None
     check = ImuRotationCheck.for_source(source)
     sinks = [TumTrajectoryWriter(out / "trajectory.tum"), EstimatesCsvWriter(out / "estimates.csv"),
@@ -62,6 +63,8 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
     stats = pipeline.run(source if check is None else check.tap(source), max_frames=cfg.max_frames,
                          on_result=on_result)
     summary = summary_document(stats, cfg, command, source)
+    for sink in extra_sinks:
+        summary.update(sink.summary() if hasattr(sink, "summary") else {})
     if check is not None:
         summary["imu_rotation_estimate"] = check.report()
         summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w]
