@@ -28,7 +28,8 @@ def run_config(config: Optional[Path], **overrides) -> RunConfig:
 
 
 def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Optional[float], evaluate: bool,
-            command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None) -> dict:
+            command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None,
+            gt: Optional[Path] = None, gt_time_offset_s: float = 0.0) -> dict:
     """Open the source, run it with a progress bar, report how it ended; exits non-zero when it failed.
 
     With `record_dir` the source's frames and IMU are also written there as they pass (our dataset
@@ -37,6 +38,10 @@ def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Op
 
     out_dir = make_output_folder(out)
     opened = configure_imu(open_source(source, imu=None if imu is None else str(imu), fps=fps), cfg)
+    if gt is not None:
+        from ..drivers.ground_truth_file import with_ground_truth_file
+
+        with_ground_truth_file(opened, gt, gt_time_offset_s)
     with (opened if record_dir is None else record(opened, record_dir)) as src:
         sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
         total = src.info.n_frames if src.info.has_frames else None
@@ -144,8 +149,13 @@ def eval_command(
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"], rerun: Optional[Path] = _o["rerun"],
+    gt: Optional[Path] = typer.Option(None, "--gt", help="Ground-truth trajectory (TUM 'timestamp tx ty tz qx qy qz "
+                                                         "qw', or EuRoC gt0/data.csv) in place of the source's own."),
+    gt_time_offset_s: float = typer.Option(0.0, "--gt-time-offset-s",
+                                           help="Seconds added to the --gt stamps to put them on the source's clock."),
 ) -> None:
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      threads=threads, imu_rotation=imu_rotation, imu_time_offset_s=imu_time_offset_s)
-    execute(source, out, cfg, imu, fps, evaluate=True, command="eval", extra_sinks_factory=rerun_sinks(rerun))
+    execute(source, out, cfg, imu, fps, evaluate=True, command="eval", extra_sinks_factory=rerun_sinks(rerun),
+            gt=gt, gt_time_offset_s=gt_time_offset_s)
