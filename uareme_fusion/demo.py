@@ -169,11 +169,17 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
     return figures
 
 
+TILT_PLOT_LINEAR_DEG = 10.0
+"""The demo's tilt plot is linear below this (every degree labelled), logarithmic above."""
+TILT_PLOT_TICKS_DEG = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 20, 50, 100, 180)
+
+
 def _plot_tilt(tilts: dict, path: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FixedLocator, FormatStrFormatter
 
     path.parent.mkdir(parents=True, exist_ok=True)
     fig, axes = plt.subplots(len(tilts), 1, figsize=(10, 3.2 * len(tilts)), squeeze=False)
@@ -181,7 +187,11 @@ def _plot_tilt(tilts: dict, path: Path) -> Path:
         for name, (t, tilt) in rows.items():
             ax.plot(t, tilt, lw=1, label=name)
         ax.set(xlabel="time (s)", ylabel="tilt error (deg)", title=f"{scene}: vision, IMU, fused")
-        ax.set_yscale("symlog", linthresh=1.0)
+        # linear up to 10 deg, where the methods differ by a few degrees; logarithmic above for failures
+        ax.set_yscale("symlog", linthresh=TILT_PLOT_LINEAR_DEG, linscale=2.0)
+        ax.yaxis.set_major_locator(FixedLocator(TILT_PLOT_TICKS_DEG))
+        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.set_ylim(0, max(TILT_PLOT_LINEAR_DEG, *(float(np.nanmax(v[1], initial=0)) * 1.2 for v in rows.values())))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()

@@ -9,7 +9,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from ..config import load_config, validate_config
+from ..config import load_config, preset_names, validate_config
 from ..pipeline import RunConfig
 from ..pipeline.session import configure_imu, make_output_folder, run_source
 from .app import app, err_console, fail
@@ -17,6 +17,8 @@ from .progress import frame_progress
 
 SOURCE_HELP = ("A video file, webcam:N, an image, folder or glob of images, a dataset folder (TUM RGB-D, "
                "ICL-NUIM, EuRoC, one written by 'simulate'), a BROAD .hdf5 or IMU .csv, sim:SCENARIO, or oak[:ID].")
+EKF_PRESETS = [name for name in preset_names() if name != "paper"]
+"""The EKF presets shipped in configs/ (paper.yaml holds the smoother's settings)."""
 STOP_EXIT_CODES = {"end": 0, "max_frames": 0, "source_error": 1, "input_error": 2, "interrupted": 130}
 
 
@@ -44,7 +46,7 @@ def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Op
         with_ground_truth_file(opened, gt, gt_time_offset_s)
     with (opened if record_dir is None else record(opened, record_dir)) as src:
         sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
-        total = src.info.n_frames if src.info.has_frames else None
+        total = src.info.n_frames if src.info.has_frames else getattr(src, "n_batches", None)
         if cfg.max_frames and total:
             total = min(total, cfg.max_frames)
         with frame_progress(command, total) as on_result:
@@ -98,7 +100,7 @@ def _options():
         normals=typer.Option(None, "--normals",
                              help="auto (default), learned, depth, source, a model file (.pt) or a folder of normal maps."),
         config=typer.Option(None, "--config", help="YAML run configuration (keys of RunConfig)."),
-        preset=typer.Option(None, "--preset", help="EKF preset: building, vehicle, handheld or a YAML path."),
+        preset=typer.Option(None, "--preset", help=f"EKF preset: {', '.join(EKF_PRESETS)} or a YAML path."),
         max_frames=typer.Option(None, "--max-frames", help="Stop after this many frames."),
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
