@@ -15,6 +15,7 @@ Convention: `v_c = R_ci v_i`; IMU stamps plus `SourceInfo.imu_time_offset_s` are
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterator
 
 import numpy as np
@@ -48,7 +49,9 @@ def estimate_imu_rotation(phi_i: np.ndarray, phi_c: np.ndarray, dt_s: np.ndarray
     phi_i, phi_c, dt_s = np.asarray(phi_i, float), np.asarray(phi_c, float), np.asarray(dt_s, float)
     bias = np.zeros(3)
     for _ in range(BIAS_ITERATIONS):
-        rot, _ = Rotation.align_vectors(phi_c, phi_i - bias * dt_s[:, None])
+        with warnings.catch_warnings():  # a poorly defined rotation shows in `uncertainty_deg`
+            warnings.simplefilter("ignore", UserWarning)
+            rot, _ = Rotation.align_vectors(phi_c, phi_i - bias * dt_s[:, None])
         bias = (dt_s[:, None] * (phi_i - rot.inv().apply(phi_c))).sum(0) / np.sum(dt_s**2)
     residual = phi_c - rot.apply(phi_i - bias * dt_s[:, None])
     residual_rad = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
@@ -107,18 +110,20 @@ class ImuRotationCheck:
             self._imu_w.append(np.asarray(batch.gyro_rad_s, float))
 
     def write(self, result: FrameResult) -> None:
-        if result.visual is None or len(self.pairs) >= MAX_PAIRS:
-            self._prev = None if result.visual is None else self._prev
+        if len(self.pairs) >= MAX_PAIRS:
             return
         t, prev = result.t_s, self._prev
-        R_cm = result.visual.R_cm if prev is None else result.visual.symmetric_to(prev[1]).R_cm
-        if prev is not None and 0 < t - prev[0] <= MAX_PAIR_GAP_S:
-            phi_c = Rotation.from_matrix(prev[1] @ R_cm.T).as_rotvec()
-            phi_i = self._gyro_rotvec(prev[0], t)
-            if phi_i is not None and np.degrees(np.linalg.norm(phi_c)) < MAX_VISUAL_STEP_DEG:
-                self.pairs.append((phi_i, phi_c, t - prev[0]))
-        self._prev = (t, R_cm)
-        self._keep_imu_after(t)
+        if result.visual is None:
+            self._prev = None
+        else:
+            R_cm = result.visual.R_cm if prev is None else result.visual.symmetric_to(prev[1]).R_cm
+            if prev is not None and 0 < t - prev[0] <= MAX_PAIR_GAP_S:
+                phi_c = Rotation.from_matrix(prev[1] @ R_cm.T).as_rotvec()
+                phi_i = self._gyro_rotvec(prev[0], t)
+                if phi_i is not None and np.degrees(np.linalg.norm(phi_c)) < MAX_VISUAL_STEP_DEG:
+                    self.pairs.append((phi_i, phi_c, t - prev[0]))
+            self._prev = (t, R_cm)
+        self._keep_imu_after(t)  # memory stays bounded by the samples of one frame interval
 
     def _gyro_rotvec(self, t0: float, t1: float) -> np.ndarray | None:
         """Rotation vector of the gyro integrated over camera time (t0, t1] (zero-order hold)."""
