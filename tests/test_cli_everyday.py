@@ -29,10 +29,16 @@ def test_preset_help_lists_imu_only():
         assert name in line
 
 
-@pytest.mark.parametrize("command", ["run", "eval", "horizon", "ground", "compare"])
-def test_threads_and_imu_options_on_every_command_that_runs_the_network(command):
+@pytest.mark.parametrize("command", ["run", "eval", "horizon", "ground", "compare", "demo", "normals", "bench"])
+def test_threads_on_every_command_that_runs_the_network(command):
     result = CliRunner().invoke(app, [command, "--help"], env={"COLUMNS": "200"})
-    for option in ("--threads", "--imu-rotation", "--imu-time-offset-s"):
+    assert "--threads" in result.output
+
+
+@pytest.mark.parametrize("command", ["run", "eval", "horizon", "ground", "compare"])
+def test_imu_geometry_options_on_every_command_that_merges_an_imu(command):
+    result = CliRunner().invoke(app, [command, "--help"], env={"COLUMNS": "200"})
+    for option in ("--imu-rotation", "--imu-time-offset-s"):
         assert option in result.output, (command, option)
 
 

@@ -110,7 +110,7 @@ DEMO_SCENES = {"room": ("handheld", 12.0), "bus": ("vehicle", 30.0)}
 
 
 def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: str = "learned",
-                scale_seconds: float = 1.0, progress=None) -> dict:
+                scale_seconds: float = 1.0, progress=None, threads: int | None = None) -> dict:
     """Rendered room and bus through the whole pipeline (normals -> solver -> EKF with IMU): tilt of
     vision only, IMU only (our filter, and vqf when installed) and fused; a table, a plot and the
     horizon overlay video of the bus."""
@@ -133,7 +133,8 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
         sinks = [collector]
         if out_dir is not None and scene == "bus":
             sinks.append(HorizonVideoSink(out_dir / "demo_bus_horizon.mp4", 15.0, panes=True))
-        pipeline = build_pipeline(source, RunConfig(normals=normals, mekf_preset=preset), sinks)
+        pipeline = build_pipeline(source, RunConfig(normals=normals, mekf_preset=preset,
+                                                     **({} if threads is None else {"threads": threads})), sinks)
         stats = pipeline.run(source, on_result=None if progress is None else progress(scene, source.info.n_frames))
         t = np.array([r.t_s for r in collector.results])
         R_true, _ = source.ground_truth().at(t)
@@ -201,7 +202,7 @@ def _plot_tilt(tilts: dict, path: Path) -> Path:
 
 
 def run_demo(console: Console | None = None, out_dir: Path | None = Path("uareme-demo"), normals: str = "learned",
-             progress=None) -> dict:
+             progress=None, threads: int | None = None) -> dict:
     console = console or Console()
     return {"solver": solver_demo(console), "scenes": fusion_demo(console, out_dir, normals=normals,
-                                                                  progress=progress)}
+                                                                  progress=progress, threads=threads)}
