@@ -132,3 +132,12 @@ def test_imu_time_offset_moves_imu_stamps_onto_the_camera_clock(phone_sequence):
     fixed, _ = _eval(phone_sequence, "camera_late.csv", "--imu-time-offset-s", "0.05")
     assert fixed["config"]["imu_time_offset_s"] == 0.05
     assert fixed["tilt_deg"]["mean"] == pytest.approx(reference["tilt_deg"]["mean"], abs=0.05)
+
+
+@pytest.mark.parametrize("args, words", [(["--imu-rotation", "xyz"], "imu_rotation: Value error, expected one of"),
+                                         (["--imu-rotation", "rrd"], "repeat an axis"),
+                                         (["--imu-time-offset-s", "nan"], "imu_time_offset_s")])
+def test_bad_imu_geometry_options_are_one_error_line_before_the_run(tmp_path, args, words):
+    result = CliRunner().invoke(app, ["run", "sim:room", "--max-frames", "2", "--out", str(tmp_path / "o"), *args])
+    assert result.exit_code == 2 and words in result.output, result.output
+    assert not (tmp_path / "o" / "summary.json").exists()

@@ -41,25 +41,38 @@ DISAGREEMENT_DEG = 30.0
 NEAR_CONVENTION_DEG = 20.0
 """An estimate this close to an axis-letter rotation is named by its letters."""
 BIAS_ITERATIONS = 5
+OUTLIER_FACTOR = 4.0
+"""A pair whose residual is above this many times the median residual is an outlier."""
 
 
 def estimate_imu_rotation(phi_i: np.ndarray, phi_c: np.ndarray, dt_s: np.ndarray) -> dict:
     """`R_ci` (3, 3) and gyro bias (3,) rad/s from rotation-vector pairs `phi_c ~ R_ci (phi_i - b dt)`,
-    with the excitation (deg, singular values of `phi_i`) and the RMS residual (deg)."""
+    with the excitation (deg, singular values of `phi_i`), the RMS residual (deg), the standard
+    deviation about the least excited axis (deg) and the pairs kept. Pairs whose residual exceeds
+    `OUTLIER_FACTOR` times the median (a visual rotation that jumped) are left out of a second fit."""
     phi_i, phi_c, dt_s = np.asarray(phi_i, float), np.asarray(phi_c, float), np.asarray(dt_s, float)
+    keep = np.ones(len(phi_i), bool)
+    for _ in range(2):
+        rot, bias = _fit(phi_i[keep], phi_c[keep], dt_s[keep])
+        residual = np.linalg.norm(phi_c - rot.apply(phi_i - bias * dt_s[:, None]), axis=1)
+        keep = residual <= OUTLIER_FACTOR * max(np.median(residual), 1e-9)
+    residual_rad = float(np.sqrt(np.mean(residual[keep] ** 2)))
+    excitation_rad = np.linalg.svd(phi_i[keep], compute_uv=False)
+    weakest = np.hypot(excitation_rad[1], excitation_rad[2])
+    return {"R_ci": rot.as_matrix(), "gyro_bias_rad_s": bias, "excitation_deg": np.degrees(excitation_rad),
+            "residual_deg_rms": float(np.degrees(residual_rad)), "pairs_kept": int(keep.sum()),
+            "uncertainty_deg": float(np.degrees(residual_rad / weakest)) if weakest > 0 else float("inf")}
+
+
+def _fit(phi_i: np.ndarray, phi_c: np.ndarray, dt_s: np.ndarray) -> tuple[Rotation, np.ndarray]:
+    """Kabsch (`align_vectors`) alternated with the least-squares gyro bias."""
     bias = np.zeros(3)
     for _ in range(BIAS_ITERATIONS):
         with warnings.catch_warnings():  # a poorly defined rotation shows in `uncertainty_deg`
             warnings.simplefilter("ignore", UserWarning)
             rot, _ = Rotation.align_vectors(phi_c, phi_i - bias * dt_s[:, None])
         bias = (dt_s[:, None] * (phi_i - rot.inv().apply(phi_c))).sum(0) / np.sum(dt_s**2)
-    residual = phi_c - rot.apply(phi_i - bias * dt_s[:, None])
-    residual_rad = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
-    excitation_rad = np.linalg.svd(phi_i, compute_uv=False)
-    weakest = np.hypot(excitation_rad[1], excitation_rad[2])
-    return {"R_ci": rot.as_matrix(), "gyro_bias_rad_s": bias, "excitation_deg": np.degrees(excitation_rad),
-            "residual_deg_rms": float(np.degrees(residual_rad)),
-            "uncertainty_deg": float(np.degrees(residual_rad / weakest)) if weakest > 0 else float("inf")}
+    return rot, bias
 
 
 class _TappedSource(Source):
@@ -161,7 +174,8 @@ class ImuRotationCheck:
                    nearest_axis_letters=letters, nearest_axis_letters_deg=off_deg,
                    angle_to_used_deg=float(np.degrees(Rotation.from_matrix(self.R_ci_used.T @ est["R_ci"]).magnitude())),
                    gyro_bias_rad_s=est["gyro_bias_rad_s"].tolist(), excitation_deg=est["excitation_deg"].tolist(),
-                   residual_deg_rms=est["residual_deg_rms"], uncertainty_deg=est["uncertainty_deg"])
+                   residual_deg_rms=est["residual_deg_rms"], uncertainty_deg=est["uncertainty_deg"],
+                   pairs_kept=est["pairs_kept"])
         if not observable:
             doc["note"] = (f"too little rotation about two or more axes: the estimate's uncertainty is "
                            f"{est['uncertainty_deg']:.1f} deg (> {MAX_UNCERTAINTY_DEG:g})")
