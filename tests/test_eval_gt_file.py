@@ -68,3 +68,16 @@ def test_missing_gt_file_is_one_error_line(plain):
     result = CliRunner().invoke(app, ["eval", str(plain / "plain"), "--gt", str(plain / "nope.txt"),
                                       "--out", str(plain / "x")])
     assert result.exit_code == 2 and "--gt" in result.output and "nope.txt" in result.output
+
+
+def test_euroc_imu_log_with_its_gt_file_scores_like_the_dataset(shared_data, tmp_path):
+    """A bare IMU log plus `--gt gt0/data.csv` gives the dataset folder's own scores (EuRoC V1_02)."""
+    mav0 = shared_data / "euroc_v1_02_first40s" / "mav0"
+    if not mav0.is_dir():
+        pytest.skip("euroc_v1_02_first40s not in the development data")
+    own = _scores(tmp_path, "own", str(mav0.parent), "--max-frames", "300")
+    from_file = _scores(tmp_path, "file", str(mav0 / "imu0" / "data.csv"), "--gt", str(mav0 / "gt0" / "data.csv"),
+                        "--max-frames", "300")
+    assert own["frames_scored"] == from_file["frames_scored"] > 200
+    assert from_file["tilt_deg"] == pytest.approx(own["tilt_deg"], abs=1e-9)
+    assert from_file["are_deg"] == pytest.approx(own["are_deg"], abs=1e-9)

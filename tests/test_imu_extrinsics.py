@@ -141,3 +141,19 @@ def test_bad_imu_geometry_options_are_one_error_line_before_the_run(tmp_path, ar
     result = CliRunner().invoke(app, ["run", "sim:room", "--max-frames", "2", "--out", str(tmp_path / "o"), *args])
     assert result.exit_code == 2 and words in result.output, result.output
     assert not (tmp_path / "o" / "summary.json").exists()
+
+
+def test_warning_names_letters_near_an_axis_convention_and_a_quaternion_otherwise():
+    from uareme_fusion.pipeline.imu_rotation_check import ImuRotationCheck
+
+    check = ImuRotationCheck(np.eye(3))
+    base = {"observable": True, "quat_xyzw": [0.0, 0.0, 0.2588, 0.9659]}
+    assert check.warning({**base, "angle_to_used_deg": 5.0, "nearest_axis_letters": "rdf",
+                          "nearest_axis_letters_deg": 5.0}) is None
+    near = check.warning({**base, "angle_to_used_deg": 92.0, "nearest_axis_letters": "flu",
+                          "nearest_axis_letters_deg": 3.0})
+    assert "--imu-rotation flu" in near and "(ros)" in near
+    far = check.warning({**base, "angle_to_used_deg": 45.0, "nearest_axis_letters": "rdf",
+                         "nearest_axis_letters_deg": 45.0})
+    assert "--imu-rotation 0.0000,0.0000,0.2588,0.9659" in far
+    assert check.warning({**base, "observable": False, "angle_to_used_deg": 180.0}) is None
