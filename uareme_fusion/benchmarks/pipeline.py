@@ -147,7 +147,9 @@ def run(seconds: float = 10.0, memory_minutes: float = 10.0, normals: str = "lea
     tp, busy = result["throughput"], result["throughput_busy"]
     result["busy_ratio"] = busy["fps"] / tp["fps"]
     stages = ", ".join(f"{k} {v:.1f}" for k, v in tp["timing_ms"].items())
-    shown = "default" if threads is None else str(threads)
+    from ..normals.learned import DEFAULT_THREADS
+
+    shown = f"{DEFAULT_THREADS} (default)" if threads is None else str(threads)
     print(f"pipeline, 640x480 input, {normals} normals ({shown} torch threads), mekf + 200 Hz IMU, "
           f"{tp['frames']} frames:")
     print(f"  ms per frame: {stages}; total {tp['pipeline_ms']:.1f} ms")
