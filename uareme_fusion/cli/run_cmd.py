@@ -87,6 +87,11 @@ def print_summary(summary: dict) -> None:
         table.add_row("ARE deg (mean / median / max)", f"{a['mean']:.2f} / {a['median']:.2f} / {a['max']:.2f}")
         table.add_row("tilt deg (mean / p95 / max)", f"{t['mean']:.2f} / {t['p95']:.2f} / {t['max']:.2f}")
         table.add_row("NEES mean", f"{summary['nees']['mean']:.2f}")
+    est = summary.get("imu_rotation_estimate", {})
+    if est.get("observable"):
+        table.add_row("camera-IMU rotation (from data)",
+                      f"{est['nearest_axis_letters']} within {est['nearest_axis_letters_deg']:.1f} deg; "
+                      f"{est['angle_to_used_deg']:.1f} deg from the one used")
     table.add_row("outputs", ", ".join(summary["outputs"]))
     console.print(table)
     for line in summary.get("warnings", []):
