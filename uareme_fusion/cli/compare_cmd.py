@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Optional
 
 import typer
@@ -67,11 +68,5 @@ def _source_sequence(spec: str, imu: Optional[Path], fps: Optional[float], cfg):
     with configure_imu(open_source(spec, imu=None if imu is None else str(imu), fps=fps), cfg) as src:
         total = min(filter(None, [src.info.n_frames, cfg.max_frames]), default=None)
         with frame_progress("compare: visual rotations", total) as on_result:
-            return source_sequence(src, cfg, progress=lambda done, _: on_result(None, _Done(done)))
-
-
-class _Done:
-    """What `frame_progress`'s callback reads of a run's stats."""
-
-    def __init__(self, estimates: int):
-        self.estimates = estimates
+            # frame_progress reads only `stats.estimates`
+            return source_sequence(src, cfg, progress=lambda done, _: on_result(None, SimpleNamespace(estimates=done)))
