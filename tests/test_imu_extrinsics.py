@@ -42,7 +42,8 @@ def test_kalibr_camchain_gives_the_rotation_of_T_cam_imu(tmp_path):
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, [0.01, 0.02, -0.03]
     path = tmp_path / "camchain-imucam.yaml"
-    path.write_text(f"cam0:\n  T_cam_imu:\n" + "".join(f"  - {row.tolist()}\n" for row in T) + "  timeshift_cam_imu: 0.0\n")
+    rows = "".join(f"  - {row.tolist()}\n" for row in T)
+    path.write_text("cam0:\n  T_cam_imu:\n" + rows + "  timeshift_cam_imu: 0.0\n")
     np.testing.assert_allclose(parse_imu_rotation(str(path)), R, atol=1e-12)
 
 

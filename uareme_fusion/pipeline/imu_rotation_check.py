@@ -169,10 +169,11 @@ class ImuRotationCheck:
         est = estimate_imu_rotation(phi_i, phi_c, dt)
         observable = bool(est["uncertainty_deg"] <= MAX_UNCERTAINTY_DEG)
         letters, off_deg = axis_letters(est["R_ci"])
+        to_used_deg = float(np.degrees(Rotation.from_matrix(self.R_ci_used.T @ est["R_ci"]).magnitude()))
         doc.update(observable=observable, R_ci=est["R_ci"].tolist(),
                    quat_xyzw=Rotation.from_matrix(est["R_ci"]).as_quat().tolist(),
                    nearest_axis_letters=letters, nearest_axis_letters_deg=off_deg,
-                   angle_to_used_deg=float(np.degrees(Rotation.from_matrix(self.R_ci_used.T @ est["R_ci"]).magnitude())),
+                   angle_to_used_deg=to_used_deg,
                    gyro_bias_rad_s=est["gyro_bias_rad_s"].tolist(), excitation_deg=est["excitation_deg"].tolist(),
                    residual_deg_rms=est["residual_deg_rms"], uncertainty_deg=est["uncertainty_deg"],
                    pairs_kept=est["pairs_kept"])
