@@ -166,9 +166,9 @@ def test_compare_corrupt_normal_map_names_it(tmp_path):
 COMPARE_OPTION_CASES = [
     ("no_source", [], "give either a dataset folder SOURCE or --synthetic"),
     ("both_sources", ["SEQ", "--synthetic", "walk"], "not both"),
-    ("missing_folder", ["MISSING"], "no such dataset folder"),
-    ("file_as_source", ["FILE"], "expected a dataset folder .* got a file"),
-    ("empty_folder", ["EMPTY"], "no normals"),
+    ("missing_folder", ["MISSING"], "no such file or folder"),
+    ("file_as_source", ["FILE"], "OpenCV cannot open it"),  # any source 'run' accepts: not a video
+    ("empty_folder", ["EMPTY"], "not a dataset .* holds no image files"),
     ("unknown_trajectory", ["--synthetic", "moon"], "unknown trajectory 'moon'"),
     ("negative_duration", ["--synthetic", "static", "--duration-s", "-1"], "Invalid value for '--duration-s'"),
     ("huge_duration", ["--synthetic", "static", "--duration-s", "1e9"], "less than or equal to 3600"),

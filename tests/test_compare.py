@@ -125,6 +125,6 @@ def test_cli_compare_synthetic_and_bad_source(tmp_path):
     assert result.exit_code == 0, result.output
     assert "| smoother |" in result.output and (tmp_path / "compare.json").is_file()
     result = runner.invoke(app, ["compare", str(tmp_path / "missing"), "--out", str(tmp_path / "o")])
-    assert result.exit_code == 2 and "no such dataset folder" in result.output
+    assert result.exit_code == 2 and "no such file or folder" in result.output
     result = runner.invoke(app, ["compare", "--out", str(tmp_path / "o")])
     assert result.exit_code == 2

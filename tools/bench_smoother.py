@@ -41,7 +41,7 @@ def main() -> None:
                 means[n].append(rows[n]["are_deg_mean"])
             ratio = rows["smoother-gyro"]["are_deg_mean"] / rows["smoother"]["are_deg_mean"]
             print(f"{scenario:8s} {seed:4d} " + " ".join(
-                f"{rows[n]['are_deg_mean']:8.2f} ({rows[n]['are_deg_max']:5.1f}, {rows[n]['jumps_over_10deg']:3d})"
+                f"{rows[n]['are_deg_mean']:8.2f} ({rows[n]['are_deg_max']:5.1f}, {rows[n]['frames_are_over_10deg']:3d})"
                 for n in names)
                 + f"   {ratio:.2f}")
         wins = sum(g < p for g, p in zip(means["smoother-gyro"], means["smoother"]))

@@ -110,7 +110,7 @@ DEMO_SCENES = {"room": ("handheld", 12.0), "bus": ("vehicle", 30.0)}
 
 
 def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: str = "learned",
-                scale_seconds: float = 1.0, progress=None) -> dict:
+                scale_seconds: float = 1.0, progress=None, threads: int | None = None) -> dict:
     """Rendered room and bus through the whole pipeline (normals -> solver -> EKF with IMU): tilt of
     vision only, IMU only (our filter, and vqf when installed) and fused; a table, a plot and the
     horizon overlay video of the bus."""
@@ -133,7 +133,8 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
         sinks = [collector]
         if out_dir is not None and scene == "bus":
             sinks.append(HorizonVideoSink(out_dir / "demo_bus_horizon.mp4", 15.0, panes=True))
-        pipeline = build_pipeline(source, RunConfig(normals=normals, mekf_preset=preset), sinks)
+        pipeline = build_pipeline(source, RunConfig(normals=normals, mekf_preset=preset,
+                                                     **({} if threads is None else {"threads": threads})), sinks)
         stats = pipeline.run(source, on_result=None if progress is None else progress(scene, source.info.n_frames))
         t = np.array([r.t_s for r in collector.results])
         R_true, _ = source.ground_truth().at(t)
@@ -169,11 +170,17 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
     return figures
 
 
+TILT_PLOT_LINEAR_DEG = 10.0
+"""The demo's tilt plot is linear below this (every degree labelled), logarithmic above."""
+TILT_PLOT_TICKS_DEG = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 20, 50, 100, 180)
+
+
 def _plot_tilt(tilts: dict, path: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FixedLocator, FormatStrFormatter
 
     path.parent.mkdir(parents=True, exist_ok=True)
     fig, axes = plt.subplots(len(tilts), 1, figsize=(10, 3.2 * len(tilts)), squeeze=False)
@@ -181,7 +188,11 @@ def _plot_tilt(tilts: dict, path: Path) -> Path:
         for name, (t, tilt) in rows.items():
             ax.plot(t, tilt, lw=1, label=name)
         ax.set(xlabel="time (s)", ylabel="tilt error (deg)", title=f"{scene}: vision, IMU, fused")
-        ax.set_yscale("symlog", linthresh=1.0)
+        # linear up to 10 deg, where the methods differ by a few degrees; logarithmic above for failures
+        ax.set_yscale("symlog", linthresh=TILT_PLOT_LINEAR_DEG, linscale=2.0)
+        ax.yaxis.set_major_locator(FixedLocator(TILT_PLOT_TICKS_DEG))
+        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.set_ylim(0, max(TILT_PLOT_LINEAR_DEG, *(float(np.nanmax(v[1], initial=0)) * 1.2 for v in rows.values())))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
@@ -191,7 +202,7 @@ def _plot_tilt(tilts: dict, path: Path) -> Path:
 
 
 def run_demo(console: Console | None = None, out_dir: Path | None = Path("uareme-demo"), normals: str = "learned",
-             progress=None) -> dict:
+             progress=None, threads: int | None = None) -> dict:
     console = console or Console()
     return {"solver": solver_demo(console), "scenes": fusion_demo(console, out_dir, normals=normals,
-                                                                  progress=progress)}
+                                                                  progress=progress, threads=threads)}

@@ -65,6 +65,26 @@ class _ErrorBoundaryGroup(TyperGroup):
             raise typer.Exit(130) from None
 
 
+def _flags_without_type(option_class) -> None:
+    """Help without `<bool>` beside on/off flags (`--panes`, `--help`): typer's rich help prints a
+    type for every option, and a flag takes no value."""
+    show_type = option_class.display_type_rich
+
+    def display_type_rich(self, ctx):
+        return None if getattr(self, "is_flag", False) else show_type(self, ctx)
+
+    option_class.display_type_rich = display_type_rich
+
+
+try:  # the option class of recent typer versions; older ones print no type for flags
+    from typer.core import TyperOption
+
+    if hasattr(TyperOption, "display_type_rich"):
+        _flags_without_type(TyperOption)
+except ImportError:
+    pass
+
+
 app = typer.Typer(
     name="uareme-fusion",
     cls=_ErrorBoundaryGroup,

@@ -34,6 +34,8 @@ def bench(
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
     data: Path = typer.Option(Path("../shared/data/broad_subset"), "--data",
                               help="broad: folder of BROAD .hdf5 trials (needs the bench extra for vqf)."),
+    threads: int = typer.Option(None, "--threads", min=1, max=256,
+                                help="pipeline: torch CPU threads of the learned normals (default 1)."),
     json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
 ) -> None:
     """Time a benchmark on this machine and print its figures against the goals."""
@@ -48,7 +50,7 @@ def bench(
     elif what == "pipeline":
         from ..benchmarks import pipeline
 
-        results = pipeline.run(seconds, memory_minutes, normals)
+        results = pipeline.run(seconds, memory_minutes, normals, threads)
     elif what == "broad":
         from ..benchmarks import broad
 

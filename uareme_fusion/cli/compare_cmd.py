@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Optional
 
 import typer
 
 from ..compare import compare, load_sequence, synthetic_sequence
 from .app import app, fail
+from .run_cmd import _o, run_config
 
 MAX_SYNTHETIC_DURATION_S = 3600.0
 """The synthetic sequence is held in memory: an hour at 15 fps is about 54000 frames."""
@@ -16,7 +18,9 @@ MAX_SYNTHETIC_DURATION_S = 3600.0
 
 @app.command("compare")
 def compare_command(
-    source: Optional[Path] = typer.Argument(None, help="Dataset folder written by 'uareme-fusion simulate'."),
+    source: Optional[str] = typer.Argument(None, help="Any source 'run' accepts (a video, images, a dataset "
+                                                      "folder, sim:SCENARIO); a 'simulate' folder uses its "
+                                                      "normals unless --normals is given."),
     out: Path = typer.Option(..., "--out", help="Folder for compare.md, compare.json and compare.png."),
     synthetic: Optional[str] = typer.Option(
         None, help="Build the sequence in memory from this simulator trajectory (walk, shake, static, bus, ...)."),
@@ -25,6 +29,11 @@ def compare_command(
                                      help="Length of the synthetic sequence, seconds."),
     drop_fraction: float = typer.Option(0.1, help="Synthetic: fraction of frames without a visual rotation."),
     bad_fraction: float = typer.Option(0.05, help="Synthetic: fraction of frames with random normals."),
+    normals: Optional[str] = typer.Option(None, "--normals", help="As 'run': auto, learned, depth, source, a model "
+                                                                  "file (.pt) or a folder of normal maps."),
+    imu: Optional[Path] = _o["imu"], max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
+    imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
 ) -> None:
     """Run every backend on the same visual rotations and IMU; write a table and an error plot."""
     if (source is None) == (synthetic is None):
@@ -32,9 +41,32 @@ def compare_command(
     if synthetic is not None:
         seq = synthetic_sequence(synthetic, seed=seed, duration_s=duration_s, drop_fraction=drop_fraction,
                                  bad_fraction=bad_fraction)
-    else:
+    elif normals is None and imu is None and _has_saved_normals(Path(source)):
         seq = load_sequence(source)
+    else:
+        seq = _source_sequence(source, imu, fps, run_config(None, normals=normals, max_frames=max_frames,
+                                                            threads=threads, imu_rotation=imu_rotation,
+                                                            imu_time_offset_s=imu_time_offset_s))
     doc = compare(seq, out)
     typer.echo((out / "compare.md").read_text())
     typer.echo(f"wrote {out / 'compare.md'}, {out / 'compare.json'}, {out / 'compare.png'} "
                f"({len(doc['backends'])} backends)")
+
+
+def _has_saved_normals(folder: Path) -> bool:
+    """A folder written by 'simulate' (normals.npz or normals/): `load_sequence` reads it."""
+    return folder.is_dir() and ((folder / "normals.npz").is_file() or (folder / "normals").is_dir())
+
+
+def _source_sequence(spec: str, imu: Optional[Path], fps: Optional[float], cfg):
+    """The visual rotations of any source, computed once (`compare_source.source_sequence`)."""
+    from ..compare_source import source_sequence
+    from ..drivers import open_source
+    from ..pipeline.session import configure_imu
+    from .progress import frame_progress
+
+    with configure_imu(open_source(spec, imu=None if imu is None else str(imu), fps=fps), cfg) as src:
+        total = min(filter(None, [src.info.n_frames, cfg.max_frames]), default=None)
+        with frame_progress("compare: visual rotations", total) as on_result:
+            # frame_progress reads only `stats.estimates`
+            return source_sequence(src, cfg, progress=lambda done, _: on_result(None, SimpleNamespace(estimates=done)))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from contextlib import ExitStack
 from pathlib import Path
+from typing import Optional
 
 import typer
 
@@ -15,6 +16,8 @@ from .progress import frame_progress
 def demo(
     out: Path = typer.Option(Path("uareme-demo"), help="Folder for the demo's plot and overlay video."),
     normals: str = typer.Option("learned", help="learned (the shipped network) or source (the simulator's exact normals)."),
+    threads: Optional[int] = typer.Option(None, "--threads", min=1, max=256,
+                                          help="torch CPU threads of the learned normals (default 1)."),
 ) -> None:
     """Run the method on built-in synthetic data and print what it gets right (about a minute)."""
     if out.exists() and not out.is_dir():
@@ -27,4 +30,4 @@ def demo(
         def progress(scene, total):
             return stack.enter_context(frame_progress(f"demo {scene}", total))
 
-        run_demo(out_dir=out, normals=normals, progress=progress)
+        run_demo(out_dir=out, normals=normals, progress=progress, threads=threads)

@@ -20,6 +20,8 @@ def normals_command(
                                          "dict, RGB in [0, 1] -> normal + kappa); default: the shipped weights."),
     kappa_cap: float = typer.Option(75.0, "--kappa-cap", min=1e-3, help="kappa cap; white in the confidence image."),
     intrinsics: Optional[str] = _o["intrinsics"],
+    threads: int = typer.Option(1, "--threads", min=1, max=256, help="torch CPU threads (1: fast beside other "
+                                                                      "busy programs)."),
 ) -> None:
     """Surface normals (coloured X-Y-Z to R-G-B, OpenCV camera frame) and confidence (white = confident)."""
     from ..drivers.intrinsics import parse_intrinsics
@@ -27,7 +29,7 @@ def normals_command(
     from ..normals.learned import LearnedNormals, LearnedNormalsConfig
 
     camera = parse_intrinsics(intrinsics) if intrinsics is not None else None
-    estimator = LearnedNormals(model=model, config=LearnedNormalsConfig(kappa_cap=kappa_cap))
+    estimator = LearnedNormals(model=model, config=LearnedNormalsConfig(kappa_cap=kappa_cap, threads=threads))
     columns = [TextColumn("[bold]normals"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()]
     with Progress(*columns, console=err_console) as progress:
         task = progress.add_task("normals", total=None)

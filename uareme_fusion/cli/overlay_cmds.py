@@ -27,13 +27,16 @@ def horizon_command(
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
     intrinsics: Optional[str] = _o["intrinsics"],
+    threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
+    imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
     panes: bool = typer.Option(False, "--panes", help="Add panes of normals and confidence beside each frame."),
     fov_deg: Optional[float] = typer.Option(None, "--fov-deg",
                                             help="Assumed horizontal field of view when K is unknown (default 60)."),
 ) -> None:
     """Draw the horizon and the Manhattan axes on every frame of a video."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
-                     intrinsics=intrinsics, assumed_fov_deg=fov_deg)
+                     intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
+                     imu_time_offset_s=imu_time_offset_s, assumed_fov_deg=fov_deg)
     if out.suffix.lower() not in VIDEO_CODECS:
         raise InputError(f"--out {out}: unsupported video extension; use one of {', '.join(VIDEO_CODECS)}")
 
@@ -41,9 +44,9 @@ def horizon_command(
         needs_frames(src, "horizon")
         return [HorizonVideoSink(out, src.info.fps or 30.0, cfg.assumed_fov_deg, panes)]
 
-    execute(source, out.parent / f"{out.stem}.run", cfg, imu, fps, evaluate=False, command="horizon",
-            extra_sinks_factory=sinks)
-    typer.echo(f"wrote {out}")
+    summary = execute(source, out.parent / f"{out.stem}.run", cfg, imu, fps, evaluate=False, command="horizon",
+                      extra_sinks_factory=sinks)
+    typer.echo(f"wrote {out} ({summary.get('videos', {}).get(out.name, 'no frames')})")
 
 
 @app.command("ground")
@@ -54,13 +57,16 @@ def ground_command(
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
     intrinsics: Optional[str] = _o["intrinsics"],
+    threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
+    imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
     video: bool = typer.Option(False, "--video", help="Write the overlays as OUT/ground.mp4 instead of images."),
     threshold_deg: Optional[float] = typer.Option(None, "--threshold-deg",
                                                   help="Ground when the normal is within this angle of up (15)."),
 ) -> None:
     """Segment the ground: pixels whose normal is within a threshold of the estimated up vector."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
-                     intrinsics=intrinsics, ground_threshold_deg=threshold_deg)
+                     intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
+                     imu_time_offset_s=imu_time_offset_s, ground_threshold_deg=threshold_deg)
 
     def sinks(src, out_dir, cfg):
         needs_frames(src, "ground")

@@ -9,14 +9,16 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from ..config import load_config, validate_config
+from ..config import load_config, preset_names, validate_config
 from ..pipeline import RunConfig
-from ..pipeline.session import make_output_folder, run_notes, run_source
+from ..pipeline.session import configure_imu, make_output_folder, run_notes, run_source
 from .app import app, err_console, fail
 from .progress import frame_progress
 
 SOURCE_HELP = ("A video file, webcam:N, an image, folder or glob of images, a dataset folder (TUM RGB-D, "
                "ICL-NUIM, EuRoC, one written by 'simulate'), a BROAD .hdf5 or IMU .csv, sim:SCENARIO, or oak[:ID].")
+EKF_PRESETS = [name for name in preset_names() if name != "paper"]
+"""The EKF presets shipped in configs/ (paper.yaml holds the smoother's settings)."""
 STOP_EXIT_CODES = {"end": 0, "max_frames": 0, "source_error": 1, "input_error": 2, "interrupted": 130}
 
 
@@ -28,7 +30,8 @@ def run_config(config: Optional[Path], **overrides) -> RunConfig:
 
 
 def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Optional[float], evaluate: bool,
-            command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None) -> dict:
+            command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None,
+            gt: Optional[Path] = None, gt_time_offset_s: float = 0.0) -> dict:
     """Open the source, run it with a progress bar, report how it ended; exits non-zero when it failed.
 
     With `record_dir` the source's frames and IMU are also written there as they pass (our dataset
@@ -36,11 +39,16 @@ def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Op
     from ..drivers import open_source, record
 
     out_dir = make_output_folder(out)
-    opened = open_source(source, imu=None if imu is None else str(imu), fps=fps, intrinsics=cfg.intrinsics)
+    opened = configure_imu(open_source(source, imu=None if imu is None else str(imu), fps=fps,
+                                       intrinsics=cfg.intrinsics), cfg)
+    if gt is not None:
+        from ..drivers.ground_truth_file import with_ground_truth_file
+
+        with_ground_truth_file(opened, gt, gt_time_offset_s)
     with (opened if record_dir is None else record(opened, record_dir)) as src:
         print_notes(*run_notes(src, cfg))
         sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
-        total = src.info.n_frames if src.info.has_frames else None
+        total = src.info.n_frames if src.info.has_frames else getattr(src, "n_batches", None)
         if cfg.max_frames and total:
             total = min(total, cfg.max_frames)
         with frame_progress(command, total) as on_result:
@@ -59,6 +67,19 @@ def print_notes(notes: list[str], fixes: list[str]) -> None:
         err_console.print(f"warning: {fix}", markup=False, emoji=False, style="yellow")
     for note in notes:
         err_console.print(f"note: {note}", markup=False, emoji=False)
+
+
+def rerun_sinks(path: Optional[Path]):
+    """The sinks factory of `--rerun PATH` for `execute` (None without it)."""
+    if path is None:
+        return None
+
+    def factory(src, out_dir, cfg):
+        from ..pipeline.rerun_sink import RerunSink
+
+        return [RerunSink(path, cfg.assumed_fov_deg)]
+
+    return factory
 
 
 def print_summary(summary: dict) -> None:
@@ -80,8 +101,15 @@ def print_summary(summary: dict) -> None:
         table.add_row("ARE deg (mean / median / max)", f"{a['mean']:.2f} / {a['median']:.2f} / {a['max']:.2f}")
         table.add_row("tilt deg (mean / p95 / max)", f"{t['mean']:.2f} / {t['p95']:.2f} / {t['max']:.2f}")
         table.add_row("NEES mean", f"{summary['nees']['mean']:.2f}")
+    est = summary.get("imu_rotation_estimate", {})
+    if est.get("observable"):
+        table.add_row("camera-IMU rotation (from data)",
+                      f"{est['nearest_axis_letters']} within {est['nearest_axis_letters_deg']:.1f} deg; "
+                      f"{est['angle_to_used_deg']:.1f} deg from the one used")
     table.add_row("outputs", ", ".join(summary["outputs"]))
     console.print(table)
+    for line in summary.get("warnings", []):
+        err_console.print(f"[bold yellow]warning:[/] {line}", markup=True, emoji=False, highlight=False)
 
 
 def _options():
@@ -91,7 +119,7 @@ def _options():
         normals=typer.Option(None, "--normals",
                              help="auto (default), learned, depth, source, a model file (.pt) or a folder of normal maps."),
         config=typer.Option(None, "--config", help="YAML run configuration (keys of RunConfig)."),
-        preset=typer.Option(None, "--preset", help="EKF preset: building, vehicle, handheld, imu_only or a YAML path "
+        preset=typer.Option(None, "--preset", help=f"EKF preset: {', '.join(EKF_PRESETS)} or a YAML path "
                                                     "(default: handheld with a camera, imu_only for an IMU log)."),
         intrinsics=typer.Option(None, "--intrinsics", help="Camera intrinsics: fx,fy,cx,cy in pixels (optionally "
                                 "followed by k1,k2,p1,p2[,k3]) or a camera file (OpenCV YAML/JSON, Kalibr camchain, "
@@ -100,6 +128,19 @@ def _options():
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
                                                      "(replay it later with 'run FOLDER')."),
+        threads=typer.Option(None, "--threads", min=1, max=256,
+                             help="torch CPU threads of the learned normals (default 1: fast beside other busy "
+                                  "programs)."),
+        imu_rotation=typer.Option(None, "--imu-rotation",
+                                  help="Camera-from-IMU rotation: android, ios, axis letters of the IMU seen from "
+                                       "the camera (rub, flu, ...), a 3x3 (9 numbers), a quaternion x,y,z,w or a "
+                                       "Kalibr camchain .yaml (default: the source's own, identity)."),
+        rerun=typer.Option(None, "--rerun", help="Also log the run to this rerun recording (.rrd): image with "
+                                                   "horizon and axes, camera in 3D, tilt, std and status over "
+                                                   "time, normals and confidence (needs the 'viewer' extra)."),
+        imu_time_offset_s=typer.Option(None, "--imu-time-offset-s",
+                                       help="Seconds added to IMU stamps to put them on the camera clock "
+                                            "(default: the source's own, 0)."),
     )
 
 
@@ -113,12 +154,17 @@ def run_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
-    record: Optional[Path] = _o["record"], intrinsics: Optional[str] = _o["intrinsics"],
+    threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
+    imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
+    record: Optional[Path] = _o["record"], rerun: Optional[Path] = _o["rerun"],
+    intrinsics: Optional[str] = _o["intrinsics"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
-                     intrinsics=intrinsics)
-    execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record)
+                     intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
+                     imu_time_offset_s=imu_time_offset_s)
+    execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record,
+            extra_sinks_factory=rerun_sinks(rerun))
 
 
 @app.command("eval")
@@ -128,9 +174,17 @@ def eval_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
+    imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"], rerun: Optional[Path] = _o["rerun"],
     intrinsics: Optional[str] = _o["intrinsics"],
+    gt: Optional[Path] = typer.Option(None, "--gt", help="Ground-truth trajectory (TUM 'timestamp tx ty tz qx qy qz "
+                                                         "qw', or EuRoC gt0/data.csv) in place of the source's own."),
+    gt_time_offset_s: float = typer.Option(0.0, "--gt-time-offset-s",
+                                           help="Seconds added to the --gt stamps to put them on the source's clock."),
 ) -> None:
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
-                     intrinsics=intrinsics)
-    execute(source, out, cfg, imu, fps, evaluate=True, command="eval")
+                     intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
+                     imu_time_offset_s=imu_time_offset_s)
+    execute(source, out, cfg, imu, fps, evaluate=True, command="eval", extra_sinks_factory=rerun_sinks(rerun),
+            gt=gt, gt_time_offset_s=gt_time_offset_s)

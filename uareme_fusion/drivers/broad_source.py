@@ -18,7 +18,7 @@ import numpy as np
 
 from .base import GroundTruth, ImuBatch, Source, SourceInfo
 from .broad import read_broad
-from .interleave import IMU_ONLY_BATCH_S, split_by_span
+from .interleave import IMU_ONLY_BATCH_S, count_spans, split_by_span
 
 
 class BroadSource(Source):
@@ -33,6 +33,11 @@ class BroadSource(Source):
         self.notes = ([f"{path}: {self.n_reference_missing} samples without optical reference (left out of "
                        "the ground truth)"] if self.n_reference_missing else [])
         self.info = SourceInfo(name=str(path), n_frames=0, fps=None, has_frames=False, has_imu=True)
+
+    @property
+    def n_batches(self) -> int:
+        """Batches (so estimates) the run will give: the progress bar's length."""
+        return count_spans(self.trial.t_s, self.batch_s)
 
     def events(self) -> Iterator[ImuBatch]:
         yield from split_by_span(self.trial.t_s, self.trial.gyro_rad_s, self.trial.accel_m_s2, self.batch_s)

@@ -153,12 +153,17 @@ class EurocSource(Source):
                 break
         else:
             return None
-        table = read_table(path, GT_COLUMNS, delimiter=",", kind="an EuRoC ground-truth file")
-        if len(table) == 0:
-            raise InputError(f"{path}: holds no ground-truth rows")
-        t_ns = table.ints(0)
-        table.require_increasing(t_ns)
-        quat_wxyz = table.floats(slice(4, 8))
-        table.require_finite(quat_wxyz, "quaternion")
-        R_RS = Rotation.from_quat(quat_wxyz, scalar_first=True).as_matrix()
-        return GroundTruth(t_ns * 1e-9, R_RS @ self.R_BS_cam, gravity_aligned=True)
+        t_s, R_RS = read_euroc_ground_truth(path)
+        return GroundTruth(t_s, R_RS @ self.R_BS_cam, gravity_aligned=True)
+
+
+def read_euroc_ground_truth(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """An EuRoC ground-truth CSV -> (t_s (N,), R_RS (N, 3, 3): body (IMU) to the gravity-aligned world)."""
+    table = read_table(path, GT_COLUMNS, delimiter=",", kind="an EuRoC ground-truth file")
+    if len(table) == 0:
+        raise InputError(f"{path}: holds no ground-truth rows")
+    t_ns = table.ints(0)
+    table.require_increasing(t_ns)
+    quat_wxyz = table.floats(slice(4, 8))
+    table.require_finite(quat_wxyz, "quaternion")
+    return t_ns * 1e-9, Rotation.from_quat(quat_wxyz, scalar_first=True).as_matrix()

@@ -30,7 +30,7 @@ from uareme_fusion.io.text_tables import sniff_delimiter
 from .base import GroundTruth, ImuBatch, Source, SourceInfo
 from .euroc_imu import EurocImu, read_euroc_imu
 from .imu_checks import check_imu_log
-from .interleave import IMU_ONLY_BATCH_S, interleave, split_by_span
+from .interleave import IMU_ONLY_BATCH_S, count_spans, interleave, split_by_span
 
 
 def read_imu_log(path: str | Path) -> tuple[EurocImu, list[str]]:
@@ -65,6 +65,11 @@ class ImuCsvSource(Source):
 
     def batches(self) -> Iterator[ImuBatch]:
         yield from split_by_span(self.imu.t_s, self.imu.gyro_rad_s, self.imu.accel_m_s2, self.batch_s)
+
+    @property
+    def n_batches(self) -> int:
+        """Batches (so estimates) the run will give: the progress bar's length."""
+        return count_spans(self.imu.t_s, self.batch_s)
 
     def events(self) -> Iterator[ImuBatch]:
         yield from self.batches()

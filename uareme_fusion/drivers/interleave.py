@@ -44,12 +44,22 @@ def split_by_span(t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarra
                   span_s: float = IMU_ONLY_BATCH_S) -> Iterator[ImuBatch]:
     """In-memory IMU arrays as consecutive batches each covering about `span_s` seconds (views, no
     copies); the stream IMU-only sources yield."""
-    if len(t_s) == 0:
-        return
-    edges = np.arange(t_s[0] + span_s, t_s[-1] + span_s, span_s)
-    cuts = np.unique(np.concatenate([[0], np.searchsorted(t_s, edges, side="right"), [len(t_s)]]))
+    cuts = _span_cuts(t_s, span_s)
     for a, b in zip(cuts[:-1], cuts[1:]):
         yield ImuBatch(t_s[a:b], gyro_rad_s[a:b], accel_m_s2[a:b])
+
+
+def count_spans(t_s: np.ndarray, span_s: float = IMU_ONLY_BATCH_S) -> int:
+    """How many batches `split_by_span` yields for stamps `t_s` (an IMU-only run's estimates)."""
+    return max(len(_span_cuts(t_s, span_s)) - 1, 0)
+
+
+def _span_cuts(t_s: np.ndarray, span_s: float) -> np.ndarray:
+    """Indices where `split_by_span`'s batches start, and `len(t_s)` at the end."""
+    if len(t_s) == 0:
+        return np.zeros(0, int)
+    edges = np.arange(t_s[0] + span_s, t_s[-1] + span_s, span_s)
+    return np.unique(np.concatenate([[0], np.searchsorted(t_s, edges, side="right"), [len(t_s)]]))
 
 
 class ImuInterleaver:

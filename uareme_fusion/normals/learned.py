@@ -38,6 +38,8 @@ from ..types import Frame, NormalMap
 
 WEIGHTS_FORMAT = "uareme-normalnet-v1"
 DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "normalnet_lite0.pt"
+DEFAULT_THREADS = 1
+"""torch CPU threads unless configured (`LearnedNormalsConfig.threads`, `--threads`)."""
 PROBE_SIZE_PX = (64, 48)
 """(width, height) of the image every loaded model is checked on."""
 
@@ -58,8 +60,11 @@ class LearnedNormalsConfig:
     over whole surfaces (a wall slightly mis-oriented as a block), so few. Sets the solver's covariance
     scale; fitted so that the median NEES of single-frame rotations on held-out synthetic views is the
     chi-square(3) median 2.37 (tools/bench_normals.py; the mean is dominated by a few gross failures)."""
-    threads: int | None = None
-    """torch CPU threads (None: leave torch's setting)."""
+    threads: int | None = DEFAULT_THREADS
+    """torch CPU threads (None: leave torch's setting). One by default: beside another CPU-bound
+    process, torch's default of one thread per core makes its threads wait on each other and a
+    frame takes 10-20x longer; one thread loses little on a quiet machine (README, "Speed on a busy
+    machine"; `uareme-fusion bench pipeline` measures both)."""
     device: str = "cpu"
 
     def __post_init__(self):

@@ -8,7 +8,10 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from ..drivers.extrinsics import parse_imu_rotation
+from ..errors import ConfigError
 
 
 class RunConfig(BaseModel):
@@ -38,3 +41,23 @@ class RunConfig(BaseModel):
     a camera file (OpenCV YAML/JSON, Kalibr camchain, EuRoC sensor.yaml); None: the source's own."""
     max_frames: int | None = Field(None, gt=0)
     """Stop after this many frames (None: the whole source)."""
+    threads: int = Field(1, ge=1, le=256)
+    """torch CPU threads of the learned normals. 1 by default: beside another busy process, two
+    threads wait on each other and a frame can take 10x longer (README, "Speed on a busy machine")."""
+    imu_rotation: str | None = None
+    """Camera-from-IMU rotation `R_ci` (`v_c = R_ci v_i`): a named convention (android, ios), axis
+    letters (rub, flu, ...), 9 numbers of a 3x3, a quaternion x,y,z,w or a Kalibr camchain .yaml
+    (`drivers.extrinsics.parse_imu_rotation`). None: the source's own (identity unless calibrated)."""
+    imu_time_offset_s: float | None = Field(None, allow_inf_nan=False)
+    """Added to IMU stamps to put them on the camera clock (`SourceInfo.imu_time_offset_s`).
+    None: the source's own (0 unless the recording says otherwise)."""
+
+    @field_validator("imu_rotation")
+    @classmethod
+    def _imu_rotation_parses(cls, value: str | None) -> str | None:
+        if value is not None:
+            try:
+                parse_imu_rotation(value, option="imu_rotation")
+            except ConfigError as exc:  # "imu_rotation 'x': why" -> "why" (the key and value are named by pydantic)
+                raise ValueError(str(exc).split(": ", 1)[-1]) from None
+        return value

@@ -14,11 +14,13 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
+from ..io.video_writer import OPENCV_CODECS, open_video_encoder
 from ..overlay import draw_ground, ground_mask, side_by_side
 from ..overlay.compose import draw_overlay
 from .runner import FrameResult
 
-VIDEO_CODECS = {".mp4": "mp4v", ".avi": "MJPG", ".mkv": "MJPG", ".mov": "mp4v"}
+VIDEO_CODECS = OPENCV_CODECS
+"""The video extensions written (encoders in `io.video_writer`)."""
 
 
 def estimate_R_cm(result: FrameResult) -> np.ndarray | None:
@@ -36,29 +38,32 @@ def overlay_image(result: FrameResult, fov_deg: float, panes: bool) -> np.ndarra
 
 
 class VideoFileWriter:
-    """An OpenCV video writer opened on the first image (its size fixes the video's)."""
+    """A video encoder (`io.video_writer`: H.264 when PyAV is installed, else OpenCV) opened on the
+    first image (its size fixes the video's); `encoder` names the one used."""
 
     def __init__(self, path: Path, fps: float):
         self.path, self.fps = Path(path), float(fps)
-        codec = VIDEO_CODECS.get(self.path.suffix.lower())
-        if codec is None:
+        if self.path.suffix.lower() not in VIDEO_CODECS:
             raise InputError(f"{self.path}: unsupported video extension; use one of {', '.join(VIDEO_CODECS)}")
-        self._fourcc = cv2.VideoWriter_fourcc(*codec)
         self._writer = None
+        self.encoder: str | None = None
         self.frames = 0
 
     def write_rgb(self, rgb: np.ndarray) -> None:
         if self._writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._writer = cv2.VideoWriter(str(self.path), self._fourcc, self.fps, (rgb.shape[1], rgb.shape[0]))
-            if not self._writer.isOpened():
-                raise InputError(f"{self.path}: OpenCV cannot write this video (codec {self._fourcc})")
-        self._writer.write(np.ascontiguousarray(rgb[..., ::-1]))
+            self._writer = open_video_encoder(self.path, self.fps, (rgb.shape[1], rgb.shape[0]))
+            self.encoder = self._writer.name
+        self._writer.write(rgb)
         self.frames += 1
+
+    def summary(self) -> dict:
+        """{"videos": {file name: encoder}} for summary.json."""
+        return {"videos": {self.path.name: self.encoder}} if self.encoder else {}
 
     def close(self) -> None:
         if self._writer is not None:
-            self._writer.release()
+            self._writer.close()
             self._writer = None
 
 
@@ -71,6 +76,9 @@ class HorizonVideoSink:
     def write(self, result: FrameResult) -> None:
         if result.frame is not None and result.frame.rgb is not None:
             self.video.write_rgb(overlay_image(result, self.fov_deg, self.panes))
+
+    def summary(self) -> dict:
+        return self.video.summary()
 
     def close(self) -> None:
         self.video.close()
@@ -106,6 +114,9 @@ class GroundSink:
         else:
             cv2.imwrite(str(self.out / "overlay" / name), overlay[..., ::-1])
         self.count += 1
+
+    def summary(self) -> dict:
+        return {} if self.video is None else self.video.summary()
 
     def close(self) -> None:
         if self.video is not None:

@@ -14,11 +14,13 @@ from pathlib import Path
 import numpy as np
 
 from ..drivers.base import GroundTruth, Source
+from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
 from ..errors import InputError
 from ..metrics import attitude_errors, error_summary
 from ..rotations import align_constant
 from ..types import Status
 from .config import RunConfig
+from .imu_rotation_check import ImuRotationCheck
 from .runner import Pipeline, RunStats
 from .sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
 from .stages import CappedNormals, make_backend, make_normal_estimator, mekf_preset_for
@@ -41,7 +43,7 @@ def make_output_folder(out_dir: str | Path) -> Path:
 def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipeline:
     normals = None
     if source.info.has_frames:
-        normals = CappedNormals(make_normal_estimator(cfg.normals, source.info), cfg.kappa_cap)
+        normals = CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
     return Pipeline(normals, make_backend(cfg, source.info), sinks)
 
 
@@ -52,18 +54,33 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
     if evaluate and truth is None:
         raise InputError(f"{source.info.name}: this source has no ground truth to evaluate against "
                          "(use 'uareme-fusion run' instead)")
+    extra_sinks = list(extra_sinks)
     log = EstimateLog() if evaluate else None
+    check = ImuRotationCheck.for_source(source)
     sinks = [TumTrajectoryWriter(out / "trajectory.tum"), EstimatesCsvWriter(out / "estimates.csv"),
-             *extra_sinks, *([log] if log else [])]
+             *extra_sinks, *([log] if log else []), *([check] if check else [])]
     pipeline = build_pipeline(source, cfg, sinks)
-    stats = pipeline.run(source, max_frames=cfg.max_frames, on_result=on_result)
+    stats = pipeline.run(source if check is None else check.tap(source), max_frames=cfg.max_frames,
+                         on_result=on_result)
     summary = summary_document(stats, cfg, command, source)
+    for sink in extra_sinks:
+        summary.update(sink.summary() if hasattr(sink, "summary") else {})
+    if check is not None:
+        summary["imu_rotation_estimate"] = check.report()
+        summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w]
     if log is not None:
         summary.update(evaluation(log, truth, gravity_aware=source.info.has_imu and cfg.backend in
                                   GRAVITY_AWARE_BACKENDS))
     summary["outputs"] = sorted(p.name for p in out.iterdir() if p.name != "summary.json") + ["summary.json"]
     (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=False) + "\n")
     return summary
+
+
+def configure_imu(source: Source, cfg: RunConfig) -> Source:
+    """`source` with the configuration's camera-IMU rotation and time offset, when given, in place
+    of its own (`RunConfig.imu_rotation`, `imu_time_offset_s`); call before the source runs."""
+    R_ci = None if cfg.imu_rotation is None else parse_imu_rotation(cfg.imu_rotation)
+    return with_imu_geometry(source, R_ci, cfg.imu_time_offset_s)
 
 
 def run_to_folder(source_spec: str, out_dir: str | Path, cfg: RunConfig | None = None, imu: str | None = None,
@@ -75,6 +92,7 @@ def run_to_folder(source_spec: str, out_dir: str | Path, cfg: RunConfig | None =
     cfg = cfg or RunConfig()
     out = make_output_folder(out_dir)
     with open_source(str(source_spec), imu=imu, intrinsics=cfg.intrinsics, **source_options) as source:
+        configure_imu(source, cfg)
         return run_source(source, out, cfg, evaluate, extra_sinks, on_result, command)
 
 

@@ -77,12 +77,13 @@ class AutoNormals:
     """The source's own normals when its frames carry them, learned normals otherwise (decided on
     the first frame)."""
 
-    def __init__(self, source_name: str):
-        self.source_name, self.name, self._chosen = source_name, "auto", None
+    def __init__(self, source_name: str, threads: int | None = None):
+        self.source_name, self.name, self._chosen, self.threads = source_name, "auto", None, threads
 
     def estimate_frame(self, frame: Frame) -> NormalMap:
         if self._chosen is None:
-            self._chosen = SourceNormals(self.source_name) if frame.normals is not None else _learned()
+            self._chosen = (SourceNormals(self.source_name) if frame.normals is not None
+                            else _learned(threads=self.threads))
             self.name = f"auto ({self._chosen.name})"
         return self._chosen.estimate_frame(frame)
 
@@ -100,12 +101,13 @@ class DepthWhereAvailable:
         return None if frame.depth is None else self.estimator.estimate_frame(frame)
 
 
-def make_normal_estimator(spec: str, info: SourceInfo):
-    """The normal estimator named by `spec` (see `RunConfig.normals`); checks that the source can feed it."""
+def make_normal_estimator(spec: str, info: SourceInfo, threads: int | None = None):
+    """The normal estimator named by `spec` (see `RunConfig.normals`); checks that the source can feed it.
+    `threads`: torch CPU threads of a learned network (None: `LearnedNormalsConfig`'s default)."""
     from ..normals.depth import DepthNormals
 
     if spec == "auto":
-        return AutoNormals(info.name)
+        return AutoNormals(info.name, threads)
     if spec == "source":
         return SourceNormals(info.name)
     if spec == "depth":
@@ -117,22 +119,22 @@ def make_normal_estimator(spec: str, info: SourceInfo):
                              "know them: give --intrinsics fx,fy,cx,cy or a camera file")
         return DepthWhereAvailable(DepthNormals())
     if spec == "learned":
-        return _learned()
+        return _learned(threads=threads)
     path = Path(spec)
     if path.is_dir():
         return NormalFiles(path)
     if path.suffix.lower() in MODEL_FILE_SUFFIXES:
         if not path.is_file():
             raise InputError(f"{path}: model file not found")
-        return _learned(path)
+        return _learned(path, threads)
     raise InputError(f"--normals {spec!r}: expected auto, learned, depth, source, a model file "
                      f"({', '.join(MODEL_FILE_SUFFIXES)}) or a folder of normal maps")
 
 
-def _learned(model_path: Path | None = None):
-    from ..normals.learned import LearnedNormals
+def _learned(model_path: Path | None = None, threads: int | None = None):
+    from ..normals.learned import DEFAULT_THREADS, LearnedNormals, LearnedNormalsConfig
 
-    return LearnedNormals() if model_path is None else LearnedNormals(model=model_path)
+    return LearnedNormals(model=model_path, config=LearnedNormalsConfig(threads=threads or DEFAULT_THREADS))
 
 
 CAMERA_PRESETS = ("building", "handheld", "vehicle")
@@ -167,7 +169,7 @@ def make_backend(cfg: RunConfig, info: SourceInfo) -> Backend:
 
         base = load_config("paper", SmootherConfig, section="smoother").model_dump()
         if info.has_imu:
-            base.update(mode=SmootherMode.GYRO, R_ci=imu_geometry["R_ci"])
+            base.update(mode=SmootherMode.GYRO, **imu_geometry)
         return Smoother(validate_config({**base, **cfg.smoother}, SmootherConfig, "run config [smoother]"))
     from ..backends.mekf import Mekf, MekfConfig
 
