@@ -1,6 +1,7 @@
 """The project's one compiler switch: numba's `njit`, or nothing (pure-numpy reference paths).
 
-`compiled(fn)` compiles `fn` with `numba.njit(cache=False, nogil=True)` when numba imports, and
+`compiled(fn)` compiles `fn` with `numba.njit(cache=False, nogil=True)` when numba imports (lazily,
+at its first call), and
 returns None otherwise, after one warning line. Callers keep a pure Python/numpy reference beside
 each compiled kernel and use it whenever the kernel is None or fails to compile (`disable`).
 `UAREME_NO_JIT=1` in the environment forces the reference paths (tests compare the two).
@@ -37,13 +38,15 @@ def available() -> bool:
     return numba is not None
 
 
-def compiled(fn=None, **options):
-    """`numba.njit(cache=False, nogil=True, **options)(fn)`, or None without numba (one warning)."""
+def compiled(fn=None, cache: bool = False, **options):
+    """`numba.njit(cache=cache, nogil=True, **options)(fn)`, or None without numba (one warning).
+    `cache=True` keeps the machine code on disk (numba's `__pycache__` beside the source, or
+    `NUMBA_CACHE_DIR`) for kernels whose compilation takes seconds."""
     def wrap(f):
         if numba is None:
             _warn_once(_REASON)
             return None
-        return numba.njit(cache=False, nogil=True, **options)(f)
+        return numba.njit(cache=cache, nogil=True, **options)(f)
     return wrap(fn) if fn is not None else wrap
 
 

@@ -40,6 +40,7 @@ from ..solver.manhattan import R_CM_UPRIGHT
 from ..types import Estimate, Status, VisualRotation
 from .base import Backend
 from .imu_stream import COLUMNS, ImuBatch, ImuStream
+from .mekf_compiled import KERNEL, compiled_path_applies, integrate_compiled
 
 TH, BG, MF, RATE = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
 """Blocks of the 12-dimensional error state."""
@@ -174,6 +175,9 @@ class MekfConfig(BaseModel):
     """The IMU clock runs this far ahead of the camera clock, s."""
     gravity_m_s2: float = Field(9.81, gt=0)
     record_imu_estimates: bool = False
+    compiled: bool = True
+    """Integrate gap-free IMU batches with the compiled kernels (`mekf_kernels`) when numba is
+    available; False (or no numba) runs the numpy/filterpy reference path."""
     """Keep `R_wc` after every IMU sample (see `Mekf.imu_trajectory`)."""
 
     @field_validator("R_ci")
@@ -221,6 +225,7 @@ class Mekf(Backend):
         self._manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_sqrt_s or cfg.manhattan_tilt_rw_rad_sqrt_s)
         self._inv_g = 1.0 / cfg.gravity_m_s2
         self._trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
+        self._compiled = cfg.compiled and KERNEL is not None
         self.stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
         self.mode = cfg.mode
         self.R_wc = np.eye(3)
@@ -382,6 +387,9 @@ class Mekf(Backend):
         due_s = period - _PERIOD_TOLERANCE_S
         # Propagating to a frame: an update due at its end waits for the frame's visual update.
         defer = extrapolate_to_s is not None
+        if self._compiled and compiled_path_applies(self, t, saturated, extra_s):
+            integrate_compiled(self, t, gyro_c, accel_c, extra_s, defer)
+            return
         if t.size < 2 or last_t - self.t_state <= period:
             # Short batch (a frame's worth): one chunk, then the update if the period is complete.
             self._integrate_chunk(t, gyro_c, accel_c, saturated, extra_s)
@@ -394,11 +402,7 @@ class Mekf(Backend):
         # which its interval starts, so a chunk ends on the sample whose interval crosses the
         # boundary: every chunk but the last one crossed it and ends with an update (each update then
         # averages between `period` and `period` + one sample step).
-        elapsed_before = np.empty(t.size)
-        elapsed_before[0] = self._acc_elapsed_s
-        elapsed_before[1:] = self._acc_elapsed_s + (t[:-1] - self.t_state)
-        cuts = np.flatnonzero(np.diff(np.floor(elapsed_before / period))) + 1
-        bounds = [0, *cuts.tolist(), t.size]
+        bounds = self._chunk_bounds(t).tolist()
         for i in range(len(bounds) - 1):
             a, b = bounds[i], bounds[i + 1]
             last = i == len(bounds) - 2
@@ -407,6 +411,19 @@ class Mekf(Backend):
                 self._accel_due = True
                 if not (last and defer):
                     self._accel_update()
+
+    def _chunk_bounds(self, t: np.ndarray) -> np.ndarray:
+        """Chunk limits of a batch (chunk k is samples bounds[k]:bounds[k+1]): one chunk for a short
+        batch (a frame's worth), else a cut after each sample whose interval crosses an
+        accelerometer-update boundary."""
+        period = self.config.accel_update_period_s
+        if t.size < 2 or float(t[-1]) - self.t_state <= period:
+            return np.array([0, t.size])
+        elapsed_before = np.empty(t.size)
+        elapsed_before[0] = self._acc_elapsed_s
+        elapsed_before[1:] = self._acc_elapsed_s + (t[:-1] - self.t_state)
+        cuts = np.flatnonzero(np.diff(np.floor(elapsed_before / period))) + 1
+        return np.concatenate(([0], cuts, [t.size]))
 
     def _integrate_chunk(self, t, gyro_c, accel_c, saturated, extra_s: float = 0.0) -> None:
         """Integrate samples (camera frame) over (t_state, t[-1]]: sample k covers (t_{k-1}, t_k]
