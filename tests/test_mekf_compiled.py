@@ -50,6 +50,7 @@ def assert_same_filters(a: Mekf, b: Mekf, ests_a=(), ests_b=()):
         (ta, Ra), (tb, Rb) = a.imu_trajectory(), b.imu_trajectory()
         np.testing.assert_array_equal(ta, tb)
         assert angle_between(Ra, Rb).max() < 1e-9
+        np.testing.assert_allclose(a.imu_trajectory_cov(), b.imu_trajectory_cov(), rtol=1e-7, atol=1e-15)
     for ea, eb in zip(ests_a, ests_b):
         assert ea.status == eb.status
         assert angle_between(ea.R_wc, eb.R_wc) < 1e-9

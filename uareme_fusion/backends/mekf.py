@@ -268,6 +268,7 @@ class Mekf(Backend):
         self._acc_lp_J: np.ndarray | None = None
         self._record_t: list[np.ndarray] = []
         self._record_R: list[np.ndarray] = []
+        self._record_P: list[np.ndarray] = []
 
     # ------------------------------------------------------------------ public API
     def process_imu(self, t_s, gyro_rad_s, accel_m_s2) -> None:
@@ -349,6 +350,11 @@ class Mekf(Backend):
         if not self._record_t:
             return np.zeros(0), np.zeros((0, 3, 3))
         return np.concatenate(self._record_t), np.concatenate(self._record_R)
+
+    def imu_trajectory_cov(self) -> np.ndarray:
+        """(N, 3, 3) covariance (rad^2, right perturbation of `R_wc`) beside each `imu_trajectory`
+        rotation: the one predicted to the end of the chunk that sample was integrated in."""
+        return np.concatenate(self._record_P) if self._record_P else np.zeros((0, 3, 3))
 
     def estimate(self, t_s: float | None = None) -> Estimate:
         """Current estimate (at the state time) without consuming status flags."""
@@ -509,6 +515,8 @@ class Mekf(Backend):
         if self._manhattan_walks and self.manhattan_initialised:
             self._add_manhattan_noise(Q, T_elapsed)
         _, self.P = kf_predict(_ZERO_STATE, self.P, F, Q)
+        if cfg.record_imu_estimates and n:
+            self._record_P.append(np.repeat(self.P[None, TH, TH], n, axis=0))
         # Accelerometer: time-weighted sum of specific force, rotated into the chunk's end frame.
         if n:
             self._acc_sum_c = C_N.T @ (self._acc_sum_c + np.einsum("kjl,kl,k->j", C[:n], accel_c, dt[:n]))

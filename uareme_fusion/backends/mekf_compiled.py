@@ -75,14 +75,16 @@ def integrate_compiled(filt, t, gyro_c, accel_c, extra_s: float, defer: bool) ->
     rest_sums = np.array(filt._rest_sums, float)
     record = filt.config.record_imu_estimates
     record_R = np.empty((t.size if record else 0, 3, 3))
+    record_P = np.empty_like(record_R)
     bounds = filt._chunk_bounds(t).astype(np.int64)
     downweighted = KERNEL(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums,
                           np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
                           np.ascontiguousarray(accel_c, float), bounds, float(extra_s), _parameters(filt, defer),
-                          record_R)
+                          record_R, record_P)
     if record:
         filt._record_t.append(np.array(t, float))
         filt._record_R.append(record_R)
+        filt._record_P.append(record_P)
     filt.R_wc, filt.R_wm, filt.b_c, filt.P = R_wc, R_wm, b_c, P
     filt._last_gyro_c, filt._acc_sum_c, filt._rest_sums = last_gyro, acc_sum, rest_sums
     filt.t_state = float(s[K.S_T_STATE])

@@ -235,13 +235,14 @@ def accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p
 
 
 def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
-                    extra_s, p, record_R):
+                    extra_s, p, record_R, record_P):
     """Integrate a released batch (camera frame, no gaps or saturated samples) chunk by chunk
     between `bounds` (chunk k is samples bounds[k]:bounds[k+1]) as `Mekf._integrate_pending` does,
     with the accelerometer updates that fall due, except one due at the end of a batch propagated
     to a frame (`P_DEFER`): that one is left to the frame (`s[S_ACCEL_DUE]` = 1). The last chunk
     is extrapolated by `extra_s`. Arrays are updated in place (R_wc, R_wm too); with `P_RECORD`,
-    `record_R` (n, 3, 3) receives R_wc after each sample. Returns True when an update was down-weighted."""
+    `record_R` (n, 3, 3) receives R_wc after each sample and `record_P` the attitude covariance
+    predicted to the end of its chunk. Returns True when an update was down-weighted."""
     n_chunks = bounds.shape[0] - 1
     downweighted_any = False
     C_buf = np.empty((t.shape[0], 3, 3))
@@ -263,6 +264,7 @@ def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_su
         if p[P_RECORD] > 0:
             for k in range(b - a):
                 record_R[a + k] = R_wc_cur @ C_k[k]
+                record_P[a + k] = P_pred[0:3, 0:3]
         R_wc_cur = R_wc_cur @ C_N
         s[S_PRODUCTS] += 1
         if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
