@@ -127,16 +127,19 @@ def _reference_moments(n: np.ndarray, k: np.ndarray | None) -> NormalMoments:
         np.nan_to_num(Q, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
     # Every distinct moment is (squared monomial a < 3) x (monomial b): weight only the first side.
     Qw = Q[:3] * weight
+    distinct = [np.dot(Qw[a], Q[b]) for a, b in _DISTINCT_PAIRS]
+    return _from_distinct(distinct, int(np.count_nonzero(weight > 0)), n_invalid)
+
+
+def _from_distinct(distinct, n_valid: int, n_invalid: int) -> NormalMoments:
+    """`NormalMoments` from the 15 distinct moments in `_DISTINCT_PAIRS` order."""
     G = np.empty((6, 6))
-    for a, b in _DISTINCT_PAIRS:
-        G[a, b] = G[b, a] = np.dot(Qw[a], Q[b])
+    for value, (a, b) in zip(distinct, _DISTINCT_PAIRS):
+        G[a, b] = G[b, a] = value
     for (a, b), (c, d) in _REPEATED_PAIRS:
         G[a, b] = G[b, a] = G[c, d]
     # sum_i w_i = sum_i w_i (|n_i|^2)^2 = sum of the squared-monomial block (a, b < 3) of G.
-    total_weight = float(G[:3, :3].sum())
-    return NormalMoments(
-        G=G, total_weight=total_weight, n_valid=int(np.count_nonzero(weight > 0)), n_invalid=n_invalid
-    )
+    return NormalMoments(G=G, total_weight=float(G[:3, :3].sum()), n_valid=n_valid, n_invalid=n_invalid)
 
 
 def _fused_sums(n, k, unit_weights, largest, min_sq_norm, out):
@@ -210,9 +213,4 @@ def fused_moments(vectors: np.ndarray, weights: np.ndarray | None) -> NormalMome
         jit.disable(exc)
         _fused_kernel = None
         return None
-    G = np.empty((6, 6))
-    for value, (a, b) in zip(out[:15], _DISTINCT_PAIRS):
-        G[a, b] = G[b, a] = value
-    for (a, b), (c, d) in _REPEATED_PAIRS:
-        G[a, b] = G[b, a] = G[c, d]
-    return NormalMoments(G=G, total_weight=float(G[:3, :3].sum()), n_valid=int(out[15]), n_invalid=int(out[16]))
+    return _from_distinct(out[:15], int(out[15]), int(out[16]))
