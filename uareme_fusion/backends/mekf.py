@@ -40,7 +40,7 @@ from ..solver.manhattan import R_CM_UPRIGHT
 from ..types import Estimate, Status, VisualRotation
 from .base import Backend
 from .imu_stream import COLUMNS, ImuBatch, ImuStream
-from .mekf_compiled import KERNEL, compiled_path_applies, integrate_compiled
+from .mekf_compiled import KERNEL, accel_update_compiled, compiled_path_applies, integrate_compiled
 
 TH, BG, MF, RATE = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
 """Blocks of the 12-dimensional error state."""
@@ -391,8 +391,9 @@ class Mekf(Backend):
             self._accel_update()
         period = self.config.accel_update_period_s
         due_s = period - _PERIOD_TOLERANCE_S
-        # Propagating to a frame: an update due at its end waits for the frame's visual update.
-        defer = extrapolate_to_s is not None
+        # Propagating to a frame: an update due at its end waits for the frame's visual update (IMU-only
+        # there is none: the frame would apply it at once, so it is applied here, in the same order).
+        defer = extrapolate_to_s is not None and self.mode != MekfMode.IMU_ONLY
         if self._compiled and compiled_path_applies(self, t, saturated, extra_s):
             integrate_compiled(self, t, gyro_c, accel_c, extra_s, defer)
             return
@@ -613,6 +614,9 @@ class Mekf(Backend):
     def _accel_update(self) -> None:
         """Apply the accelerometer update of the period just completed (see `_accel_rows`)."""
         self._accel_due = False
+        if self._compiled:
+            accel_update_compiled(self)
+            return
         rows = self._accel_rows()
         if rows is not None:
             self._kalman_update(*rows)

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..types import Status
 from . import mekf_kernels as K
-from .mekf_kernels import KERNEL
+from .mekf_kernels import KERNEL  # noqa: F401 -- mekf imports it from here
 
 _ORTHONORMALISE_EVERY = 16  # as mekf._ORTHONORMALISE_EVERY (kept equal by a test)
 
@@ -58,8 +58,9 @@ _COUNTERS = ((K.S_ACCEL_UPDATES, "accel_updates"), (K.S_ACCEL_SKIPPED, "accel_sk
              (K.S_ACCEL_DOWNWEIGHTED, "accel_downweighted"), (K.S_REST_UPDATES, "rest_updates"))
 
 
-def integrate_compiled(filt, t, gyro_c, accel_c, extra_s: float, defer: bool) -> None:
-    """Integrate a batch (camera frame) with the kernel, then write the state back into `filt`."""
+def _pack(filt):
+    """The filter's state as the kernels' arguments: (s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp,
+    lp_J, rest_sums), fresh float64 arrays that the kernels update in place."""
     s = np.zeros(K.S_SIZE)
     s[K.S_T_STATE] = filt.t_state
     s[K.S_ACC_TIME], s[K.S_ACC_ELAPSED] = filt._acc_time_s, filt._acc_elapsed_s
@@ -67,28 +68,19 @@ def integrate_compiled(filt, t, gyro_c, accel_c, extra_s: float, defer: bool) ->
     s[K.S_LP_VALID] = float(filt._acc_lp_c is not None)
     s[K.S_REST_N] = filt._rest_n
     s[K.S_REST_SINCE] = np.nan if filt._rest_since_s is None else filt._rest_since_s
-    R_wc, R_wm = np.array(filt.R_wc, float), np.array(filt.R_wm, float)
-    b_c, P = np.array(filt.b_c, float), np.array(filt.P, float)
-    last_gyro, acc_sum = np.array(filt._last_gyro_c, float), np.array(filt._acc_sum_c, float)
     lp = np.array(filt._acc_lp_c, float) if filt._acc_lp_c is not None else np.zeros((2, 3))
     lp_J = np.array(filt._acc_lp_J, float) if filt._acc_lp_J is not None else np.zeros((2, 3, 3))
-    rest_sums = np.array(filt._rest_sums, float)
-    record = filt.config.record_imu_estimates
-    record_R = np.empty((t.size if record else 0, 3, 3))
-    record_P = np.empty_like(record_R)
-    bounds = filt._chunk_bounds(t).astype(np.int64)
-    downweighted = KERNEL(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums,
-                          np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
-                          np.ascontiguousarray(accel_c, float), bounds, float(extra_s), _parameters(filt, defer),
-                          record_R, record_P)
-    if record:
-        filt._record_t.append(np.array(t, float))
-        filt._record_R.append(record_R)
-        filt._record_P.append(record_P)
+    return (s, np.array(filt.R_wc, float), np.array(filt.R_wm, float), np.array(filt.b_c, float),
+            np.array(filt.P, float), np.array(filt._last_gyro_c, float), np.array(filt._acc_sum_c, float),
+            lp, lp_J, np.array(filt._rest_sums, float))
+
+
+def _unpack(filt, state, downweighted: bool) -> None:
+    """Write the kernels' results back into the filter (counters and flags included)."""
+    s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums = state
     filt.R_wc, filt.R_wm, filt.b_c, filt.P = R_wc, R_wm, b_c, P
     filt._last_gyro_c, filt._acc_sum_c, filt._rest_sums = last_gyro, acc_sum, rest_sums
     filt.t_state = float(s[K.S_T_STATE])
-    filt._imu_t_s = float(t[-1])
     filt._acc_time_s, filt._acc_elapsed_s = float(s[K.S_ACC_TIME]), float(s[K.S_ACC_ELAPSED])
     filt._products_unnormalised = int(s[K.S_PRODUCTS])
     filt._rest_n = int(s[K.S_REST_N])
@@ -101,3 +93,30 @@ def integrate_compiled(filt, t, gyro_c, accel_c, extra_s: float, defer: bool) ->
         filt._flags |= Status.ACCEL_DOWNWEIGHTED
     if s[K.S_ACCEL_DUE] > 0:
         filt._accel_due = True
+
+
+def integrate_compiled(filt, t, gyro_c, accel_c, extra_s: float, defer: bool) -> None:
+    """Integrate a batch (camera frame) with the kernel, then write the state back into `filt`."""
+    state = _pack(filt)
+    record = filt.config.record_imu_estimates
+    record_R = np.empty((t.size if record else 0, 3, 3))
+    record_P = np.empty_like(record_R)
+    bounds = filt._chunk_bounds(t).astype(np.int64)
+    downweighted = KERNEL(*state, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
+                          np.ascontiguousarray(accel_c, float), bounds, float(extra_s), _parameters(filt, defer),
+                          record_R, record_P)
+    if record:
+        filt._record_t.append(np.array(t, float))
+        filt._record_R.append(record_R)
+        filt._record_P.append(record_P)
+    filt._imu_t_s = float(t[-1])
+    _unpack(filt, state, downweighted)
+
+
+def accel_update_compiled(filt) -> None:
+    """The accelerometer (and at-rest) update of the period just completed, compiled: as
+    `Mekf._accel_update`."""
+    state = _pack(filt)
+    s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state
+    downweighted = K.ACCEL_UPDATE(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, _parameters(filt, False))
+    _unpack(filt, state, downweighted)

@@ -305,8 +305,19 @@ def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_su
     return downweighted_any
 
 
+def accel_update_in_place(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
+    """`accel_and_rest_update` with R_wc and R_wm updated in place; True when down-weighted."""
+    R_wc_new, R_wm_new, downweighted = accel_and_rest_update(s, R_wc.copy(), R_wm.copy(), b_c, P, acc_sum, lp,
+                                                             lp_J, rest_sums, p)
+    R_wc[:, :] = R_wc_new
+    R_wm[:, :] = R_wm_new
+    return downweighted
+
+
 KERNEL = None
 """`integrate_batch` compiled, with the functions it calls, or None (numba missing or broken)."""
+ACCEL_UPDATE = None
+"""`accel_update_in_place` compiled, or None."""
 if jit.available():
     try:
         _pure = (skew3, inv3, exp3, orthonormal3, propagate_chunk, accel_measurement, zero_rate_measurement,
@@ -314,6 +325,7 @@ if jit.available():
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = jit.compiled(integrate_batch, cache=True, error_model="numpy")
+        ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)
-        KERNEL = None
+        KERNEL = ACCEL_UPDATE = None
