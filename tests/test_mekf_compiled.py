@@ -138,3 +138,4 @@ def test_without_numba_the_reference_runs_after_one_warning_line():
     assert out.stdout.split() == ["24", "4"]
     warnings = [line for line in out.stderr.splitlines() if "compiled kernels unavailable" in line]
     assert len(warnings) == 1
+

@@ -5,13 +5,19 @@ log (gyro negated), so at each sample the two estimates use disjoint halves of t
 the sample itself; their up vectors are averaged with the inverse of each filter's tilt variance.
 Only the tilt is fused: each filter's world yaw is its own gauge, so the result keeps the forward
 filter's heading. Returns the camera attitude `R_wc` (camera to a z-up world) per IMU sample.
+
+`OfflineImu` serves these as a backend, so that `run`/`eval --offline` on a recorded IMU-only file
+(`pipeline.session.build_pipeline`) write them through the usual sinks.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
 from ..rotations import WORLD_UP, exp_so3
+from ..types import Estimate, Status, VisualRotation
+from .base import Backend
 from .imu_stream import check_imu_arrays
 from .mekf import GyroSampling, Mekf, MekfConfig, MekfMode
 
@@ -40,10 +46,13 @@ def _tilt_variance(up_c: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return np.maximum(0.5 * (np.trace(cov, axis1=1, axis2=2) - along), 1e-12)
 
 
-def forward_backward_imu(config: MekfConfig, t_s, gyro_rad_s, accel_m_s2) -> tuple[np.ndarray, np.ndarray]:
-    """Offline attitude of a recorded IMU log (IMU frame and clock, strictly increasing times after
-    the filter's own cleaning): `(t_s (N,), R_wc (N, 3, 3))`, camera to a z-up world whose yaw is
-    the forward filter's; samples only one direction estimated keep that direction's estimate."""
+def forward_backward_imu(config: MekfConfig, t_s, gyro_rad_s, accel_m_s2,
+                         with_cov: bool = False) -> tuple[np.ndarray, ...]:
+    """Offline attitude of a recorded IMU log (IMU frame; times on the filter's clock, cleaned as
+    the filter cleans them): `(t_s (N,), R_wc (N, 3, 3))`, camera to a z-up world whose yaw is the
+    forward filter's; samples only the forward filter estimated keep its estimate. With `with_cov`
+    also `cov (N, 3, 3)` (rad^2, right perturbation): the forward filter's, scaled by the ratio of
+    the fused to the forward tilt variance."""
     t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
     t_f, R_f, P_f = _recorded(config, t, gyro, accel)
     # Time-reversed log: a gyro sample stamped t_k measures the rate over (t_{k-1}, t_k] when
@@ -69,4 +78,41 @@ def forward_backward_imu(config: MekfConfig, t_s, gyro_rad_s, accel_m_s2) -> tup
     s = np.linalg.norm(axis, axis=1)
     angle = np.arctan2(s, np.einsum("ni,ni->n", up_f, up))
     phi = -np.where(s[:, None] > 0, axis / np.where(s > 0, s, 1.0)[:, None], 0.0) * angle[:, None]
-    return grid, R_fg @ exp_so3(phi)
+    R = R_fg @ exp_so3(phi)
+    if not with_cov:
+        return grid, R
+    return grid, R, P_fg * (w_f / (w_f + w_b))[:, None, None]
+
+
+class OfflineImu(Backend):
+    """Estimates of a whole recorded IMU log smoothed up front (`forward_backward_imu`), returned at
+    the times the pipeline asks for (the last sample at or before each)."""
+
+    name = "mekf-offline"
+
+    def __init__(self, config: MekfConfig, t_s, gyro_rad_s, accel_m_s2):
+        t = np.asarray(t_s, float) - config.imu_time_offset_s
+        self.t_s, self.R_wc, self.cov = forward_backward_imu(
+            config.model_copy(update={"imu_time_offset_s": 0.0}), t, gyro_rad_s, accel_m_s2, with_cov=True)
+
+    def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
+        k = int(np.searchsorted(self.t_s, t_s, side="right")) - 1
+        if k < 0:
+            return Estimate(t_s, np.eye(3), np.eye(3), Status.NOT_INITIALISED)
+        return Estimate(t_s, self.R_wc[k].copy(), 0.5 * (self.cov[k] + self.cov[k].T))
+
+    def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
+        return None
+
+
+def offline_backend(config: MekfConfig, source) -> OfflineImu:
+    """`OfflineImu` over every IMU sample of a recorded IMU-only `source` (read once here; the
+    pipeline then replays the source for the estimate times)."""
+    if source.info.has_frames:
+        raise InputError(f"{source.info.name}: --offline smooths a recorded IMU-only file; this source has frames")
+    batches = [e for e in source.events() if len(e)]
+    if not batches:
+        raise InputError(f"{source.info.name}: no IMU samples to smooth")
+    return OfflineImu(config, np.concatenate([b.t_s for b in batches]),
+                      np.concatenate([b.gyro_rad_s for b in batches]),
+                      np.concatenate([b.accel_m_s2 for b in batches]))

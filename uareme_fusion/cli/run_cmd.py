@@ -81,6 +81,8 @@ def _options():
         preset=typer.Option(None, "--preset", help="EKF preset: building, vehicle, handheld or a YAML path."),
         max_frames=typer.Option(None, "--max-frames", help="Stop after this many frames."),
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
+        offline=typer.Option(None, "--offline", help="A recorded IMU-only file: smooth it forward and backward "
+                             "(more accurate than the streaming filter)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
                                                      "(replay it later with 'run FOLDER')."),
     )
@@ -96,10 +98,11 @@ def run_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
-    record: Optional[Path] = _o["record"],
+    record: Optional[Path] = _o["record"], offline: Optional[bool] = _o["offline"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
-    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
+    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
+                     offline=offline)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record)
 
 
@@ -110,7 +113,9 @@ def eval_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    offline: Optional[bool] = _o["offline"],
 ) -> None:
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
-    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
+    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
+                     offline=offline)
     execute(source, out, cfg, imu, fps, evaluate=True, command="eval")

@@ -32,5 +32,8 @@ class RunConfig(BaseModel):
     """Horizontal field of view assumed for drawing when the source has no intrinsics, degrees."""
     ground_threshold_deg: float = Field(15.0, gt=0.0, lt=90.0)
     """A pixel is ground when its normal is within this angle of up, degrees."""
+    offline: bool = False
+    """A recorded IMU-only file: estimates from the EKF run forward and backward over the whole log
+    (`backends.mekf_offline`) instead of the streaming filter."""
     max_frames: int | None = Field(None, gt=0)
     """Stop after this many frames (None: the whole source)."""
