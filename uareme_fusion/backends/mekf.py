@@ -394,8 +394,8 @@ class Mekf(Backend):
         # Propagating to a frame: an update due at its end waits for the frame's visual update (IMU-only
         # there is none: the frame would apply it at once, so it is applied here, in the same order).
         defer = extrapolate_to_s is not None and self.mode != MekfMode.IMU_ONLY
-        if self._compiled and compiled_path_applies(self, t, saturated, extra_s):
-            integrate_compiled(self, t, gyro_c, accel_c, extra_s, defer)
+        if (self._compiled and compiled_path_applies(self, t, saturated, extra_s)
+                and integrate_compiled(self, t, gyro_c, accel_c, extra_s, defer)):
             return
         if t.size < 2 or last_t - self.t_state <= period:
             # Short batch (a frame's worth): one chunk, then the update if the period is complete.

@@ -18,19 +18,24 @@ _ORTHONORMALISE_EVERY = 16  # as mekf._ORTHONORMALISE_EVERY (kept equal by a tes
 
 
 def compiled_path_applies(filt, t: np.ndarray, saturated: np.ndarray, extra_s: float) -> bool:
-    """Whether a batch (camera clock) can take the compiled path: samples present, no IMU gap
-    (nor one just ended), no saturated sample, no step longer than `imu_gap_limit_s`."""
+    """Whether a batch (camera clock) can take the compiled path: samples present, not just after an
+    IMU gap, no saturated sample, no extrapolation past `imu_gap_limit_s` (the kernel itself refuses
+    a batch with a longer step between samples)."""
     if not t.size or filt._in_imu_gap or extra_s > filt.config.imu_gap_limit_s:
         return False
-    if filt.stream.counts.saturated and saturated.any():
-        return False
-    limit = filt.config.imu_gap_limit_s
-    if float(t[0]) - filt.t_state > limit:
-        return False
-    return t.size < 2 or float(np.max(t[1:] - t[:-1])) <= limit
+    return not (filt.stream.counts.saturated and saturated.any())
 
 
 def _parameters(filt, defer: bool) -> np.ndarray:
+    """The kernels' parameter vector (cached per filter: only two entries change over a run)."""
+    key = (filt.manhattan_initialised, defer)
+    cache = filt.__dict__.setdefault("_kernel_parameters", {})
+    if key not in cache:
+        cache[key] = _parameter_vector(filt, defer)
+    return cache[key]
+
+
+def _parameter_vector(filt, defer: bool) -> np.ndarray:
     cfg = filt.config
     p = np.empty(K.P_SIZE)
     p[K.P_Q_GYRO], p[K.P_Q_BIAS], p[K.P_Q_RATE] = filt._q_gyro, filt._q_bias, filt._q_rate
@@ -51,6 +56,7 @@ def _parameters(filt, defer: bool) -> np.ndarray:
     p[K.P_MF_TILT_RW] = cfg.manhattan_tilt_rw_rad_sqrt_s if walks else 0.0
     p[K.P_ORTHO_EVERY] = _ORTHONORMALISE_EVERY
     p[K.P_RECORD] = float(cfg.record_imu_estimates)
+    p[K.P_GAP_LIMIT] = cfg.imu_gap_limit_s
     return p
 
 
@@ -95,22 +101,26 @@ def _unpack(filt, state, downweighted: bool) -> None:
         filt._accel_due = True
 
 
-def integrate_compiled(filt, t, gyro_c, accel_c, extra_s: float, defer: bool) -> None:
-    """Integrate a batch (camera frame) with the kernel, then write the state back into `filt`."""
+def integrate_compiled(filt, t, gyro_c, accel_c, extra_s: float, defer: bool) -> bool:
+    """Integrate a batch (camera frame) with the kernel and write the state back into `filt`; False
+    (nothing changed) when the batch holds an IMU gap, which the reference path then handles."""
     state = _pack(filt)
     record = filt.config.record_imu_estimates
     record_R = np.empty((t.size if record else 0, 3, 3))
     record_P = np.empty_like(record_R)
     bounds = filt._chunk_bounds(t).astype(np.int64)
-    downweighted = KERNEL(*state, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
-                          np.ascontiguousarray(accel_c, float), bounds, float(extra_s), _parameters(filt, defer),
-                          record_R, record_P)
+    done = KERNEL(*state, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
+                  np.ascontiguousarray(accel_c, float), bounds, float(extra_s), _parameters(filt, defer),
+                  record_R, record_P)
+    if done < 0:
+        return False  # a step longer than the gap limit: nothing was changed
     if record:
         filt._record_t.append(np.array(t, float))
         filt._record_R.append(record_R)
         filt._record_P.append(record_P)
     filt._imu_t_s = float(t[-1])
-    _unpack(filt, state, downweighted)
+    _unpack(filt, state, done > 0)
+    return True
 
 
 def accel_update_compiled(filt) -> None:

@@ -33,8 +33,8 @@ S_SIZE = 12
 # Layout of the float64 parameter vector `p`.
 (P_Q_GYRO, P_Q_BIAS, P_Q_RATE, P_TRAPEZOID, P_PERIOD, P_DUE, P_DEFER, P_LP_TAU, P_INV_G, P_GRAVITY,
  P_ACC_NOISE, P_NORM_SCALE, P_INNOV_SCALE, P_FLAG_RATIO, P_REST_GYRO, P_REST_ACCEL, P_REST_MIN_S,
- P_REST_STD, P_MF_INIT, P_MF_YAW_RW, P_MF_TILT_RW, P_ORTHO_EVERY, P_RECORD) = range(23)
-P_SIZE = 23
+ P_REST_STD, P_MF_INIT, P_MF_YAW_RW, P_MF_TILT_RW, P_ORTHO_EVERY, P_RECORD, P_GAP_LIMIT) = range(24)
+P_SIZE = 24
 
 
 def skew3(v):
@@ -242,7 +242,14 @@ def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_su
     to a frame (`P_DEFER`): that one is left to the frame (`s[S_ACCEL_DUE]` = 1). The last chunk
     is extrapolated by `extra_s`. Arrays are updated in place (R_wc, R_wm too); with `P_RECORD`,
     `record_R` (n, 3, 3) receives R_wc after each sample and `record_P` the attitude covariance
-    predicted to the end of its chunk. Returns True when an update was down-weighted."""
+    predicted to the end of its chunk. Returns 1 when an update was down-weighted, 0 otherwise, and
+    -1, changing nothing, when a step (from `s[S_T_STATE]` on) exceeds `P_GAP_LIMIT` (an IMU gap).
+    """
+    t_prev = s[S_T_STATE]
+    for k in range(t.shape[0]):
+        if t[k] - t_prev > p[P_GAP_LIMIT]:
+            return -1
+        t_prev = t[k]
     n_chunks = bounds.shape[0] - 1
     downweighted_any = False
     C_buf = np.empty((t.shape[0], 3, 3))
@@ -302,7 +309,7 @@ def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_su
                 downweighted_any |= dw
     R_wc[:, :] = R_wc_cur
     R_wm[:, :] = R_wm_cur
-    return downweighted_any
+    return 1 if downweighted_any else 0
 
 
 def accel_update_in_place(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
