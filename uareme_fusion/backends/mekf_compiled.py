@@ -28,11 +28,15 @@ def compiled_path_applies(filt, t: np.ndarray, saturated: np.ndarray, extra_s: f
 
 def _parameters(filt, defer: bool) -> np.ndarray:
     """The kernels' parameter vector (cached per filter: only two entries change over a run)."""
-    key = (filt.manhattan_initialised, defer)
-    cache = filt.__dict__.setdefault("_kernel_parameters", {})
-    if key not in cache:
-        cache[key] = _parameter_vector(filt, defer)
-    return cache[key]
+    cache = filt.__dict__.get("_kernel_parameters")
+    if cache is None:  # all four at once, so that the cache never grows later in a run
+        cache = filt._kernel_parameters = {}
+        for manhattan in (False, True):
+            for deferred in (False, True):
+                p = _parameter_vector(filt, deferred)
+                p[K.P_MF_INIT] = float(manhattan)
+                cache[manhattan, deferred] = p
+    return cache[filt.manhattan_initialised, defer]
 
 
 def _parameter_vector(filt, defer: bool) -> np.ndarray:
