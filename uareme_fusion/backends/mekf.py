@@ -40,6 +40,7 @@ from ..solver.manhattan import R_CM_UPRIGHT
 from ..types import Estimate, Status, VisualRotation
 from .base import Backend
 from .imu_stream import COLUMNS, ImuBatch, ImuStream
+from .mekf_compiled import KERNEL, accel_update_compiled, compiled_path_applies, integrate_compiled
 
 TH, BG, MF, RATE = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
 """Blocks of the 12-dimensional error state."""
@@ -174,6 +175,9 @@ class MekfConfig(BaseModel):
     """The IMU clock runs this far ahead of the camera clock, s."""
     gravity_m_s2: float = Field(9.81, gt=0)
     record_imu_estimates: bool = False
+    compiled: bool = True
+    """Integrate gap-free IMU batches with the compiled kernels (`mekf_kernels`) when numba is
+    available; False (or no numba) runs the numpy/filterpy reference path."""
     """Keep `R_wc` after every IMU sample (see `Mekf.imu_trajectory`)."""
 
     @field_validator("R_ci")
@@ -221,6 +225,7 @@ class Mekf(Backend):
         self._manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_sqrt_s or cfg.manhattan_tilt_rw_rad_sqrt_s)
         self._inv_g = 1.0 / cfg.gravity_m_s2
         self._trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
+        self._compiled = cfg.compiled and KERNEL is not None
         self.stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
         self.mode = cfg.mode
         self.R_wc = np.eye(3)
@@ -263,6 +268,7 @@ class Mekf(Backend):
         self._acc_lp_J: np.ndarray | None = None
         self._record_t: list[np.ndarray] = []
         self._record_R: list[np.ndarray] = []
+        self._record_P: list[np.ndarray] = []
 
     # ------------------------------------------------------------------ public API
     def process_imu(self, t_s, gyro_rad_s, accel_m_s2) -> None:
@@ -345,6 +351,11 @@ class Mekf(Backend):
             return np.zeros(0), np.zeros((0, 3, 3))
         return np.concatenate(self._record_t), np.concatenate(self._record_R)
 
+    def imu_trajectory_cov(self) -> np.ndarray:
+        """(N, 3, 3) covariance (rad^2, right perturbation of `R_wc`) beside each `imu_trajectory`
+        rotation: the one predicted to the end of the chunk that sample was integrated in."""
+        return np.concatenate(self._record_P) if self._record_P else np.zeros((0, 3, 3))
+
     def estimate(self, t_s: float | None = None) -> Estimate:
         """Current estimate (at the state time) without consuming status flags."""
         return self._make_estimate(self.t_state if t_s is None else t_s, self._flags)
@@ -380,8 +391,12 @@ class Mekf(Backend):
             self._accel_update()
         period = self.config.accel_update_period_s
         due_s = period - _PERIOD_TOLERANCE_S
-        # Propagating to a frame: an update due at its end waits for the frame's visual update.
-        defer = extrapolate_to_s is not None
+        # Propagating to a frame: an update due at its end waits for the frame's visual update (IMU-only
+        # there is none: the frame would apply it at once, so it is applied here, in the same order).
+        defer = extrapolate_to_s is not None and self.mode != MekfMode.IMU_ONLY
+        if (self._compiled and compiled_path_applies(self, t, saturated, extra_s)
+                and integrate_compiled(self, t, gyro_c, accel_c, extra_s, defer)):
+            return
         if t.size < 2 or last_t - self.t_state <= period:
             # Short batch (a frame's worth): one chunk, then the update if the period is complete.
             self._integrate_chunk(t, gyro_c, accel_c, saturated, extra_s)
@@ -394,11 +409,7 @@ class Mekf(Backend):
         # which its interval starts, so a chunk ends on the sample whose interval crosses the
         # boundary: every chunk but the last one crossed it and ends with an update (each update then
         # averages between `period` and `period` + one sample step).
-        elapsed_before = np.empty(t.size)
-        elapsed_before[0] = self._acc_elapsed_s
-        elapsed_before[1:] = self._acc_elapsed_s + (t[:-1] - self.t_state)
-        cuts = np.flatnonzero(np.diff(np.floor(elapsed_before / period))) + 1
-        bounds = [0, *cuts.tolist(), t.size]
+        bounds = self._chunk_bounds(t).tolist()
         for i in range(len(bounds) - 1):
             a, b = bounds[i], bounds[i + 1]
             last = i == len(bounds) - 2
@@ -407,6 +418,19 @@ class Mekf(Backend):
                 self._accel_due = True
                 if not (last and defer):
                     self._accel_update()
+
+    def _chunk_bounds(self, t: np.ndarray) -> np.ndarray:
+        """Chunk limits of a batch (chunk k is samples bounds[k]:bounds[k+1]): one chunk for a short
+        batch (a frame's worth), else a cut after each sample whose interval crosses an
+        accelerometer-update boundary."""
+        period = self.config.accel_update_period_s
+        if t.size < 2 or float(t[-1]) - self.t_state <= period:
+            return np.array([0, t.size])
+        elapsed_before = np.empty(t.size)
+        elapsed_before[0] = self._acc_elapsed_s
+        elapsed_before[1:] = self._acc_elapsed_s + (t[:-1] - self.t_state)
+        cuts = np.flatnonzero(np.diff(np.floor(elapsed_before / period))) + 1
+        return np.concatenate(([0], cuts, [t.size]))
 
     def _integrate_chunk(self, t, gyro_c, accel_c, saturated, extra_s: float = 0.0) -> None:
         """Integrate samples (camera frame) over (t_state, t[-1]]: sample k covers (t_{k-1}, t_k]
@@ -492,6 +516,8 @@ class Mekf(Backend):
         if self._manhattan_walks and self.manhattan_initialised:
             self._add_manhattan_noise(Q, T_elapsed)
         _, self.P = kf_predict(_ZERO_STATE, self.P, F, Q)
+        if cfg.record_imu_estimates and n:
+            self._record_P.append(np.repeat(self.P[None, TH, TH], n, axis=0))
         # Accelerometer: time-weighted sum of specific force, rotated into the chunk's end frame.
         if n:
             self._acc_sum_c = C_N.T @ (self._acc_sum_c + np.einsum("kjl,kl,k->j", C[:n], accel_c, dt[:n]))
@@ -588,6 +614,9 @@ class Mekf(Backend):
     def _accel_update(self) -> None:
         """Apply the accelerometer update of the period just completed (see `_accel_rows`)."""
         self._accel_due = False
+        if self._compiled:
+            accel_update_compiled(self)
+            return
         rows = self._accel_rows()
         if rows is not None:
             self._kalman_update(*rows)

@@ -126,6 +126,8 @@ def _options():
                                 "EuRoC sensor.yaml); frames are undistorted."),
         max_frames=typer.Option(None, "--max-frames", help="Stop after this many frames."),
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
+        offline=typer.Option(None, "--offline", help="A recorded IMU-only file: smooth it forward and backward "
+                             "(more accurate than the streaming filter)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
                                                      "(replay it later with 'run FOLDER')."),
         threads=typer.Option(None, "--threads", min=1, max=256,
@@ -157,12 +159,12 @@ def run_command(
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
     record: Optional[Path] = _o["record"], rerun: Optional[Path] = _o["rerun"],
-    intrinsics: Optional[str] = _o["intrinsics"],
+    intrinsics: Optional[str] = _o["intrinsics"], offline: Optional[bool] = _o["offline"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
-                     imu_time_offset_s=imu_time_offset_s)
+                     imu_time_offset_s=imu_time_offset_s, offline=offline)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record,
             extra_sinks_factory=rerun_sinks(rerun))
 
@@ -176,7 +178,7 @@ def eval_command(
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"], rerun: Optional[Path] = _o["rerun"],
-    intrinsics: Optional[str] = _o["intrinsics"],
+    intrinsics: Optional[str] = _o["intrinsics"], offline: Optional[bool] = _o["offline"],
     gt: Optional[Path] = typer.Option(None, "--gt", help="Ground-truth trajectory (TUM 'timestamp tx ty tz qx qy qz "
                                                          "qw', or EuRoC gt0/data.csv) in place of the source's own."),
     gt_time_offset_s: float = typer.Option(0.0, "--gt-time-offset-s",
@@ -185,6 +187,6 @@ def eval_command(
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
-                     imu_time_offset_s=imu_time_offset_s)
+                     imu_time_offset_s=imu_time_offset_s, offline=offline)
     execute(source, out, cfg, imu, fps, evaluate=True, command="eval", extra_sinks_factory=rerun_sinks(rerun),
             gt=gt, gt_time_offset_s=gt_time_offset_s)

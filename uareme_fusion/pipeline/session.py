@@ -44,7 +44,14 @@ def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipe
     normals = None
     if source.info.has_frames:
         normals = CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
-    return Pipeline(normals, make_backend(cfg, source.info), sinks)
+    backend = make_backend(cfg, source.info)
+    if cfg.offline:
+        from ..backends.mekf_offline import offline_backend
+
+        if cfg.backend != "mekf":
+            raise InputError(f"--offline smooths with the mekf backend, not {cfg.backend}")
+        backend = offline_backend(backend.config, source)
+    return Pipeline(normals, backend, sinks)
 
 
 def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False, extra_sinks: Iterable = (),

@@ -1,0 +1,141 @@
+"""The compiled IMU path of the EKF (issue 17) against the numpy/filterpy reference: same estimates
+on seeded streams, with frames, with bad samples, gaps and saturation; fallback without numba."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from uareme_fusion.backends import mekf, mekf_compiled
+from uareme_fusion.backends.mekf import Mekf, MekfConfig
+from uareme_fusion.config import load_config
+from uareme_fusion.rotations import angle_between, exp_so3
+from uareme_fusion.sim.imu import simulate_imu
+from uareme_fusion.sim.trajectory import make_trajectory
+from uareme_fusion.types import Status, VisualRotation
+
+needs_numba = pytest.mark.skipif(mekf_compiled.KERNEL is None, reason="numba not installed: no compiled path")
+
+
+def stream(seed: int, duration_s: float = 30.0, rate_hz: float = 200.0):
+    traj = make_trajectory("walk", duration_s=duration_s, seed=seed)
+    t, gyro, accel = simulate_imu(traj, rate_hz=rate_hz, seed=seed + 1)
+    return traj, t, gyro + np.array([0.01, -0.02, 0.015]), accel  # a gyro bias to estimate
+
+
+def run(config: MekfConfig, t, gyro, accel, step: int, frames=None):
+    """Feed `step` samples per call (a frame after each call when `frames` gives R_cm(t)); returns
+    the filter and its estimates."""
+    filt = Mekf(config)
+    ests = []
+    for i in range(0, t.size, step):
+        filt.process_imu(t[i:i + step], gyro[i:i + step], accel[i:i + step])
+        if frames is not None and i + step < t.size:
+            t_f = float(t[min(i + step, t.size) - 1]) + 0.001
+            ests.append(filt.process_frame(t_f, frames(t_f, filt)))
+    filt.flush()
+    return filt, ests
+
+
+def assert_same_filters(a: Mekf, b: Mekf, ests_a=(), ests_b=()):
+    assert np.degrees(angle_between(a.R_wc, b.R_wc)) < 1e-9 * 180 / np.pi
+    np.testing.assert_allclose(a.P, b.P, rtol=1e-7, atol=1e-15)
+    np.testing.assert_allclose(a.b_c, b.b_c, atol=1e-10)
+    assert a.counters == b.counters
+    assert a.stream.counts == b.stream.counts
+    if a.config.record_imu_estimates:
+        (ta, Ra), (tb, Rb) = a.imu_trajectory(), b.imu_trajectory()
+        np.testing.assert_array_equal(ta, tb)
+        assert angle_between(Ra, Rb).max() < 1e-9
+        np.testing.assert_allclose(a.imu_trajectory_cov(), b.imu_trajectory_cov(), rtol=1e-7, atol=1e-15)
+    for ea, eb in zip(ests_a, ests_b):
+        assert ea.status == eb.status
+        assert angle_between(ea.R_wc, eb.R_wc) < 1e-9
+        np.testing.assert_allclose(ea.cov, eb.cov, rtol=1e-6, atol=1e-15)
+
+
+def both(config: MekfConfig):
+    return config.model_copy(update={"compiled": True}), config.model_copy(update={"compiled": False})
+
+
+@needs_numba
+def test_orthonormalisation_period_is_the_reference_one():
+    assert mekf_compiled._ORTHONORMALISE_EVERY == mekf._ORTHONORMALISE_EVERY
+
+
+@needs_numba
+@pytest.mark.parametrize("step", [1, 7, 10_000])
+def test_imu_only_preset_same_estimates_in_any_batch_size(step):
+    _, t, gyro, accel = stream(0)
+    cfg = load_config("imu_only", MekfConfig).model_copy(update={"record_imu_estimates": True})
+    (a, _), (b, _) = (run(c, t, gyro, accel, step) for c in both(cfg))
+    assert a.counters["rest_updates"] + a.counters["accel_updates"] > 100
+    assert_same_filters(a, b)
+
+
+@needs_numba
+@pytest.mark.parametrize("preset", ["handheld", "vehicle"])
+def test_fused_with_frames_same_estimates(preset):
+    traj, t, gyro, accel = stream(1, duration_s=12.0)
+    rng = np.random.default_rng(5)
+    deltas = rng.normal(scale=0.01, size=(2000, 3))
+    cov = 1e-4 * np.eye(3)
+
+    def frames(t_f, filt):  # the same draws for both filters
+        k = int(t_f * 1000) % 2000
+        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0] @ exp_so3(deltas[k])
+        return VisualRotation(R_cm=R_cm, cov=cov, cost=0.01, iterations=3, n_valid=100)
+
+    (a, ea), (b, eb) = (run(c, t, gyro, accel, 7, frames) for c in both(load_config(preset, MekfConfig)))
+    assert a.counters["visual_updates"] > 100
+    assert_same_filters(a, b, ea, eb)
+
+
+@needs_numba
+def test_bad_samples_gaps_and_saturation_same_estimates_counts_and_flags():
+    _, t, gyro, accel = stream(2, duration_s=20.0)
+    gyro, accel, t = gyro.copy(), accel.copy(), t.copy()
+    gyro[100:103] = np.nan
+    accel[500, 1] = np.inf
+    t[900] = np.nan
+    gyro[1500:1504, 2] = 40.0  # beyond the 34.9 rad/s range: saturated
+    keep = np.ones(t.size, bool)
+    keep[2000:2100] = False  # a 0.5 s gap
+    t, gyro, accel = t[keep], gyro[keep], accel[keep]
+    cfg = load_config("imu_only", MekfConfig).model_copy(update={"record_imu_estimates": True})
+    results = []
+    for c in both(cfg):
+        filt = Mekf(c)
+        flags = Status.OK
+        for i in range(0, t.size, 20):
+            filt.process_imu(t[i:i + 20], gyro[i:i + 20], accel[i:i + 20])
+            flags |= filt.process_frame(float(np.nanmax(t[i:i + 20])) + 1e-4, None).status
+        filt.flush()
+        results.append((filt, flags))
+    (a, fa), (b, fb) = results
+    assert a.stream.counts.nonfinite == 5 and a.stream.counts.saturated == 4
+    assert a.counters["imu_gaps"] == 1
+    assert fa & Status.IMU_GAP and fa & Status.GYRO_SATURATED and fa & Status.IMU_DROPPED
+    assert fa == fb
+    assert_same_filters(a, b)
+
+
+def test_without_numba_the_reference_runs_after_one_warning_line():
+    code = ("import sys, warnings; sys.modules['numba'] = None\n"
+            "warnings.simplefilter('always')\n"
+            "import numpy as np\n"
+            "from uareme_fusion.backends.mekf import Mekf, MekfConfig\n"
+            "from uareme_fusion.solver import normal_moments\n"
+            "f = Mekf(MekfConfig(mode='imu_only')); t = np.arange(0, 1, 0.005)\n"
+            "f.process_imu(t, np.zeros((t.size, 3)), np.tile([0, 0, 9.81], (t.size, 1))); f.flush()\n"
+            "m = normal_moments(np.ones((4, 3)))\n"
+            "print(f.counters['accel_updates'], m.n_valid)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["24", "4"]
+    warnings = [line for line in out.stderr.splitlines() if "compiled kernels unavailable" in line]
+    assert len(warnings) == 1
+

@@ -1,0 +1,55 @@
+"""The compiled one-pass moments (issue 17) against the numpy reference, valid and invalid pixels."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from uareme_fusion import jit
+from uareme_fusion.solver.moments import check_normal_map, fused_moments, normal_moments_reference
+
+pytestmark = pytest.mark.skipif(not jit.available(), reason="numba not installed: no compiled path to test")
+
+
+def assert_same(n, k):
+    ref = normal_moments_reference(n, k)
+    fused = fused_moments(*check_normal_map(n, k))
+    scale = max(float(np.abs(ref.G).max()), 1e-300)
+    np.testing.assert_allclose(fused.G, ref.G, rtol=0, atol=1e-12 * scale)
+    assert fused.total_weight == pytest.approx(ref.total_weight, rel=1e-12, abs=1e-300)
+    assert (fused.n_valid, fused.n_invalid) == (ref.n_valid, ref.n_invalid)
+
+
+def test_float64_map_with_every_kind_of_invalid_pixel_matches_the_reference():
+    rng = np.random.default_rng(3)
+    n = rng.normal(size=(120, 160, 3)) * rng.uniform(0.2, 5.0, size=(120, 160, 1))
+    k = rng.uniform(0.0, 50.0, size=(120, 160))
+    n[0, :10] = np.nan
+    n[1, :5] = 0.0
+    n[2, :3] = np.inf
+    n[3, :2, 1] = -np.inf
+    k[4, :7] = np.nan
+    k[5, :2] = -1.0
+    k[6, :4] = np.inf
+    k[7, :3] = -0.0
+    k[8, :6] = 0.0  # valid, weight 0: neither in n_valid nor in n_invalid
+    assert_same(n, k)
+    assert_same(n, None)
+
+
+def test_float32_map_matches_a_float64_reference_to_float64_rounding():
+    rng = np.random.default_rng(4)
+    n = rng.normal(size=(50_000, 3)).astype(np.float32)
+    k = rng.uniform(0.0, 75.0, size=50_000).astype(np.float32)
+    fused = fused_moments(*check_normal_map(n, k))
+    ref = normal_moments_reference(n.astype(np.float64), k.astype(np.float64))  # same values, exact sums
+    np.testing.assert_allclose(fused.G, ref.G, rtol=1e-12)
+    assert (fused.n_valid, fused.n_invalid) == (ref.n_valid, ref.n_invalid)
+
+
+@settings(max_examples=60, deadline=None)
+@given(arrays(np.float64, (7, 3), elements=st.one_of(st.floats(-1e6, 1e6), st.sampled_from([np.nan, np.inf, 0.0]))),
+       arrays(np.float64, (7,), elements=st.one_of(st.floats(-10, 1e6), st.sampled_from([np.nan, np.inf, -0.0]))))
+def test_any_small_float64_map_counts_and_sums_like_the_reference(n, k):
+    assert_same(n, k)

@@ -1,0 +1,338 @@
+"""Compiled IMU propagation and accelerometer/zero-rate updates of `Mekf` (issue 17).
+
+The maths are those of `mekf.Mekf._integrate_chunk`, `_accel_rows`, `_rest_update` and
+`_kalman_update` (the reference, in numpy/filterpy), written as small pure functions on plain arrays
+so that numba compiles them and a later EKF split can reuse them:
+- `propagate_chunk`: gyro integration over a chunk of samples and the error-state covariance
+  prediction (closed-form transition and process noise, as in the reference);
+- `accel_measurement` / `zero_rate_measurement`: residual, variance (isotropic) and H of the
+  accelerometer-direction and at-rest bias measurements;
+- `kalman_update`: Joseph-form update of the zero-mean error state, injection and reset.
+`integrate_batch` runs them over a released batch, chunk by chunk, with the updates falling due.
+It covers batches without gaps or saturated samples; `Mekf` keeps those on the reference path.
+
+Conventions as in `mekf`: right perturbations, error state `[dtheta_c, db_c, dtheta_m, domega_c]`,
+`R_wc` camera to world (z up), rates in rad/s in the camera frame, times in s.
+Every function here also runs as plain Python (slowly); `KERNEL` is the compiled driver or None.
+Compiling them takes about 20 s on a small machine, so their machine code is cached on disk
+(numba `cache=True`): only the first process after an install or an edit pays it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import jit
+
+# Layout of the float64 state vector `s` that `integrate_batch` reads and updates in place.
+S_T_STATE, S_ACC_TIME, S_ACC_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
+S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE = range(7, 12)
+S_SIZE = 12
+# Layout of the float64 parameter vector `p`.
+(P_Q_GYRO, P_Q_BIAS, P_Q_RATE, P_TRAPEZOID, P_PERIOD, P_DUE, P_DEFER, P_LP_TAU, P_INV_G, P_GRAVITY,
+ P_ACC_NOISE, P_NORM_SCALE, P_INNOV_SCALE, P_FLAG_RATIO, P_REST_GYRO, P_REST_ACCEL, P_REST_MIN_S,
+ P_REST_STD, P_MF_INIT, P_MF_YAW_RW, P_MF_TILT_RW, P_ORTHO_EVERY, P_RECORD, P_GAP_LIMIT) = range(24)
+P_SIZE = 24
+
+
+def skew3(v):
+    """(3, 3) cross-product matrix of v."""
+    out = np.zeros((3, 3))
+    out[0, 1], out[0, 2], out[1, 2] = -v[2], v[1], -v[0]
+    out[1, 0], out[2, 0], out[2, 1] = v[2], -v[1], v[0]
+    return out
+
+
+def inv3(A):
+    """Inverse of a 3x3 matrix by cofactors (NaN/Inf for a singular one, as numpy's would fail)."""
+    out = np.empty((3, 3))
+    out[0, 0] = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
+    out[0, 1] = A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]
+    out[0, 2] = A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]
+    out[1, 0] = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
+    out[1, 1] = A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]
+    out[1, 2] = A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]
+    out[2, 0] = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
+    out[2, 1] = A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]
+    out[2, 2] = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+    det = A[0, 0] * out[0, 0] + A[0, 1] * out[1, 0] + A[0, 2] * out[2, 0]
+    return out / det
+
+
+def exp3(phi):
+    """Rodrigues' formula, with its Taylor series near 0 (the exponential map of SO(3))."""
+    theta2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+    if theta2 < 1e-8:
+        a = 1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0
+        b = 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0
+    else:
+        theta = math.sqrt(theta2)
+        a = math.sin(theta) / theta
+        b = (1.0 - math.cos(theta)) / theta2
+    K = skew3(phi)
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def orthonormal3(R):
+    """One Newton step of the polar decomposition (as `mekf._orthonormal`)."""
+    return 0.5 * R @ (3.0 * np.eye(3) - R.T @ R)
+
+
+def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoid, q_gyro, q_bias, q_rate,
+                    C_out):
+    """Integrate samples k = 0..n-1 (camera frame, no gaps) over (t_state, t[-1]] and then hold the
+    last rate `extra_s` longer. Writes the cumulative rotations C_k (n, 3, 3) into `C_out` and
+    returns (C_N, A_bias, T, P_predicted): `R_wc <- R_wc C_N`, `dtheta_N = C_N^T dtheta_0 - A_bias db`,
+    T the time covered, P the covariance predicted with the closed-form transition and noise."""
+    n = t.shape[0]
+    C = np.eye(3)
+    S = np.zeros((3, 3))  # sum_k dt_k C_k
+    T = 0.0
+    rate_var = 0.0
+    t_prev = t_state
+    g_prev = last_gyro
+    m = n + 1 if extra_s > 0.0 else n
+    for k in range(m):
+        if k < n:
+            dt, g = t[k] - t_prev, gyro[k]
+            t_prev = t[k]
+        else:
+            dt, g = extra_s, gyro[n - 1]
+        rate = 0.5 * (g + g_prev) - b_c if trapezoid else g - b_c
+        g_prev = g
+        C = C @ exp3(rate * dt)
+        if k < n:
+            C_out[k] = C
+        S += dt * C
+        T += dt
+        rate_var += (rate[0] * rate[0] + rate[1] * rate[1] + rate[2] * rate[2]) * dt
+    A_bias = C.T @ S
+    F = np.eye(12)
+    F[0:3, 0:3] = C.T
+    F[0:3, 3:6] = -A_bias
+    Q = np.zeros((12, 12))
+    q_th = q_gyro * T + q_bias * T**3 / 3.0 + q_rate * rate_var
+    for i in range(3):
+        Q[i, i] = q_th
+        Q[i, 3 + i] = Q[3 + i, i] = -q_bias * T**2 / 2.0
+        Q[3 + i, 3 + i] = q_bias * T
+    return C, A_bias, T, F @ P @ F.T + Q
+
+
+def accel_measurement(acc_c, T, R_wc, lp_J1, use_lp_J, p):
+    """Accelerometer direction as a tilt measurement (as `Mekf._accel_rows`): (ok, residual (3,),
+    variance, H (3, 12), downweighted). `ok` False near free fall (no direction)."""
+    norm = math.sqrt(acc_c[0] ** 2 + acc_c[1] ** 2 + acc_c[2] ** 2)
+    H = np.zeros((3, 12))
+    if not (T > 0 and norm > 0.1 * p[P_GRAVITY]):
+        return False, np.zeros(3), 0.0, H, False
+    norm_dev = abs(norm * p[P_INV_G] - 1.0)
+    z = acc_c / norm
+    h = R_wc[2].copy()  # R_wc^T @ (0, 0, 1)
+    angle = math.acos(min(1.0, max(-1.0, z[0] * h[0] + z[1] * h[1] + z[2] * h[2])))
+    var0 = p[P_ACC_NOISE] ** 2 / T
+    var = var0 * (1.0 + (norm_dev / p[P_NORM_SCALE]) ** 2) * (1.0 + (angle / p[P_INNOV_SCALE]) ** 2)
+    downweighted = var > (p[P_FLAG_RATIO] * math.sqrt(var0)) ** 2
+    H[:, 0:3] = skew3(h)
+    if use_lp_J:
+        H[:, 3:6] = -(np.eye(3) - np.outer(z, z)) @ lp_J1 / norm
+    return True, z - h, var, H, downweighted
+
+
+def zero_rate_measurement(rest_sums, rest_n, T, b_c, p):
+    """At rest the period's mean gyro reading measures the bias (as `Mekf._rest_update`):
+    (at_rest, residual (3,), variance, H (3, 12)); `at_rest` False when the period moved."""
+    H = np.zeros((3, 12))
+    g_mean, a_mean = rest_sums[0:3] / rest_n, rest_sums[4:7] / rest_n
+    g2 = g_mean[0] ** 2 + g_mean[1] ** 2 + g_mean[2] ** 2
+    g_dev2 = max(rest_sums[3] / rest_n - g2, 0.0)
+    a_dev2 = max(rest_sums[7] / rest_n - (a_mean[0] ** 2 + a_mean[1] ** 2 + a_mean[2] ** 2), 0.0)
+    limit2 = p[P_REST_GYRO] ** 2
+    if g2 >= limit2 or g_dev2 >= limit2 or a_dev2 >= p[P_REST_ACCEL] ** 2:
+        return False, np.zeros(3), 0.0, H
+    for i in range(3):
+        H[i, 3 + i] = 1.0
+    return True, g_mean - b_c, p[P_Q_GYRO] / T + p[P_REST_STD] ** 2, H
+
+
+def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
+    """Joseph-form update with isotropic measurement noise `var`, then injection into the nominal
+    state and the reset of the error (as `Mekf._kalman_update`). Updates the arrays in place and
+    returns the new (R_wc, R_wm); nothing changes when the result is not finite."""
+    Rm = var * np.eye(3)
+    PHt = P @ H.T
+    K = PHt @ inv3(H @ PHt + Rm)
+    dx = K @ residual
+    I_KH = np.eye(12) - K @ H
+    P_new = I_KH @ P @ I_KH.T + K @ Rm @ K.T
+    if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(P_new))):
+        return R_wc, R_wm
+    G = np.eye(12)
+    if p[P_MF_INIT] > 0:
+        R_wm = R_wm @ exp3(dx[6:9])
+        G[6:9, 6:9] -= 0.5 * skew3(dx[6:9])
+    R_wc = R_wc @ exp3(dx[0:3])
+    s[S_PRODUCTS] += 1
+    if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
+        R_wc, R_wm = orthonormal3(R_wc), orthonormal3(R_wm)
+        s[S_PRODUCTS] = 0
+    G[0:3, 0:3] -= 0.5 * skew3(dx[0:3])
+    b_c += dx[3:6]
+    if s[S_LP_VALID] > 0:
+        lp[0] += lp_J[0] @ dx[3:6]
+        lp[1] += lp_J[1] @ dx[3:6]
+    P_new = G @ P_new @ G.T
+    P[:, :] = 0.5 * (P_new + P_new.T)
+    return R_wc, R_wm
+
+
+def accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
+    """The update at the end of an accelerometer period (as `Mekf._accel_update`): the zero-rate
+    update when at rest, then the (low-passed) accelerometer direction. Returns (R_wc, R_wm, flag)."""
+    T = s[S_ACC_TIME]
+    acc_c = acc_sum / T if T > 0 else acc_sum.copy()
+    acc_sum[:] = 0.0
+    s[S_ACC_TIME] = 0.0
+    s[S_ACC_ELAPSED] = 0.0
+    if p[P_REST_GYRO] > 0:
+        n = s[S_REST_N]
+        if n >= 2 and T > 0:
+            at_rest, r, var, H = zero_rate_measurement(rest_sums, n, T, b_c, p)
+            if not at_rest:
+                s[S_REST_SINCE] = np.nan
+            else:
+                if math.isnan(s[S_REST_SINCE]):
+                    s[S_REST_SINCE] = s[S_T_STATE] - T
+                if s[S_T_STATE] - s[S_REST_SINCE] >= p[P_REST_MIN_S]:
+                    R_wc, R_wm = kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
+                    s[S_REST_UPDATES] += 1
+        rest_sums[:] = 0.0
+        s[S_REST_N] = 0
+    tau = p[P_LP_TAU]
+    if tau > 0 and T > 0:
+        if s[S_LP_VALID] == 0:
+            lp[0], lp[1] = acc_c, acc_c
+            lp_J[:] = 0.0
+            s[S_LP_VALID] = 1
+        else:
+            alpha = 1.0 - math.exp(-T / tau)
+            lp[0] += alpha * (acc_c - lp[0])
+            lp[1] += alpha * (lp[0] - lp[1])
+            lp_J[0] *= 1.0 - alpha
+            lp_J[1] += alpha * (lp_J[0] - lp_J[1])
+        acc_c = lp[1].copy()
+    ok, r, var, H, downweighted = accel_measurement(acc_c, T, R_wc, lp_J[1], tau > 0, p)
+    if not ok:
+        s[S_ACCEL_SKIPPED] += 1
+        return R_wc, R_wm, False
+    if downweighted:
+        s[S_ACCEL_DOWNWEIGHTED] += 1
+    s[S_ACCEL_UPDATES] += 1
+    R_wc, R_wm = kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
+    return R_wc, R_wm, downweighted
+
+
+def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
+                    extra_s, p, record_R, record_P):
+    """Integrate a released batch (camera frame, no gaps or saturated samples) chunk by chunk
+    between `bounds` (chunk k is samples bounds[k]:bounds[k+1]) as `Mekf._integrate_pending` does,
+    with the accelerometer updates that fall due, except one due at the end of a batch propagated
+    to a frame (`P_DEFER`): that one is left to the frame (`s[S_ACCEL_DUE]` = 1). The last chunk
+    is extrapolated by `extra_s`. Arrays are updated in place (R_wc, R_wm too); with `P_RECORD`,
+    `record_R` (n, 3, 3) receives R_wc after each sample and `record_P` the attitude covariance
+    predicted to the end of its chunk. Returns 1 when an update was down-weighted, 0 otherwise, and
+    -1, changing nothing, when a step (from `s[S_T_STATE]` on) exceeds `P_GAP_LIMIT` (an IMU gap).
+    """
+    t_prev = s[S_T_STATE]
+    for k in range(t.shape[0]):
+        if t[k] - t_prev > p[P_GAP_LIMIT]:
+            return -1
+        t_prev = t[k]
+    n_chunks = bounds.shape[0] - 1
+    downweighted_any = False
+    C_buf = np.empty((t.shape[0], 3, 3))
+    R_wc_cur = R_wc.copy()
+    R_wm_cur = R_wm.copy()
+    for c in range(n_chunks):
+        a, b = bounds[c], bounds[c + 1]
+        last = c == n_chunks - 1
+        extra = extra_s if last else 0.0
+        C_k = C_buf[a:b]
+        C_N, A_bias, T, P_pred = propagate_chunk(R_wc_cur, b_c, P, last_gyro, s[S_T_STATE], t[a:b], gyro[a:b],
+                                                 extra, p[P_TRAPEZOID] > 0, p[P_Q_GYRO], p[P_Q_BIAS],
+                                                 p[P_Q_RATE], C_k)
+        if p[P_MF_INIT] > 0 and (p[P_MF_YAW_RW] > 0 or p[P_MF_TILT_RW] > 0) and T > 0:
+            u = R_wm_cur[2].copy()
+            uu = np.outer(u, u)
+            P_pred[6:9, 6:9] += T * (p[P_MF_YAW_RW] ** 2 * uu + p[P_MF_TILT_RW] ** 2 * (np.eye(3) - uu))
+        P[:, :] = P_pred
+        if p[P_RECORD] > 0:
+            for k in range(b - a):
+                record_R[a + k] = R_wc_cur @ C_k[k]
+                record_P[a + k] = P_pred[0:3, 0:3]
+        R_wc_cur = R_wc_cur @ C_N
+        s[S_PRODUCTS] += 1
+        if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
+            R_wc_cur, R_wm_cur = orthonormal3(R_wc_cur), orthonormal3(R_wm_cur)
+            s[S_PRODUCTS] = 0
+        last_gyro[:] = gyro[b - 1]
+        # Specific force, time-weighted, in the chunk's end frame.
+        acc = acc_sum.copy()
+        t_prev = s[S_T_STATE]
+        for k in range(b - a):
+            acc += (t[a + k] - t_prev) * (C_k[k] @ accel[a + k])
+            t_prev = t[a + k]
+        acc_sum[:] = C_N.T @ acc
+        s[S_ACC_TIME] += T - extra
+        s[S_ACC_ELAPSED] += T
+        if s[S_LP_VALID] > 0:
+            lp[0], lp[1] = C_N.T @ lp[0], C_N.T @ lp[1]
+            lp_J[0] = C_N.T @ lp_J[0] - skew3(lp[0]) @ A_bias
+            lp_J[1] = C_N.T @ lp_J[1] - skew3(lp[1]) @ A_bias
+        if p[P_REST_GYRO] > 0:
+            for k in range(a, b):
+                g, f = gyro[k], accel[k]
+                rest_sums[0:3] += g
+                rest_sums[3] += g[0] * g[0] + g[1] * g[1] + g[2] * g[2]
+                rest_sums[4:7] += f
+                rest_sums[7] += f[0] * f[0] + f[1] * f[1] + f[2] * f[2]
+            s[S_REST_N] += b - a
+        s[S_T_STATE] = t[b - 1] + extra
+        if not last or s[S_ACC_ELAPSED] >= p[P_DUE]:
+            if last and p[P_DEFER] > 0:
+                s[S_ACCEL_DUE] = 1
+            else:
+                R_wc_cur, R_wm_cur, dw = accel_and_rest_update(s, R_wc_cur, R_wm_cur, b_c, P, acc_sum, lp, lp_J,
+                                                               rest_sums, p)
+                downweighted_any |= dw
+    R_wc[:, :] = R_wc_cur
+    R_wm[:, :] = R_wm_cur
+    return 1 if downweighted_any else 0
+
+
+def accel_update_in_place(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
+    """`accel_and_rest_update` with R_wc and R_wm updated in place; True when down-weighted."""
+    R_wc_new, R_wm_new, downweighted = accel_and_rest_update(s, R_wc.copy(), R_wm.copy(), b_c, P, acc_sum, lp,
+                                                             lp_J, rest_sums, p)
+    R_wc[:, :] = R_wc_new
+    R_wm[:, :] = R_wm_new
+    return downweighted
+
+
+KERNEL = None
+"""`integrate_batch` compiled, with the functions it calls, or None (numba missing or broken)."""
+ACCEL_UPDATE = None
+"""`accel_update_in_place` compiled, or None."""
+if jit.available():
+    try:
+        _pure = (skew3, inv3, exp3, orthonormal3, propagate_chunk, accel_measurement, zero_rate_measurement,
+                 kalman_update, accel_and_rest_update)
+        for _f in _pure:
+            globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
+        KERNEL = jit.compiled(integrate_batch, cache=True, error_model="numpy")
+        ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
+    except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
+        jit.disable(exc)
+        KERNEL = ACCEL_UPDATE = None

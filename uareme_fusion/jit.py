@@ -1,0 +1,55 @@
+"""The project's one compiler switch: numba's `njit`, or nothing (pure-numpy reference paths).
+
+`compiled(fn)` compiles `fn` with `numba.njit(cache=False, nogil=True)` when numba imports (lazily,
+at its first call), and
+returns None otherwise, after one warning line. Callers keep a pure Python/numpy reference beside
+each compiled kernel and use it whenever the kernel is None or fails to compile (`disable`).
+`UAREME_NO_JIT=1` in the environment forces the reference paths (tests compare the two).
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+
+try:
+    if os.environ.get("UAREME_NO_JIT"):
+        raise ImportError("UAREME_NO_JIT is set")
+    import numba
+except Exception as exc:  # noqa: BLE001 -- a broken numba install must not stop the package
+    numba = None
+    _REASON = f"{type(exc).__name__}: {exc}"
+else:
+    _REASON = ""
+
+_warned = False
+
+
+def _warn_once(reason: str) -> None:
+    global _warned
+    if not _warned and not os.environ.get("UAREME_NO_JIT"):
+        _warned = True
+        warnings.warn(f"uareme_fusion: compiled kernels unavailable ({reason}); using the numpy reference paths",
+                      RuntimeWarning, stacklevel=3)
+
+
+def available() -> bool:
+    """Whether numba imported (kernels may still fail to compile: see `disable`)."""
+    return numba is not None
+
+
+def compiled(fn=None, cache: bool = False, **options):
+    """`numba.njit(cache=cache, nogil=True, **options)(fn)`, or None without numba (one warning).
+    `cache=True` keeps the machine code on disk (numba's `__pycache__` beside the source, or
+    `NUMBA_CACHE_DIR`) for kernels whose compilation takes seconds."""
+    def wrap(f):
+        if numba is None:
+            _warn_once(_REASON)
+            return None
+        return numba.njit(cache=cache, nogil=True, **options)(f)
+    return wrap(fn) if fn is not None else wrap
+
+
+def disable(exc: BaseException) -> None:
+    """Report a kernel that failed to compile or run (one warning); the caller falls back."""
+    _warn_once(f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
