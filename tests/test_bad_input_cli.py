@@ -167,7 +167,7 @@ COMPARE_OPTION_CASES = [
     ("no_source", [], "give either a dataset folder SOURCE or --synthetic"),
     ("both_sources", ["SEQ", "--synthetic", "walk"], "not both"),
     ("missing_folder", ["MISSING"], "no such file or folder"),
-    ("file_as_source", ["FILE"], "OpenCV cannot open it"),  # any source 'run' accepts: not a video
+    ("file_as_source", ["FILE"], "is not an EuRoC IMU file: line 1 has 1 column"),  # text, not a video: read as an IMU table
     ("empty_folder", ["EMPTY"], "not a dataset .* holds no image files"),
     ("unknown_trajectory", ["--synthetic", "moon"], "unknown trajectory 'moon'"),
     ("negative_duration", ["--synthetic", "static", "--duration-s", "-1"], "Invalid value for '--duration-s'"),
