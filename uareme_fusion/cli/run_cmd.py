@@ -6,18 +6,18 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
 from ..config import load_config, validate_config
 from ..pipeline import RunConfig
-from ..pipeline.session import make_output_folder, run_source
-from .app import app, fail
+from ..pipeline.session import prepare_output_folder, run_source
+from .app import StdoutConsole, app, fail
 from .progress import frame_progress
 
 SOURCE_HELP = ("A video file, webcam:N, an image, folder or glob of images, a dataset folder (TUM RGB-D, "
                "ICL-NUIM, EuRoC, one written by 'simulate'), a BROAD .hdf5 or IMU .csv, sim:SCENARIO, or oak[:ID].")
-STOP_EXIT_CODES = {"end": 0, "max_frames": 0, "source_error": 1, "input_error": 2, "interrupted": 130}
+STOP_EXIT_CODES = {"end": 0, "max_frames": 0, "source_error": 1, "input_error": 2, "interrupted": 130,
+                   "output_error": 1}
 
 
 def run_config(config: Optional[Path], **overrides) -> RunConfig:
@@ -28,14 +28,14 @@ def run_config(config: Optional[Path], **overrides) -> RunConfig:
 
 
 def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Optional[float], evaluate: bool,
-            command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None) -> dict:
+            command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None, force: bool = False) -> dict:
     """Open the source, run it with a progress bar, report how it ended; exits non-zero when it failed.
 
     With `record_dir` the source's frames and IMU are also written there as they pass (our dataset
     layout: a live session replays exactly with `run RECORD_DIR`)."""
     from ..drivers import open_source, record
 
-    out_dir = make_output_folder(out)
+    out_dir = prepare_output_folder(out, force)
     opened = open_source(source, imu=None if imu is None else str(imu), fps=fps)
     with (opened if record_dir is None else record(opened, record_dir)) as src:
         sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
@@ -47,13 +47,18 @@ def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Op
                                  command=command)
     print_summary(summary)
     code = STOP_EXIT_CODES.get(summary["stopped"], 1)
+    if summary["stopped"] == "interrupted":
+        code = 128 + summary.get("signal", 2)
+    if "summary_error" in summary:
+        raise fail(f"{summary['error'] or 'the run ended'}; {summary['summary_error']}, so the outputs in "
+                   f"{out_dir} have no summary.json", 1)
     if code:
         raise fail(f"{summary['error']} (outputs so far kept in {out_dir})", code)
     return summary
 
 
 def print_summary(summary: dict) -> None:
-    console = Console()
+    console = StdoutConsole()
     table = Table(title=f"{summary['command']}: {summary['source']}", show_header=False)
     table.add_row("frames / estimates", f"{summary['frames']} / {summary['estimates']}")
     table.add_row("without visual rotation", str(summary["frames_without_visual"]))
@@ -83,6 +88,7 @@ def _options():
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
                                                      "(replay it later with 'run FOLDER')."),
+        force=typer.Option(False, "--force", help="Replace the results of an earlier run in a non-empty --out."),
     )
 
 
@@ -96,11 +102,11 @@ def run_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
-    record: Optional[Path] = _o["record"],
+    record: Optional[Path] = _o["record"], force: bool = _o["force"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
-    execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record)
+    execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record, force=force)
 
 
 @app.command("eval")
@@ -109,8 +115,8 @@ def eval_command(
     out: Path = typer.Option(..., "--out", help="Folder for the outputs of 'run' plus the scores in summary.json."),
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
-    max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"], force: bool = _o["force"],
 ) -> None:
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
-    execute(source, out, cfg, imu, fps, evaluate=True, command="eval")
+    execute(source, out, cfg, imu, fps, evaluate=True, command="eval", force=force)

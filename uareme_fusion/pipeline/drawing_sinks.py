@@ -13,7 +13,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, OutputError
+from ..io.safe_files import discard, publish, refuse_link, temporary_sibling, write_image_atomic
 from ..overlay import draw_ground, ground_mask, side_by_side
 from ..overlay.compose import draw_overlay
 from .runner import FrameResult
@@ -36,7 +37,12 @@ def overlay_image(result: FrameResult, fov_deg: float, panes: bool) -> np.ndarra
 
 
 class VideoFileWriter:
-    """An OpenCV video writer opened on the first image (its size fixes the video's)."""
+    """An OpenCV video writer opened on the first image (its size fixes the video's).
+
+    It writes a hidden temporary file beside `path` and renames it into place on `close`, once the
+    container is finished (an mp4's index written) and reads back with every frame, so `path` is
+    never a half-written video. A frame of another size is resized to the first's and counted in
+    `resized` (never dropped: OpenCV's writer silently skips such frames)."""
 
     def __init__(self, path: Path, fps: float):
         self.path, self.fps = Path(path), float(fps)
@@ -45,21 +51,44 @@ class VideoFileWriter:
             raise InputError(f"{self.path}: unsupported video extension; use one of {', '.join(VIDEO_CODECS)}")
         self._fourcc = cv2.VideoWriter_fourcc(*codec)
         self._writer = None
+        self._tmp: Path | None = None
+        self._size: tuple[int, int] | None = None
         self.frames = 0
+        self.resized = 0
 
     def write_rgb(self, rgb: np.ndarray) -> None:
         if self._writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._writer = cv2.VideoWriter(str(self.path), self._fourcc, self.fps, (rgb.shape[1], rgb.shape[0]))
+            refuse_link(self.path)
+            self._tmp = temporary_sibling(self.path)
+            self._size = (rgb.shape[1], rgb.shape[0])
+            self._writer = cv2.VideoWriter(str(self._tmp), self._fourcc, self.fps, self._size)
             if not self._writer.isOpened():
+                self._writer = None
+                discard(self._tmp)
                 raise InputError(f"{self.path}: OpenCV cannot write this video (codec {self._fourcc})")
+        if (rgb.shape[1], rgb.shape[0]) != self._size:
+            rgb = cv2.resize(rgb, self._size, interpolation=cv2.INTER_AREA)
+            self.resized += 1
         self._writer.write(np.ascontiguousarray(rgb[..., ::-1]))
         self.frames += 1
 
     def close(self) -> None:
-        if self._writer is not None:
-            self._writer.release()
-            self._writer = None
+        if self._writer is None:
+            return
+        self._writer.release()
+        self._writer = None
+        capture = cv2.VideoCapture(str(self._tmp))
+        readable = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if capture.isOpened() else 0
+        capture.release()
+        if readable != self.frames:
+            discard(self._tmp)
+            raise OutputError(f"{self.path}: could not be written (the finished video reads back {readable} of "
+                              f"{self.frames} frames: disk full?)")
+        publish(self._tmp, self.path)
+
+    def summary_fields(self, key: str) -> dict:
+        return {f"{key}_frames": self.frames, f"{key}_frames_resized": self.resized}
 
 
 class HorizonVideoSink:
@@ -75,6 +104,9 @@ class HorizonVideoSink:
     def close(self) -> None:
         self.video.close()
 
+    def summary_fields(self) -> dict:
+        return self.video.summary_fields("video")
+
 
 class GroundSink:
     """Ground masks per frame: `masks/NNNNNN.png` (white = ground, at image size) and either overlay
@@ -82,9 +114,9 @@ class GroundSink:
 
     def __init__(self, out_dir: Path, threshold_deg: float = 15.0, video: Path | None = None, fps: float = 30.0):
         self.out, self.threshold_deg = Path(out_dir), threshold_deg
-        (self.out / "masks").mkdir(parents=True, exist_ok=True)
-        if video is None:
-            (self.out / "overlay").mkdir(exist_ok=True)
+        for sub in ("masks",) + (("overlay",) if video is None else ()):
+            refuse_link(self.out / sub)
+            (self.out / sub).mkdir(parents=True, exist_ok=True)
         self.video = None if video is None else VideoFileWriter(video, fps)
         self.count = 0
 
@@ -99,14 +131,17 @@ class GroundSink:
             mask, _ = ground_mask(result.normal_map, result.estimate.up_c, self.threshold_deg)
             mask = cv2.resize(mask.astype(np.uint8), (width, height), interpolation=cv2.INTER_NEAREST) > 0
         name = f"{frame.index if frame.index >= 0 else self.count:06d}.png"
-        cv2.imwrite(str(self.out / "masks" / name), mask.astype(np.uint8) * 255)
         overlay = draw_ground(frame.rgb, mask)
+        write_image_atomic(self.out / "masks" / name, mask.astype(np.uint8) * 255)
         if self.video is not None:
             self.video.write_rgb(overlay)
         else:
-            cv2.imwrite(str(self.out / "overlay" / name), overlay[..., ::-1])
+            write_image_atomic(self.out / "overlay" / name, overlay[..., ::-1])
         self.count += 1
 
     def close(self) -> None:
         if self.video is not None:
             self.video.close()
+
+    def summary_fields(self) -> dict:
+        return {"ground_masks": self.count, **(self.video.summary_fields("video") if self.video else {})}
