@@ -18,11 +18,14 @@ def normals_command(
     model: Optional[Path] = typer.Option(None, "--model", help="A drop-in model file (TorchScript or state "
                                          "dict, RGB in [0, 1] -> normal + kappa); default: the shipped weights."),
     kappa_cap: float = typer.Option(75.0, "--kappa-cap", min=1e-3, help="kappa cap; white in the confidence image."),
+    force: bool = typer.Option(False, "--force", help="Write into a non-empty --out (files of the same name are replaced)."),
 ) -> None:
     """Surface normals (coloured X-Y-Z to R-G-B, OpenCV camera frame) and confidence (white = confident)."""
     from ..normals.export import export_normals
     from ..normals.learned import LearnedNormals, LearnedNormalsConfig
+    from ..pipeline.session import prepare_output_folder
 
+    prepare_output_folder(out, force)
     estimator = LearnedNormals(model=model, config=LearnedNormalsConfig(kappa_cap=kappa_cap))
     columns = [TextColumn("[bold]normals"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()]
     with Progress(*columns, console=err_console) as progress:

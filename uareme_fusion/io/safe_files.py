@@ -69,6 +69,7 @@ def temporary_sibling(path: Path) -> Path:
     """A new empty hidden file beside `path` (same folder and suffix) for an atomic write."""
     path = Path(path)
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".partial{path.suffix}", dir=path.parent)
     except OSError as exc:
         raise cannot_write(path, exc) from None
