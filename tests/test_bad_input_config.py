@@ -20,7 +20,7 @@ MEKF_CASES = [
     ("typo_in_one_of_many", "mode: auto\nimu_gap_limt_s: 0.1\n", "imu_gap_limt_s: Extra inputs are not permitted"),
     ("negative_density", "gyro_noise_rad_s_sqrt_hz: -1\n",
      r"gyro_noise_rad_s_sqrt_hz: Input should be greater than or equal to 0.000000001 \(got -1\)"),
-    ("zero_density", "gyro_noise_rad_s_sqrt_hz: 0\n", "greater than 0"),
+    ("zero_density", "gyro_noise_rad_s_sqrt_hz: 0\n", "greater than or equal to 0.000000001"),
     ("string_for_float", "gyro_noise_rad_s_sqrt_hz: small\n", r"valid number.*\(got 'small'\)"),
     ("list_for_float", "accel_update_period_s: [0.1, 0.2]\n", "accel_update_period_s: Input should be a valid number"),
     ("mapping_for_float", "accel_update_period_s: {value: 0.1}\n",
