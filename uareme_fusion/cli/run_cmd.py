@@ -72,6 +72,9 @@ def print_summary(summary: dict) -> None:
         table.add_row("ARE deg (mean / median / max)", f"{a['mean']:.2f} / {a['median']:.2f} / {a['max']:.2f}")
         table.add_row("tilt deg (mean / p95 / max)", f"{t['mean']:.2f} / {t['p95']:.2f} / {t['max']:.2f}")
         table.add_row("NEES mean", f"{summary['nees']['mean']:.2f}")
+    if summary.get("video_frames_resized"):
+        table.add_row("video frames resized", f"{summary['video_frames_resized']} of {summary['video_frames']} "
+                      "(their size differs from the first frame's)")
     table.add_row("outputs", ", ".join(summary["outputs"]))
     console.print(table)
 

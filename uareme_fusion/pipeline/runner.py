@@ -212,5 +212,7 @@ class Pipeline:
             try:
                 sink.close()
             except OutputError as exc:
-                if self.stats.stopped != "output_error":
+                if self.stats.stopped == "output_error":
+                    self.stats.error = f"{self.stats.error}; {exc}"
+                else:
                     self.stats.stopped, self.stats.error = "output_error", str(exc)
