@@ -79,10 +79,11 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
         raise InputError(f"{source.info.name}: this source has no ground truth to evaluate against "
                          "(use 'uareme-fusion run' instead)")
     log = EstimateLog() if evaluate else None
+    pipeline = build_pipeline(source, cfg)  # a bad backend setting stops here, before any file is written
     summary_file = ReservedFile(out / "summary.json", json.dumps({"command": command, "stopped": "running"}) + "\n")
     sinks = [TumTrajectoryWriter(out / "trajectory.tum"), EstimatesCsvWriter(out / "estimates.csv"),
              *extra_sinks, *([log] if log else [])]
-    pipeline = build_pipeline(source, cfg, sinks)
+    pipeline.sinks = sinks
     stats = pipeline.run(source, max_frames=cfg.max_frames, on_result=on_result)
     summary = summary_document(stats, cfg, command, source)
     if log is not None:
