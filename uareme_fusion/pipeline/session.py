@@ -85,15 +85,15 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
              *extra_sinks, *([log] if log else [])]
     pipeline.sinks = sinks
     stats = pipeline.run(source, max_frames=cfg.max_frames, on_result=on_result)
-    summary = summary_document(stats, cfg, command, source)
-    if log is not None:
-        summary.update(evaluation(log, truth, gravity_aware=source.info.has_imu and cfg.backend in
-                                  GRAVITY_AWARE_BACKENDS))
-    for sink in sinks:
-        summary.update(getattr(sink, "summary_fields", dict)())
-    summary["outputs"] = sorted(p.name for p in out.iterdir()
-                                if p.name != "summary.json" and not p.name.startswith(".")) + ["summary.json"]
     with stop_signals.writing():  # a signal now waits until summary.json is complete
+        summary = summary_document(stats, cfg, command, source)
+        if log is not None:
+            summary.update(evaluation(log, truth, gravity_aware=source.info.has_imu and cfg.backend in
+                                      GRAVITY_AWARE_BACKENDS))
+        for sink in sinks:
+            summary.update(getattr(sink, "summary_fields", dict)())
+        summary["outputs"] = sorted(p.name for p in out.iterdir()
+                                    if p.name != "summary.json" and not p.name.startswith(".")) + ["summary.json"]
         try:
             summary_file.write(json.dumps(summary, indent=2, sort_keys=False) + "\n")
         except OutputError as exc:
