@@ -37,7 +37,7 @@ BILLION_LAUGHS = "a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".jo
 ], ids=["billion_laughs", "deep_lists", "deep_mappings"])
 def test_yaml_bombs_and_deep_nesting_are_one_line(tmp_path, text, message):
     (tmp_path / "bad.yaml").write_text(text)
-    proc = cli("run", "sim:room", "--config", tmp_path / "bad.yaml", "--out", tmp_path / "out", timeout=30)
+    proc = cli("run", "sim:room", "--config", tmp_path / "bad.yaml", "--out", tmp_path / "out")
     assert proc.returncode == 2
     (line,) = error_lines(proc)
     assert line.startswith(f"error: {tmp_path / 'bad.yaml'}") and line.endswith(message)
@@ -113,7 +113,7 @@ def imu_csv(tmp_path):
 def test_a_process_substitution_imu_is_read(tmp_path, imu_csv):
     out = tmp_path / "out"
     proc = subprocess.run(["bash", "-c", f"{sys.executable} -m uareme_fusion run {imu_csv / 'rgb'} --imu "
-                           f"<(cat {imu_csv / 'imu0' / 'data.csv'}) --out {out}"],
+                           f"<(cat {imu_csv / 'imu0' / 'data.csv'}) --normals {imu_csv / 'normals'} --out {out}"],
                           capture_output=True, text=True, env=_env(), timeout=120)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((out / "summary.json").read_text())
@@ -126,7 +126,7 @@ def test_a_fifo_imu_with_a_writer_is_read_and_a_fifo_source_is_named(tmp_path, i
     data = (imu_csv / "imu0" / "data.csv").read_bytes()
     writer = threading.Thread(target=lambda: fifo.write_bytes(data), daemon=True)
     writer.start()
-    proc = cli("run", imu_csv / "rgb", "--imu", fifo, "--out", tmp_path / "out")
+    proc = cli("run", imu_csv / "rgb", "--imu", fifo, "--normals", imu_csv / "normals", "--out", tmp_path / "out")
     writer.join(timeout=10)
     assert proc.returncode == 0, proc.stderr
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["imu_samples"] > 100

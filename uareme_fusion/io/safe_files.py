@@ -208,7 +208,7 @@ class ReservedFile:
     the padding). `write` then replaces it atomically; when the disk is full by then, the text is
     written over the reserved bytes in place instead (shrinking a file never needs space)."""
 
-    def __init__(self, path: Path, placeholder: str, reserve_bytes: int = 16384):
+    def __init__(self, path: Path, placeholder: str, reserve_bytes: int = 8192):
         self.path, self.reserve_bytes = Path(path), int(reserve_bytes)
         data = placeholder.encode("utf-8")
         write_bytes_atomic(self.path, data + b" " * max(self.reserve_bytes - len(data), 0))
