@@ -12,13 +12,13 @@ A standard output closed early (`| head`) is not an error: the files are complet
 
 from __future__ import annotations
 
-import typer
-from rich.console import Console
-from typer.core import TyperGroup
-
 import errno
 import os
 import sys
+
+import typer
+from rich.console import Console
+from typer.core import TyperGroup
 
 from ..errors import OutputError, UaremeError
 from ..pipeline import stop_signals
