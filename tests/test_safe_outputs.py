@@ -296,3 +296,15 @@ def test_overlay_videos_resize_frames_of_another_size_and_say_so(tmp_path):
     summary = json.loads((tmp_path / "g" / "summary.json").read_text())
     assert summary["video_frames"] == 6 and summary["video_frames_resized"] == 2
     assert video_frames(tmp_path / "g" / "ground.mp4") == 6
+
+
+def test_a_full_disk_during_ground_keeps_masks_and_overlays_in_step(small_disk):
+    out = small_disk / "g"
+    proc = cli("ground", "sim:room", "--max-frames", "40", "--out", out)
+    assert proc.returncode == 1
+    (line,) = error_lines(proc)
+    assert f"error: {out}/" in line and "could not be written (No space left on device)" in line
+    summary = assert_rows_complete(out)
+    masks, overlays = sorted((out / "masks").iterdir()), sorted((out / "overlay").iterdir())
+    assert len(masks) == len(overlays) == summary["ground_masks"] == summary["estimates"]
+    assert all(cv2.imread(str(p)) is not None for p in masks + overlays)

@@ -8,6 +8,7 @@ assumed horizontal field of view, written on the overlay.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import cv2
@@ -34,6 +35,23 @@ def overlay_image(result: FrameResult, fov_deg: float, panes: bool) -> np.ndarra
     """The frame with horizon and Manhattan axes drawn (and normal/confidence panes when `panes`)."""
     image = draw_overlay(result.frame.rgb, result.estimate.up_c, estimate_R_cm(result), result.frame.K, fov_deg)
     return side_by_side(image, result.normal_map) if panes else image
+
+
+def _frames_in_video(path: Path) -> int:
+    """The frame count a finished video file declares (0 when it cannot be opened), with FFmpeg's own
+    complaints about a broken file kept off stderr (the caller reports it in one line)."""
+    saved = os.dup(2)
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 2)
+        os.close(devnull)
+        capture = cv2.VideoCapture(str(path))
+        frames = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if capture.isOpened() else 0
+        capture.release()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+    return frames
 
 
 class VideoFileWriter:
@@ -78,9 +96,7 @@ class VideoFileWriter:
             return
         self._writer.release()
         self._writer = None
-        capture = cv2.VideoCapture(str(self._tmp))
-        readable = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if capture.isOpened() else 0
-        capture.release()
+        readable = _frames_in_video(self._tmp)
         if readable != self.frames:
             discard(self._tmp)
             raise OutputError(f"{self.path}: could not be written (the finished video reads back {readable} of "
@@ -133,10 +149,14 @@ class GroundSink:
         name = f"{frame.index if frame.index >= 0 else self.count:06d}.png"
         overlay = draw_ground(frame.rgb, mask)
         write_image_atomic(self.out / "masks" / name, mask.astype(np.uint8) * 255)
-        if self.video is not None:
-            self.video.write_rgb(overlay)
-        else:
-            write_image_atomic(self.out / "overlay" / name, overlay[..., ::-1])
+        try:
+            if self.video is not None:
+                self.video.write_rgb(overlay)
+            else:
+                write_image_atomic(self.out / "overlay" / name, overlay[..., ::-1])
+        except OutputError:  # whole results only: no mask without its overlay
+            (self.out / "masks" / name).unlink(missing_ok=True)
+            raise
         self.count += 1
 
     def close(self) -> None:
