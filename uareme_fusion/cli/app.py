@@ -12,7 +12,6 @@ A standard output closed early (`| head`) is not an error: the files are complet
 
 from __future__ import annotations
 
-import errno
 import os
 import sys
 
@@ -21,6 +20,7 @@ from rich.console import Console
 from typer.core import TyperGroup
 
 from ..errors import OutputError, UaremeError
+from ..io.safe_files import ENVIRONMENT_ERRNOS
 from ..pipeline import stop_signals
 
 err_console = Console(stderr=True, highlight=False, soft_wrap=True)
@@ -86,10 +86,6 @@ class _ErrorBoundaryGroup(TyperGroup):
         except KeyboardInterrupt as exc:
             err_console.print(f"[yellow]{stop_signals.describe(exc)}[/]")
             raise typer.Exit(stop_signals.exit_code(exc)) from None
-
-
-ENVIRONMENT_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS, errno.EFBIG}
-"""OSErrors of a failing environment (exit 1) rather than of a path the user got wrong (exit 2)."""
 
 
 def _silence_stdout() -> None:

@@ -35,10 +35,17 @@ _NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
 _CLOEXEC = getattr(os, "O_CLOEXEC", 0)
 
 
-def cannot_write(path: Path, exc: OSError, detail: str = "") -> OutputError:
-    """The `OutputError` for an `OSError` met while writing `path`."""
+ENVIRONMENT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS, errno.EFBIG})
+"""OSErrors of a failing environment (`OutputError`, exit 1) rather than of a path the user got wrong
+(permission denied, no such folder: `InputError`, exit 2)."""
+
+
+def cannot_write(path: Path, exc: OSError, detail: str = "") -> InputError | OutputError:
+    """The error for an `OSError` met while writing `path`: `OutputError` for a full disk or a failing
+    device, `InputError` for a path the user can fix."""
     reason = exc.strerror or str(exc) or type(exc).__name__
-    return OutputError(f"{path}: could not be written ({reason}){detail}")
+    error = OutputError if exc.errno in ENVIRONMENT_ERRNOS else InputError
+    return error(f"{path}: could not be written ({reason}){detail}")
 
 
 def refuse_link(path: Path) -> None:
@@ -151,7 +158,7 @@ class RowFile:
         self.rows = 0
         self._complete = self._last = 0
         self._fd: int | None = None
-        self.failed: OutputError | None = None
+        self.failed: InputError | OutputError | None = None
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             refuse_link(self.path)

@@ -154,7 +154,7 @@ class GroundSink:
                 self.video.write_rgb(overlay)
             else:
                 write_image_atomic(self.out / "overlay" / name, overlay[..., ::-1])
-        except OutputError:  # whole results only: no mask without its overlay
+        except (InputError, OutputError):  # whole results only: no mask without its overlay
             (self.out / "masks" / name).unlink(missing_ok=True)
             raise
         self.count += 1

@@ -150,7 +150,7 @@ class Pipeline:
             for k, sink in enumerate(self.sinks):
                 try:
                     sink.write(result)
-                except OutputError:  # the files hold whole results only: take this one back where written
+                except (InputError, OutputError):  # the files hold whole results only: take this one back where written
                     for written in self.sinks[:k]:
                         getattr(written, "undo_last", lambda: None)()
                     raise

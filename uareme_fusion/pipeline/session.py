@@ -96,7 +96,7 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
                                     if p.name != "summary.json" and not p.name.startswith(".")) + ["summary.json"]
         try:
             summary_file.write(json.dumps(summary, indent=2, sort_keys=False) + "\n")
-        except OutputError as exc:
+        except (InputError, OutputError) as exc:
             summary["summary_error"] = str(exc)
     return summary
 
