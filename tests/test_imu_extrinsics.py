@@ -96,7 +96,7 @@ def phone_sequence(tmp_path_factory):
 
 
 def _eval(root, imu, *extra):
-    output = _run(["eval", str(root / "seq"), "--imu", str(root / imu), "--out", str(root / f"out_{imu}"), *extra])
+    output = _run(["eval", str(root / "seq"), "--imu", str(root / imu), "--out", str(root / f"out_{imu}"), "--force", *extra])
     return json.loads((root / f"out_{imu}" / "summary.json").read_text()), output
 
 

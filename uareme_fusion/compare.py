@@ -29,6 +29,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from .backends.base import Backend
+from .io.safe_files import write_text_atomic
 from .backends.single import SingleFrame
 from .backends.smoother import Smoother, SmootherConfig, SmootherMode
 from .config import load_config
@@ -316,8 +317,8 @@ def compare(seq: VisualSequence, out_dir: str | Path, names=BACKEND_NAMES) -> di
     doc = {"sequence": seq.name, "frames": len(seq.t_frame_s), "frames_without_visual": n_missing,
            "has_imu": seq.has_imu, "has_ground_truth": seq.R_wc_true is not None,
            "jump_threshold_deg": JUMP_DEG, "notes": list(seq.notes), "backends": rows}
-    (out / "compare.json").write_text(json.dumps(doc, indent=2) + "\n")
-    (out / "compare.md").write_text(markdown_table(doc))
+    write_text_atomic(out / "compare.json", json.dumps(doc, indent=2) + "\n")
+    write_text_atomic(out / "compare.md", markdown_table(doc))
     plot_errors(runs, seq, out / "compare.png")
     return doc
 

@@ -5,6 +5,8 @@ reads files. Presets live in `uareme_fusion/configs/` and are found by
 name: `load_config("vehicle", MekfConfig)` or by path: `load_config("my.yaml", MekfConfig)`.
 A key given twice in one mapping is an error (plain YAML loading would keep the last silently), and
 so is a NaN or infinite number (`.nan`, `.inf`) anywhere in a file: no parameter means "unbounded".
+Aliases (`*name`, which let a few hundred bytes expand to gigabytes: "billion laughs") and nesting
+deeper than `MAX_YAML_DEPTH` are refused with a one-line error before anything is built.
 """
 
 from __future__ import annotations
@@ -21,10 +23,29 @@ from .errors import ConfigError
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
+MAX_YAML_DEPTH = 32
+"""Deepest nesting of mappings and lists accepted in a configuration file (ours use 2)."""
+
 
 class _UniqueKeyLoader(yaml.SafeLoader):
     """PyYAML's safe loader, except that a key given twice in one mapping is an error (PyYAML keeps
-    the last value silently)."""
+    the last value silently), and aliases and deep nesting are refused (see the module docstring)."""
+
+    _depth = 0
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.events.AliasEvent):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(None, None, f"found the alias *{event.anchor}: aliases are not "
+                                              "allowed in configuration files (write the value out)", event.start_mark)
+        self._depth += 1
+        try:
+            if self._depth > MAX_YAML_DEPTH:
+                raise yaml.composer.ComposerError(None, None, f"nested more than {MAX_YAML_DEPTH} levels deep",
+                                                  self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
 
     def construct_mapping(self, node, deep=False):
         seen = set()

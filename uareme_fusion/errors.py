@@ -26,3 +26,10 @@ class SourceError(UaremeError):
     Raised mid-stream (opening a bad source is an `InputError`); the pipeline keeps what it has
     written so far complete and valid, and exits with a non-zero status.
     """
+
+
+class OutputError(UaremeError):
+    """An output file that could not be written (disk full, quota, I/O error, read-only file system).
+
+    A failing environment rather than a user mistake: the CLI exits 1, and the message names the file.
+    """

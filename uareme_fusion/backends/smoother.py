@@ -76,35 +76,35 @@ class SmootherConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     mode: SmootherMode = SmootherMode.PAPER
-    window_frames: int = Field(30, ge=2)
+    window_frames: int = Field(30, ge=2, le=10000)
     """Frames kept in the sliding window (the paper's n)."""
-    huber_k: float | None = Field(0.1, gt=0)
+    huber_k: float | None = Field(0.1, ge=1e-3, le=1e6)
     """Huber threshold on the whitened visual residual; None for a plain Gaussian prior."""
-    between_sigma_rad: float = Field(0.1, gt=0)
+    between_sigma_rad: float = Field(0.1, ge=1e-6, le=10.0)
     """Isotropic sigma of the identity smoothness factor (paper's lambda = sigma^2)."""
-    missing_variance_rad2: float = Field(1.0, gt=0)
+    missing_variance_rad2: float = Field(1.0, ge=1e-12, le=100.0)
     """Variance reported per axis before the first visual rotation."""
     # Gyro-aided mode.
-    gyro_noise_rad_s_sqrt_hz: float = Field(2e-3, gt=0)
+    gyro_noise_rad_s_sqrt_hz: float = Field(2e-3, ge=1e-9, le=1.0)
     """Gyro white-noise density (continuous time)."""
-    gyro_bias_walk_rad_s2_sqrt_hz: float = Field(1e-4, gt=0)
+    gyro_bias_walk_rad_s2_sqrt_hz: float = Field(1e-4, ge=1e-9, le=1.0)
     """Gyro bias random-walk density."""
-    gyro_bias_prior_sigma_rad_s: float = Field(0.02, gt=0)
+    gyro_bias_prior_sigma_rad_s: float = Field(0.02, ge=1e-6, le=10.0)
     """Prior sigma of the gyro bias on the first frame."""
-    accel_sigma_rad: float = Field(0.03, gt=0)
+    accel_sigma_rad: float = Field(0.03, ge=1e-6, le=10.0)
     """Sigma of the gravity direction from the mean accelerometer reading when the camera is still."""
-    accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0)
+    accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0, le=100.0)
     """Added to `accel_sigma_rad` per m/s^2 of | |a_mean| - g | plus the RMS spread of the samples."""
-    gravity_huber_k: float | None = Field(1.345, gt=0)
+    gravity_huber_k: float | None = Field(1.345, ge=1e-3, le=1e6)
     """Huber threshold on the whitened gravity residual; None for Gaussian."""
-    gravity_m_s2: float = Field(9.81, gt=0)
-    manhattan_tilt_sigma_rad: float = Field(0.02, gt=0)
+    gravity_m_s2: float = Field(9.81, ge=1.0, le=100.0)
+    manhattan_tilt_sigma_rad: float = Field(0.02, ge=1e-6, le=10.0)
     """Prior sigma of the Manhattan frame's tilt away from vertical (gyro mode)."""
-    world_yaw_sigma_rad: float = Field(1e-3, gt=0)
+    world_yaw_sigma_rad: float = Field(1e-3, ge=1e-6, le=10.0)
     """Prior sigma fixing the world's yaw (a gauge) through `R_wm` (gyro mode)."""
     R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
     """Camera-from-IMU rotation (3x3): `gyro_c = R_ci @ gyro_i`."""
-    imu_time_offset_s: float = 0.0
+    imu_time_offset_s: float = Field(0.0, ge=-3600.0, le=3600.0)
     """IMU clock minus camera clock: a sample stamped `t` measures the camera time `t - offset`."""
 
     @field_validator("R_ci")

@@ -4,18 +4,34 @@ Command modules (`uareme_fusion/cli/*_cmd.py`) register themselves on `app`; eac
 and calls one library function. The command group turns the project's errors (`UaremeError`, e.g. an
 `InputError` for a bad file), command-line usage errors (a bad option value, a missing argument) and
 `OSError`s (a path that cannot be read or written) into one red line on stderr and exit status 2, so
-a user mistake never shows a traceback; Ctrl-C exits with 130 after the command's own cleanup ran.
+a user mistake never shows a traceback. A file that cannot be written (`OutputError`: disk full,
+I/O error) exits 1, a failing environment. Ctrl-C, SIGTERM and SIGHUP stop a command the same way
+(`pipeline.stop_signals`) and exit with 128 + the signal number after the command's own cleanup ran.
+A standard output closed early (`| head`) is not an error: the files are complete, the exit is 0.
 """
 
 from __future__ import annotations
+
+import os
+import sys
 
 import typer
 from rich.console import Console
 from typer.core import TyperGroup
 
-from ..errors import UaremeError
+from ..errors import OutputError, UaremeError
+from ..io.safe_files import ENVIRONMENT_ERRNOS
+from ..pipeline import stop_signals
 
 err_console = Console(stderr=True, highlight=False, soft_wrap=True)
+
+
+class StdoutConsole(Console):
+    """rich's Console on stdout, except that a reader that went away (`| head`) silences it instead
+    of exiting 1 (rich's default): what a command prints there is a report, its files are the result."""
+
+    def on_broken_pipe(self) -> None:
+        _silence_stdout()
 
 
 def error_line(message: str) -> None:
@@ -49,7 +65,14 @@ class _ErrorBoundaryGroup(TyperGroup):
 
     def invoke(self, ctx):
         try:
-            return super().invoke(ctx)
+            with stop_signals.handle_stop_signals():
+                return super().invoke(ctx)
+        except OutputError as exc:
+            error_line(str(exc).replace("[", r"\["))
+            raise typer.Exit(1) from None
+        except BrokenPipeError:
+            _silence_stdout()
+            raise typer.Exit(0) from None
         except UaremeError as exc:
             error_line(str(exc).replace("[", r"\["))
             raise typer.Exit(2) from None
@@ -59,10 +82,20 @@ class _ErrorBoundaryGroup(TyperGroup):
         except OSError as exc:  # a path the user gave that cannot be read or written
             where = f"{exc.filename}: " if exc.filename else ""
             error_line(f"{where}{exc.strerror or exc}".replace("[", r"\["))
-            raise typer.Exit(2) from None
-        except KeyboardInterrupt:
-            err_console.print("[yellow]interrupted[/]")
-            raise typer.Exit(130) from None
+            raise typer.Exit(1 if exc.errno in ENVIRONMENT_ERRNOS else 2) from None
+        except KeyboardInterrupt as exc:
+            err_console.print(f"[yellow]{stop_signals.describe(exc)}[/]")
+            raise typer.Exit(stop_signals.exit_code(exc)) from None
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so the interpreter's last flush cannot fail again (Python's advice
+    for SIGPIPE: https://docs.python.org/3/library/signal.html#note-on-sigpipe)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
 
 
 def _flags_without_type(option_class) -> None:
@@ -117,4 +150,10 @@ def _root(
 
 def main() -> None:
     """Console-script entry point."""
-    app()
+    try:
+        app()
+    finally:
+        try:
+            sys.stdout.flush()
+        except BrokenPipeError:  # a reader that went away (`| head -c 0`): the files are complete
+            _silence_stdout()

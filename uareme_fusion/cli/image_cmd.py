@@ -6,12 +6,12 @@ import json
 from pathlib import Path
 from typing import Optional
 
-import cv2
 import numpy as np
 import typer
 
 from ..drivers.intrinsics import parse_intrinsics
 from ..errors import InputError
+from ..io.safe_files import refuse_input_as_output, write_image_atomic
 from ..pipeline.session import make_output_folder
 from ..pipeline.single_image import analyse_image, image_overlay
 from .app import app
@@ -33,12 +33,13 @@ def image_command(
     if out is not None and out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise InputError(f"{out}: the overlay is an image; use a .png or .jpg name")
     camera = parse_intrinsics(intrinsics) if intrinsics is not None else None
+    if out is not None:
+        refuse_input_as_output(out, [image])
     result = analyse_image(image, normals, camera=camera)
     if out is not None:
         overlay = image_overlay(result, fov_deg=fov_deg)
         make_output_folder(out.parent)
-        if not cv2.imwrite(str(out), overlay[..., ::-1]):
-            raise InputError(f"{out}: cannot write the overlay")
+        write_image_atomic(out, overlay[..., ::-1])
     doc = result.as_dict()
     if json_out:
         typer.echo(json.dumps(doc, indent=2))

@@ -22,12 +22,15 @@ def normals_command(
     intrinsics: Optional[str] = _o["intrinsics"],
     threads: int = typer.Option(1, "--threads", min=1, max=256, help="torch CPU threads (1: fast beside other "
                                                                       "busy programs)."),
+    force: bool = typer.Option(False, "--force", help="Write into a non-empty --out (files of the same name are replaced)."),
 ) -> None:
     """Surface normals (coloured X-Y-Z to R-G-B, OpenCV camera frame) and confidence (white = confident)."""
     from ..drivers.intrinsics import parse_intrinsics
     from ..normals.export import export_normals
     from ..normals.learned import LearnedNormals, LearnedNormalsConfig
+    from ..pipeline.session import prepare_output_folder
 
+    prepare_output_folder(out, force)
     camera = parse_intrinsics(intrinsics) if intrinsics is not None else None
     estimator = LearnedNormals(model=model, config=LearnedNormalsConfig(kappa_cap=kappa_cap, threads=threads))
     columns = [TextColumn("[bold]normals"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()]

@@ -8,6 +8,7 @@ from typing import Optional
 import typer
 
 from ..errors import InputError
+from ..io.safe_files import refuse_input_as_output, refuse_link
 from ..pipeline.drawing_sinks import VIDEO_CODECS, GroundSink, HorizonVideoSink
 from .app import app
 from .run_cmd import _o, execute, run_config
@@ -32,6 +33,7 @@ def horizon_command(
     panes: bool = typer.Option(False, "--panes", help="Add panes of normals and confidence beside each frame."),
     fov_deg: Optional[float] = typer.Option(None, "--fov-deg",
                                             help="Assumed horizontal field of view when K is unknown (default 60)."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing --out video and its OUT_STEM.run/ results."),
 ) -> None:
     """Draw the horizon and the Manhattan axes on every frame of a video."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
@@ -39,13 +41,17 @@ def horizon_command(
                      imu_time_offset_s=imu_time_offset_s, assumed_fov_deg=fov_deg)
     if out.suffix.lower() not in VIDEO_CODECS:
         raise InputError(f"--out {out}: unsupported video extension; use one of {', '.join(VIDEO_CODECS)}")
+    refuse_input_as_output(out, [source, imu])
+    refuse_link(out)
+    if out.exists() and not force:
+        raise InputError(f"--out {out} exists; pass --force to replace it")
 
     def sinks(src, out_dir, cfg):
         needs_frames(src, "horizon")
         return [HorizonVideoSink(out, src.info.fps or 30.0, cfg.assumed_fov_deg, panes)]
 
     summary = execute(source, out.parent / f"{out.stem}.run", cfg, imu, fps, evaluate=False, command="horizon",
-                      extra_sinks_factory=sinks)
+                      extra_sinks_factory=sinks, force=force)
     typer.echo(f"wrote {out} ({summary.get('videos', {}).get(out.name, 'no frames')})")
 
 
@@ -62,6 +68,7 @@ def ground_command(
     video: bool = typer.Option(False, "--video", help="Write the overlays as OUT/ground.mp4 instead of images."),
     threshold_deg: Optional[float] = typer.Option(None, "--threshold-deg",
                                                   help="Ground when the normal is within this angle of up (15)."),
+    force: bool = _o["force"],
 ) -> None:
     """Segment the ground: pixels whose normal is within a threshold of the estimated up vector."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
@@ -73,4 +80,4 @@ def ground_command(
         return [GroundSink(out_dir, cfg.ground_threshold_deg, out_dir / "ground.mp4" if video else None,
                            src.info.fps or 30.0)]
 
-    execute(source, out, cfg, imu, fps, evaluate=False, command="ground", extra_sinks_factory=sinks)
+    execute(source, out, cfg, imu, fps, evaluate=False, command="ground", extra_sinks_factory=sinks, force=force)

@@ -6,20 +6,20 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
 from ..config import load_config, preset_names, validate_config
 from ..pipeline import RunConfig
-from ..pipeline.session import configure_imu, make_output_folder, run_notes, run_source
-from .app import app, err_console, fail
+from ..pipeline.session import configure_imu, prepare_output_folder, run_notes, run_source
+from .app import StdoutConsole, app, err_console, fail
 from .progress import frame_progress
 
 SOURCE_HELP = ("A video file, webcam:N, an image, folder or glob of images, a dataset folder (TUM RGB-D, "
                "ICL-NUIM, EuRoC, one written by 'simulate'), a BROAD .hdf5 or IMU .csv, sim:SCENARIO, or oak[:ID].")
 EKF_PRESETS = [name for name in preset_names() if name != "paper"]
 """The EKF presets shipped in configs/ (paper.yaml holds the smoother's settings)."""
-STOP_EXIT_CODES = {"end": 0, "max_frames": 0, "source_error": 1, "input_error": 2, "interrupted": 130}
+STOP_EXIT_CODES = {"end": 0, "max_frames": 0, "source_error": 1, "input_error": 2, "interrupted": 130,
+                   "output_error": 1}
 
 
 def run_config(config: Optional[Path], **overrides) -> RunConfig:
@@ -31,14 +31,14 @@ def run_config(config: Optional[Path], **overrides) -> RunConfig:
 
 def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Optional[float], evaluate: bool,
             command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None,
-            gt: Optional[Path] = None, gt_time_offset_s: float = 0.0) -> dict:
+            gt: Optional[Path] = None, gt_time_offset_s: float = 0.0, force: bool = False) -> dict:
     """Open the source, run it with a progress bar, report how it ended; exits non-zero when it failed.
 
     With `record_dir` the source's frames and IMU are also written there as they pass (our dataset
     layout: a live session replays exactly with `run RECORD_DIR`)."""
     from ..drivers import open_source, record
 
-    out_dir = make_output_folder(out)
+    out_dir = prepare_output_folder(out, force)
     opened = configure_imu(open_source(source, imu=None if imu is None else str(imu), fps=fps,
                                        intrinsics=cfg.intrinsics), cfg)
     if gt is not None:
@@ -56,6 +56,11 @@ def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Op
                                  command=command)
     print_summary(summary)
     code = STOP_EXIT_CODES.get(summary["stopped"], 1)
+    if summary["stopped"] == "interrupted":
+        code = 128 + summary.get("signal", 2)
+    if "summary_error" in summary:
+        raise fail(f"{summary['error'] or 'the run ended'}; {summary['summary_error']}, so the outputs in "
+                   f"{out_dir} have no summary.json", 1)
     if code:
         raise fail(f"{summary['error']} (outputs so far kept in {out_dir})", code)
     return summary
@@ -83,7 +88,7 @@ def rerun_sinks(path: Optional[Path]):
 
 
 def print_summary(summary: dict) -> None:
-    console = Console()
+    console = StdoutConsole()
     table = Table(title=f"{summary['command']}: {summary['source']}", show_header=False)
     table.add_row("frames / estimates", f"{summary['frames']} / {summary['estimates']}")
     table.add_row("without visual rotation", str(summary["frames_without_visual"]))
@@ -106,6 +111,9 @@ def print_summary(summary: dict) -> None:
         table.add_row("camera-IMU rotation (from data)",
                       f"{est['nearest_axis_letters']} within {est['nearest_axis_letters_deg']:.1f} deg; "
                       f"{est['angle_to_used_deg']:.1f} deg from the one used")
+    if summary.get("video_frames_resized"):
+        table.add_row("video frames resized", f"{summary['video_frames_resized']} of {summary['video_frames']} "
+                      "(their size differs from the first frame's)")
     table.add_row("outputs", ", ".join(summary["outputs"]))
     console.print(table)
     for line in summary.get("warnings", []):
@@ -143,6 +151,7 @@ def _options():
         imu_time_offset_s=typer.Option(None, "--imu-time-offset-s",
                                        help="Seconds added to IMU stamps to put them on the camera clock "
                                             "(default: the source's own, 0)."),
+        force=typer.Option(False, "--force", help="Replace the results of an earlier run in a non-empty --out."),
     )
 
 
@@ -158,7 +167,7 @@ def run_command(
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
-    record: Optional[Path] = _o["record"], rerun: Optional[Path] = _o["rerun"],
+    record: Optional[Path] = _o["record"], rerun: Optional[Path] = _o["rerun"], force: bool = _o["force"],
     intrinsics: Optional[str] = _o["intrinsics"], offline: Optional[bool] = _o["offline"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
@@ -166,7 +175,7 @@ def run_command(
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
                      imu_time_offset_s=imu_time_offset_s, offline=offline)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record,
-            extra_sinks_factory=rerun_sinks(rerun))
+            extra_sinks_factory=rerun_sinks(rerun), force=force)
 
 
 @app.command("eval")
@@ -175,7 +184,7 @@ def eval_command(
     out: Path = typer.Option(..., "--out", help="Folder for the outputs of 'run' plus the scores in summary.json."),
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
-    max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"], force: bool = _o["force"],
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"], rerun: Optional[Path] = _o["rerun"],
     intrinsics: Optional[str] = _o["intrinsics"], offline: Optional[bool] = _o["offline"],
@@ -189,4 +198,4 @@ def eval_command(
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
                      imu_time_offset_s=imu_time_offset_s, offline=offline)
     execute(source, out, cfg, imu, fps, evaluate=True, command="eval", extra_sinks_factory=rerun_sinks(rerun),
-            gt=gt, gt_time_offset_s=gt_time_offset_s)
+            gt=gt, gt_time_offset_s=gt_time_offset_s, force=force)

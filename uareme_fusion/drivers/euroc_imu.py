@@ -25,6 +25,7 @@ from typing import Iterator
 import numpy as np
 
 from uareme_fusion.errors import InputError
+from uareme_fusion.io.paths import is_pipe, path_kind
 from uareme_fusion.io.text_tables import read_table
 from uareme_fusion.types import ImuSample
 
@@ -68,8 +69,9 @@ def read_euroc_imu(path: str | Path, delimiter: str | None = ",") -> EurocImu:
     if path.is_dir():
         raise InputError(f"EuRoC IMU file {path}: is a folder, and an IMU file inside it (data.csv, "
                          "imu0/data.csv or mav0/imu0/data.csv) does not exist")
-    if not path.is_file():
-        raise InputError(f"EuRoC IMU file {path} does not exist")
+    if not path.is_file() and not is_pipe(path):  # a pipe (FIFO, `<(cat f.csv)`) is read to its end
+        kind = path_kind(path)
+        raise InputError(f"EuRoC IMU file {path} " + (f"is {kind}" if kind else "does not exist"))
     table = read_table(path, EUROC_IMU_COLUMNS, delimiter=delimiter, kind="an EuRoC IMU file")
     if len(table) == 0:
         raise InputError(f"{path} holds no IMU samples (only comments or blank lines)")

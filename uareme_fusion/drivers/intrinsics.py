@@ -65,6 +65,18 @@ class CameraModel:
         return bool(np.any(self.dist != 0))
 
 
+def scaled_camera(camera: CameraModel, scale: float) -> CameraModel:
+    """The same camera for its image resized by `scale` (pixel centres kept: x' = (x + 0.5) scale - 0.5);
+    distortion acts on normalised coordinates and is unchanged."""
+    if scale == 1.0:
+        return camera
+    K = camera.K.astype(float).copy()
+    K[:2, :2] *= scale
+    K[:2, 2] = (K[:2, 2] + 0.5) * scale - 0.5
+    size = None if camera.image_size is None else tuple(int(round(n * scale)) for n in camera.image_size)
+    return replace(camera, K=K, image_size=size)
+
+
 def pinhole(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from uareme_fusion.errors import InputError
 from uareme_fusion.io.text_tables import is_text_file
+from uareme_fusion.io.paths import is_pipe, path_kind
 
 from .base import Source
 from .broad_source import BroadSource
@@ -147,8 +148,16 @@ def _open(spec: str, fps: float | None, options: dict) -> Source:
             _no_fps(fps, spec)
             return _construct(BroadSource, spec, path, **options)
         return _construct(VideoSource, spec, path, fps=fps, **options)
+    if is_pipe(path) and path.suffix.lower() == ".csv":
+        _no_fps(fps, spec)
+        return _construct(ImuCsvSource, spec, path, **options)
     if globlib.has_magic(spec):
         return _construct(ImageSource, spec, spec, fps=fps, **options)
+    kind = path_kind(path)
+    if kind is not None:
+        raise InputError(f"{spec}: is {kind}, not a video, images or a dataset folder"
+                         + (" (a pipe is read only as an IMU CSV: --imu, or a name ending in .csv)"
+                            if is_pipe(path) else ""))
     raise InputError(f"{spec}: no such file or folder (expected a video, images, a dataset folder, a .hdf5 or "
                      ".csv file, webcam:N, sim:SCENARIO or oak[:ID])")
 

@@ -167,6 +167,8 @@ def read_json_object(path: Path) -> dict:
         meta = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(f"{path}: not a readable JSON file ({exc})") from None
+    except RecursionError:
+        raise InputError(f"{path}: not a readable JSON file (nested too deeply)") from None
     if not isinstance(meta, dict):
         raise InputError(f"{path}: expected a JSON object, got {type(meta).__name__}")
     return meta

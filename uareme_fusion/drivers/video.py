@@ -47,10 +47,19 @@ def to_rgb8(image: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
+MAX_CAMERA_INDEX = 9999
+"""Largest `webcam:N` accepted (OpenCV takes a 32-bit index; real systems number cameras from 0)."""
+
+
 def parse_webcam(spec: str) -> int | None:
-    """Camera index of `webcam` / `webcam:N`, None for anything else."""
+    """Camera index of `webcam` / `webcam:N`, None for anything else; `InputError` for an index out of range."""
     match = WEBCAM_PATTERN.match(spec.strip())
-    return None if match is None else int(match.group(1) or 0)
+    if match is None:
+        return None
+    index = int(match.group(1) or 0)
+    if index > MAX_CAMERA_INDEX:
+        raise InputError(f"{spec.strip()}: camera index {match.group(1)} is out of range (0 to {MAX_CAMERA_INDEX})")
+    return index
 
 
 class VideoSource(Source):

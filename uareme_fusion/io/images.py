@@ -96,8 +96,27 @@ def apply_orientation(image: np.ndarray, code: int) -> np.ndarray:
     return np.ascontiguousarray(turned)
 
 
-def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED, what: str = "image") -> np.ndarray:
+_REDUCED_COLOR = ((2, cv2.IMREAD_REDUCED_COLOR_2), (4, cv2.IMREAD_REDUCED_COLOR_4), (8, cv2.IMREAD_REDUCED_COLOR_8))
+
+
+def reduction_for(size: tuple[int, int] | None, max_pixels: int | None) -> tuple[int, int | None]:
+    """(factor, OpenCV flag) of the smallest of 1/2, 1/4, 1/8 that brings `size` (w, h) to at most
+    `max_pixels`; (1, None) when no reduction is needed or the size is unknown."""
+    if size is None or max_pixels is None or size[0] * size[1] <= max_pixels:
+        return 1, None
+    for factor, flag in _REDUCED_COLOR:
+        if (size[0] // factor) * (size[1] // factor) <= max_pixels:
+            break
+    return factor, flag
+
+
+def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED, what: str = "image",
+               max_pixels: int | None = None) -> np.ndarray:
     """`cv2.imread(path, flags)` (BGR(A) channel order, the file's bit depth for IMREAD_UNCHANGED).
+
+    With `max_pixels`, a PNG or JPEG larger than that is decoded at 1/2, 1/4 or 1/8 of its size
+    (8-bit BGR, `cv2.IMREAD_REDUCED_COLOR_*`: JPEG scales while decoding), so a 48-megapixel photo
+    never lives in memory at full size beyond the decoder's own buffer.
 
     Raises `InputError` naming the file and `what` it should be for a missing or empty file, a
     file that is not an image (its first bytes are quoted), a header larger than `MAX_IMAGE_PIXELS`
@@ -121,6 +140,8 @@ def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED, what: str = 
                 f"{path}: the image header declares {width} x {height} pixels, more than the limit of "
                 f"{MAX_IMAGE_PIXELS} pixels; refusing to decode it"
             )
+    _, reduced = reduction_for(size, max_pixels)
+    flags = flags if reduced is None else reduced
     level = cv2.utils.logging.getLogLevel()
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # our message replaces OpenCV's log
     try:

@@ -1,5 +1,6 @@
 """Text tables (TUM lists and trajectories, EuRoC CSV) read with `np.loadtxt`, with errors that name
 the file, the line number in the file (1-based, comments and blank lines counted) and the column.
+A pipe (FIFO, `<(cat f.csv)`) is read to its end (`io.paths.read_pipe_text`).
 
     table = read_table(path, ("timestamp [ns]", "w_x", ...), delimiter=",")
     t_ns = table.ints(0); values = table.floats(slice(1, 7))
@@ -18,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .paths import is_pipe, read_pipe_text
 
 _MAX_LISTED = 3
 """How many offending lines an error message lists before it counts the rest."""
@@ -102,7 +104,7 @@ def read_table(path: str | Path, columns: tuple[str, ...], delimiter: str | None
     `kind` names the format in messages about columns ("... is not {kind}: ...")."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        text = read_pipe_text(path) if is_pipe(path) else path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     except IsADirectoryError:

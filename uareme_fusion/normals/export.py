@@ -2,13 +2,15 @@
 
     written = export_normals(Path("corridor.mp4"), Path("out"), LearnedNormals(), progress=callback)
 
-Per input frame, under `out_dir` (`<stem>` is the image's file stem, or `<video stem>_<index:06d>`):
+Per input frame, under `out_dir` (`<stem>` is the image's file stem, or `<video stem>_<index:06d>`;
+images of one folder that share a stem, `a.png` and `a.jpg`, keep their suffix: `a_png`, `a_jpg`):
 - `<stem>_normals.png`: normals coloured X-Y-Z to R-G-B as in the paper (`normals_to_rgb`,
   camera frame OpenCV: x right, y down, z forward);
 - `<stem>_confidence.png`: kappa / kappa_cap as 8-bit grey (white = confident, black = kappa 0);
 - `<stem>.npz`: `normals` (H, W, 3) float32 unit vectors and `kappa` (H, W) float32, the layout
   `io.normal_maps.load_normal_map` reads back (so these files can stand in for a network later).
 Images are read with OpenCV; an unreadable or empty image raises `InputError` naming the file.
+Every file is written atomically (`io.safe_files`): an interrupted export leaves complete files only.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.normal_maps import normals_to_rgb
+from ..io.safe_files import write_image_atomic, write_npz_atomic
 from ..pipeline.single_image import read_rgb
 from ..types import NormalMap
 
@@ -35,7 +38,7 @@ def list_frames(input_path: Path) -> tuple[int, Iterator[tuple[str, np.ndarray]]
         files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
         if not files:
             raise InputError(f"{path}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder")
-        return len(files), ((p.stem, read_rgb(p)) for p in files)
+        return len(files), ((stem, read_rgb(p)) for stem, p in zip(unique_stems(files), files))
     if not path.exists():
         raise InputError(f"{path}: no such file or folder")
     suffix = path.suffix.lower()
@@ -45,6 +48,18 @@ def list_frames(input_path: Path) -> tuple[int, Iterator[tuple[str, np.ndarray]]
         return _video_frames(path)
     raise InputError(f"{path}: not an image ({', '.join(IMAGE_SUFFIXES)}), a video "
                      f"({', '.join(VIDEO_SUFFIXES)}) or a folder of images")
+
+
+def unique_stems(files: list[Path]) -> list[str]:
+    """File stems, with the suffix kept (`a_png`) for files whose stem another file shares."""
+    stems = [p.stem for p in files]
+    shared = {s for s in stems if stems.count(s) > 1}
+    names = [f"{p.stem}_{p.suffix[1:].lower()}" if p.stem in shared else p.stem for p in files]
+    clashes = sorted({n for n in names if names.count(n) > 1})
+    if clashes:
+        raise InputError(f"{files[0].parent}: several images would write the same outputs ({', '.join(clashes)}); "
+                         "rename them")
+    return names
 
 
 def _video_frames(path: Path) -> tuple[int, Iterator[tuple[str, np.ndarray]]]:
@@ -80,10 +95,9 @@ def write_normal_map(out_dir: Path, stem: str, normal_map: NormalMap, kappa_cap:
     """Write `<stem>_normals.png`, `<stem>_confidence.png` and `<stem>.npz` (see the module docstring)."""
     for name, image in ((f"{stem}_normals.png", normals_to_rgb(normal_map.normals)[..., ::-1]),
                         (f"{stem}_confidence.png", confidence_image(normal_map.kappa, kappa_cap))):
-        if not cv2.imwrite(str(out_dir / name), image):
-            raise InputError(f"{out_dir / name}: cannot write this image")
-    np.savez_compressed(out_dir / f"{stem}.npz", normals=normal_map.normals.astype(np.float32),
-                        kappa=normal_map.kappa.astype(np.float32))
+        write_image_atomic(out_dir / name, image)
+    write_npz_atomic(out_dir / f"{stem}.npz", normals=normal_map.normals.astype(np.float32),
+                     kappa=normal_map.kappa.astype(np.float32))
 
 
 def export_normals(input_path: Path, out_dir: Path, estimator, kappa_cap: float,

@@ -8,12 +8,14 @@ assumed horizontal field of view, written on the overlay.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, OutputError
+from ..io.safe_files import cannot_write, discard, publish, refuse_link, temporary_sibling, write_image_atomic
 from ..io.video_writer import OPENCV_CODECS, open_video_encoder
 from ..overlay import draw_ground, ground_mask, side_by_side
 from ..overlay.compose import draw_overlay
@@ -37,9 +39,31 @@ def overlay_image(result: FrameResult, fov_deg: float, panes: bool) -> np.ndarra
     return side_by_side(image, result.normal_map) if panes else image
 
 
+def _frames_in_video(path: Path) -> int:
+    """The frame count a finished video file declares (0 when it cannot be opened), with FFmpeg's own
+    complaints about a broken file kept off stderr (the caller reports it in one line)."""
+    saved = os.dup(2)
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 2)
+        os.close(devnull)
+        capture = cv2.VideoCapture(str(path))
+        frames = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if capture.isOpened() else 0
+        capture.release()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+    return frames
+
+
 class VideoFileWriter:
     """A video encoder (`io.video_writer`: H.264 when PyAV is installed, else OpenCV) opened on the
-    first image (its size fixes the video's); `encoder` names the one used."""
+    first image (its size fixes the video's); `encoder` names the one used.
+
+    It writes a hidden temporary file beside `path` and renames it into place on `close`, once the
+    container is finished (an mp4's index written) and reads back with every frame, so `path` is
+    never a half-written video. A frame of another size is resized to the first's and counted in
+    `resized` (never dropped silently)."""
 
     def __init__(self, path: Path, fps: float):
         self.path, self.fps = Path(path), float(fps)
@@ -47,24 +71,53 @@ class VideoFileWriter:
             raise InputError(f"{self.path}: unsupported video extension; use one of {', '.join(VIDEO_CODECS)}")
         self._writer = None
         self.encoder: str | None = None
+        self._tmp: Path | None = None
+        self._size: tuple[int, int] | None = None
         self.frames = 0
+        self.resized = 0
 
     def write_rgb(self, rgb: np.ndarray) -> None:
         if self._writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._writer = open_video_encoder(self.path, self.fps, (rgb.shape[1], rgb.shape[0]))
+            refuse_link(self.path)
+            self._tmp = temporary_sibling(self.path)
+            self._size = (rgb.shape[1], rgb.shape[0])
+            try:
+                self._writer = open_video_encoder(self._tmp, self.fps, self._size)
+            except InputError:
+                discard(self._tmp)
+                raise
             self.encoder = self._writer.name
-        self._writer.write(rgb)
+        if (rgb.shape[1], rgb.shape[0]) != self._size:
+            rgb = cv2.resize(rgb, self._size, interpolation=cv2.INTER_AREA)
+            self.resized += 1
+        try:
+            self._writer.write(rgb)
+        except OSError as exc:  # the encoder names its temporary file; the user knows the video's name
+            raise cannot_write(self.path, exc) from None
         self.frames += 1
 
     def summary(self) -> dict:
-        """{"videos": {file name: encoder}} for summary.json."""
-        return {"videos": {self.path.name: self.encoder}} if self.encoder else {}
+        """{"videos": {file name: encoder}, "video_frames": n, "video_frames_resized": n} for summary.json."""
+        return {**({"videos": {self.path.name: self.encoder}} if self.encoder else {}),
+                "video_frames": self.frames, "video_frames_resized": self.resized}
 
     def close(self) -> None:
-        if self._writer is not None:
+        if self._writer is None:
+            return
+        try:
             self._writer.close()
+        except OSError as exc:
+            discard(self._tmp)
+            raise cannot_write(self.path, exc) from None
+        finally:
             self._writer = None
+        readable = _frames_in_video(self._tmp)
+        if readable != self.frames:
+            discard(self._tmp)
+            raise OutputError(f"{self.path}: could not be written (the finished video reads back {readable} of "
+                              f"{self.frames} frames: disk full?)")
+        publish(self._tmp, self.path)
 
 
 class HorizonVideoSink:
@@ -90,9 +143,9 @@ class GroundSink:
 
     def __init__(self, out_dir: Path, threshold_deg: float = 15.0, video: Path | None = None, fps: float = 30.0):
         self.out, self.threshold_deg = Path(out_dir), threshold_deg
-        (self.out / "masks").mkdir(parents=True, exist_ok=True)
-        if video is None:
-            (self.out / "overlay").mkdir(exist_ok=True)
+        for sub in ("masks",) + (("overlay",) if video is None else ()):
+            refuse_link(self.out / sub)
+            (self.out / sub).mkdir(parents=True, exist_ok=True)
         self.video = None if video is None else VideoFileWriter(video, fps)
         self.count = 0
 
@@ -107,16 +160,20 @@ class GroundSink:
             mask, _ = ground_mask(result.normal_map, result.estimate.up_c, self.threshold_deg)
             mask = cv2.resize(mask.astype(np.uint8), (width, height), interpolation=cv2.INTER_NEAREST) > 0
         name = f"{frame.index if frame.index >= 0 else self.count:06d}.png"
-        cv2.imwrite(str(self.out / "masks" / name), mask.astype(np.uint8) * 255)
         overlay = draw_ground(frame.rgb, mask)
-        if self.video is not None:
-            self.video.write_rgb(overlay)
-        else:
-            cv2.imwrite(str(self.out / "overlay" / name), overlay[..., ::-1])
+        write_image_atomic(self.out / "masks" / name, mask.astype(np.uint8) * 255)
+        try:
+            if self.video is not None:
+                self.video.write_rgb(overlay)
+            else:
+                write_image_atomic(self.out / "overlay" / name, overlay[..., ::-1])
+        except (InputError, OutputError):  # whole results only: no mask without its overlay
+            (self.out / "masks" / name).unlink(missing_ok=True)
+            raise
         self.count += 1
 
     def summary(self) -> dict:
-        return {} if self.video is None else self.video.summary()
+        return {"ground_masks": self.count, **({} if self.video is None else self.video.summary())}
 
     def close(self) -> None:
         if self.video is not None:

@@ -16,9 +16,10 @@ from dataclasses import dataclass, field
 
 from ..backends.base import Backend
 from ..drivers.base import ImuBatch, Source
-from ..errors import InputError, SourceError
+from ..errors import InputError, OutputError, SourceError
 from ..solver import solve_manhattan
 from ..types import Estimate, Frame, NormalMap, Status, VisualRotation
+from . import stop_signals
 
 STAGES = ("source", "normals", "solver", "backend", "sinks")
 
@@ -56,8 +57,9 @@ class StageTimes:
 
 @dataclass
 class RunStats:
-    """Counts and timings of one run; `stopped` is end, max_frames, interrupted, source_error or
-    input_error (`error` holds the message of the last two)."""
+    """Counts and timings of one run; `stopped` is end, max_frames, interrupted (Ctrl-C, SIGTERM or
+    SIGHUP: `signal` holds its number), source_error, input_error or output_error (a file that could
+    not be written; `error` holds the message of the last four)."""
 
     source: str = ""
     normals: str = ""
@@ -73,6 +75,7 @@ class RunStats:
     wall_s: float = 0.0
     stopped: str = "end"
     error: str | None = None
+    signal: int | None = None
 
     def as_dict(self) -> dict:
         return {"source": self.source, "normals": self.normals, "backend": self.backend,
@@ -82,7 +85,14 @@ class RunStats:
                 "status_counts": dict(sorted(self.status_counts.items())),
                 "timing_ms": self.times.mean_ms(self.estimates),
                 "fps": self.estimates / self.wall_s if self.wall_s > 0 else 0.0,
-                "wall_s": self.wall_s, "stopped": self.stopped, "error": self.error}
+                "wall_s": self.wall_s, "stopped": self.stopped, "error": self.error,
+                **({"signal": self.signal} if self.signal is not None else {})}
+
+    def interrupted(self, exc: BaseException | None = None, signum: int | None = None) -> None:
+        if signum is not None:
+            exc = stop_signals.StopRequested(signum)
+        self.stopped, self.error = "interrupted", stop_signals.describe(exc)
+        self.signal = getattr(exc, "signum", 2)
 
 
 class Pipeline:
@@ -147,13 +157,19 @@ class Pipeline:
 
     def _emit(self, result: FrameResult) -> FrameResult:
         t0 = time.perf_counter()
-        for sink in self.sinks:
-            sink.write(result)
-        self.stats.times.add("sinks", time.perf_counter() - t0)
-        self.stats.estimates += 1
-        for flag in Status:
-            if flag and flag in result.estimate.status:
-                self.stats.status_counts[flag.name] += 1
+        with stop_signals.writing():  # a stop signal waits: every sink gets the result, and it is counted
+            for k, sink in enumerate(self.sinks):
+                try:
+                    sink.write(result)
+                except (InputError, OutputError):  # the files hold whole results only: take this one back where written
+                    for written in self.sinks[:k]:
+                        getattr(written, "undo_last", lambda: None)()
+                    raise
+            self.stats.times.add("sinks", time.perf_counter() - t0)
+            self.stats.estimates += 1
+            for flag in Status:
+                if flag and flag in result.estimate.status:
+                    self.stats.status_counts[flag.name] += 1
         return result
 
     def run(self, source: Source, max_frames: int | None = None,
@@ -186,14 +202,28 @@ class Pipeline:
             stats.stopped, stats.error = "source_error", str(exc)
         except InputError as exc:
             stats.stopped, stats.error = "input_error", str(exc)
-        except KeyboardInterrupt:
-            stats.stopped, stats.error = "interrupted", "interrupted by the user (Ctrl-C)"
+        except OutputError as exc:
+            stats.stopped, stats.error = "output_error", str(exc)
+        except KeyboardInterrupt as exc:
+            stats.interrupted(exc)
         finally:
             stats.wall_s = time.perf_counter() - start
             stats.normals = getattr(self.normals, "name", "") if self.normals is not None else ""
-            self.close()
+            with stop_signals.writing(deliver=False):  # files are finished even when a signal comes now
+                self.close()
+            signum = stop_signals.take_pending()
+            if signum is not None and stats.stopped != "interrupted":
+                stats.interrupted(signum=signum)
         return stats
 
     def close(self) -> None:
+        """Close every sink (an mp4 gets its index); a sink that cannot finish its file ends the run as
+        output_error, and the others are still closed."""
         for sink in self.sinks:
-            sink.close()
+            try:
+                sink.close()
+            except OutputError as exc:
+                if self.stats.stopped == "output_error":
+                    self.stats.error = f"{self.stats.error}; {exc}"
+                else:
+                    self.stats.stopped, self.stats.error = "output_error", str(exc)

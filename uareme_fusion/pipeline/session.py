@@ -1,13 +1,16 @@
 """One run from a source to an output folder: `trajectory.tum`, `estimates.csv`, `summary.json`.
 
 `summary.json` is written however the run ends (end of source, `max_frames`, a source failure,
-bad input met mid-stream, Ctrl-C), with `stopped` saying which; the trajectory and CSV are flushed frame by frame. With
+bad input met mid-stream, Ctrl-C, SIGTERM, a full disk), with `stopped` saying which; the trajectory and CSV are
+written row by row. Its disk space is reserved when the run starts (until the end it says
+`"stopped": "running"`), so a disk that fills during the run does not keep it out. With
 `evaluate=True` the source's ground truth scores the run (`metrics.attitude_errors`).
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
@@ -15,18 +18,41 @@ import numpy as np
 
 from ..drivers.base import GroundTruth, Source
 from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
-from ..errors import InputError
+from ..errors import InputError, OutputError
+from ..io.safe_files import ReservedFile
 from ..metrics import attitude_errors, error_summary
 from ..rotations import align_constant
 from ..types import Status
 from .config import RunConfig
 from .imu_rotation_check import ImuRotationCheck
 from .runner import Pipeline, RunStats
+from . import stop_signals
 from .sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
 from .stages import CappedNormals, make_backend, make_normal_estimator, mekf_preset_for
 
 GRAVITY_AWARE_BACKENDS = ("mekf", "smoother")
 """With an IMU these know absolute up: NEES after a yaw-only alignment (compare.GRAVITY_AWARE)."""
+
+
+OUTPUT_NAMES = ("trajectory.tum", "estimates.csv", "summary.json", "masks", "overlay", "ground.mp4")
+"""What run, eval, horizon and ground write in their output folder; `--force` replaces exactly these."""
+
+
+def prepare_output_folder(out_dir: str | Path, force: bool) -> Path:
+    """The output folder, created; a non-empty one is refused unless `force`, which removes the
+    results of an earlier run (`OUTPUT_NAMES`) and leaves other files alone."""
+    out = make_output_folder(out_dir)
+    held = sorted(p.name for p in out.iterdir())
+    if held and not force:
+        shown = ", ".join(held[:3]) + (f" and {len(held) - 3} more" if len(held) > 3 else "")
+        raise InputError(f"--out {out} is not empty (holds {shown}); pass --force to replace the results in it")
+    for name in OUTPUT_NAMES if force else ():
+        path = out / name
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        elif path.exists() or path.is_symlink():
+            path.unlink()
+    return out
 
 
 def make_output_folder(out_dir: str | Path) -> Path:
@@ -63,23 +89,30 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
                          "(use 'uareme-fusion run' instead)")
     extra_sinks = list(extra_sinks)
     log = EstimateLog() if evaluate else None
+    pipeline = build_pipeline(source, cfg)  # a bad backend setting stops here, before any file is written
+    summary_file = ReservedFile(out / "summary.json", json.dumps({"command": command, "stopped": "running"}) + "\n")
     check = ImuRotationCheck.for_source(source)
     sinks = [TumTrajectoryWriter(out / "trajectory.tum"), EstimatesCsvWriter(out / "estimates.csv"),
              *extra_sinks, *([log] if log else []), *([check] if check else [])]
-    pipeline = build_pipeline(source, cfg, sinks)
+    pipeline.sinks = sinks
     stats = pipeline.run(source if check is None else check.tap(source), max_frames=cfg.max_frames,
                          on_result=on_result)
-    summary = summary_document(stats, cfg, command, source)
-    for sink in extra_sinks:
-        summary.update(sink.summary() if hasattr(sink, "summary") else {})
-    if check is not None:
-        summary["imu_rotation_estimate"] = check.report()
-        summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w]
-    if log is not None:
-        summary.update(evaluation(log, truth, gravity_aware=source.info.has_imu and cfg.backend in
-                                  GRAVITY_AWARE_BACKENDS))
-    summary["outputs"] = sorted(p.name for p in out.iterdir() if p.name != "summary.json") + ["summary.json"]
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=False) + "\n")
+    with stop_signals.writing():  # a signal now waits until summary.json is complete
+        summary = summary_document(stats, cfg, command, source)
+        for sink in extra_sinks:
+            summary.update(getattr(sink, "summary", dict)())
+        if check is not None:
+            summary["imu_rotation_estimate"] = check.report()
+            summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w]
+        if log is not None:
+            summary.update(evaluation(log, truth, gravity_aware=source.info.has_imu and cfg.backend in
+                                      GRAVITY_AWARE_BACKENDS))
+        summary["outputs"] = sorted(p.name for p in out.iterdir()
+                                    if p.name != "summary.json" and not p.name.startswith(".")) + ["summary.json"]
+        try:
+            summary_file.write(json.dumps(summary, indent=2, sort_keys=False) + "\n")
+        except (InputError, OutputError) as exc:
+            summary["summary_error"] = str(exc)
     return summary
 
 

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
-from ..io.images import read_image
+from ..io.images import image_size, read_image, reduction_for
 from ..overlay import side_by_side
 from ..overlay.compose import draw_overlay
 from ..rotations import quat_xyzw
@@ -41,17 +41,24 @@ class ImageAnalysis:
         v = self.visual
         return {"image": str(self.path), "R_cm": v.R_cm.tolist(), "q_cm_xyzw": quat_xyzw(v.R_cm).tolist(),
                 "cov_rad2": v.cov.tolist(), "std_deg": np.degrees(np.sqrt(np.diag(v.cov))).tolist(),
-                "up_c": self.up_c.tolist(), "quality": v.quality, "cost": v.cost, "valid_pixels": v.n_valid,
+                "up_c": self.up_c.tolist(), "analysed_size_px": [self.rgb.shape[1], self.rgb.shape[0]],
+                "quality": v.quality, "cost": v.cost, "valid_pixels": v.n_valid,
                 "timing_ms": self.timing_ms,
                 "conventions": "camera OpenCV (x right, y down, z forward); R_cm maps Manhattan to camera "
                                "coordinates; cov of the right perturbation; up_c = the Manhattan axis nearest "
                                "image up"}
 
 
-def read_rgb(path: str | Path) -> np.ndarray:
-    """An image file as RGB uint8 (grayscale, RGBA and 16-bit converted as the image sources do)."""
+ANALYSIS_MAX_PIXELS = 4_000_000
+"""Larger images are decoded at 1/2, 1/4 or 1/8 size for `analyse_image` (normals are estimated at
+far lower resolution; a 48-megapixel photo at full size needs 4 GB through the pipeline)."""
+
+
+def read_rgb(path: str | Path, max_pixels: int | None = None) -> np.ndarray:
+    """An image file as RGB uint8 (grayscale, RGBA and 16-bit converted as the image sources do);
+    decoded at reduced size when larger than `max_pixels` (`io.images.read_image`)."""
     try:
-        return to_rgb8(read_image(path, cv2.IMREAD_UNCHANGED))
+        return to_rgb8(read_image(path, cv2.IMREAD_UNCHANGED, max_pixels=max_pixels))
     except InputError as exc:
         if str(path) in str(exc):
             raise
@@ -61,11 +68,13 @@ def read_rgb(path: str | Path) -> np.ndarray:
 def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0,
                   camera=None) -> ImageAnalysis:
     """One image's rotation and up; `camera` (`drivers.intrinsics.CameraModel`) undistorts it first."""
-    from ..drivers.intrinsics import undistorted_image
+    from ..drivers.intrinsics import scaled_camera, undistorted_image
 
     path = Path(path)
-    rgb = read_rgb(path)
-    rgb = rgb if camera is None else undistorted_image(camera, rgb)
+    rgb = read_rgb(path, ANALYSIS_MAX_PIXELS)
+    if camera is not None:  # K is in the file's pixels; the analysed image may be decoded smaller
+        camera = scaled_camera(camera, 1.0 / reduction_for(image_size(path), ANALYSIS_MAX_PIXELS)[0])
+        rgb = undistorted_image(camera, rgb)
     estimator = CappedNormals(make_normal_estimator(normals, SourceInfo(name=str(path))), kappa_cap)
     t0 = time.perf_counter()
     normal_map = estimator.estimate_frame(Frame(0.0, rgb=rgb, index=0))

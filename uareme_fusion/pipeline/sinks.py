@@ -1,4 +1,7 @@
-"""Where estimates go: files flushed frame by frame, so a run that stops early leaves valid files.
+"""Where estimates go: files written row by row, so a run that stops early leaves valid files.
+
+Each row is written whole (`io.safe_files.RowFile`): a full disk leaves every complete row and
+no partial one, and raises `OutputError` naming the file.
 
 - `TumTrajectoryWriter`: `trajectory.tum`, one line `t 0 0 0 qx qy qz qw` per estimate (TUM format,
   readable by evo): the camera orientation `R_wc` (OpenCV camera axes to world, z up), quaternion
@@ -10,11 +13,12 @@
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..io.safe_files import RowFile
 from ..rotations import quat_xyzw
 from ..types import Status
 from .runner import FrameResult
@@ -30,14 +34,6 @@ perturbation of `R_wc`; up = world up in the camera frame (OpenCV axes); gyro bi
 (empty when the backend has none); status as an integer and as flag names joined by `|`."""
 
 
-def _open_for_writing(path: Path):
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        return open(path, "w", newline="")
-    except OSError as exc:
-        raise InputError(f"{path}: cannot write ({exc.strerror or exc})") from None
-
-
 def status_names(status: Status) -> str:
     return "|".join(f.name for f in Status if f and f in status)
 
@@ -45,27 +41,33 @@ def status_names(status: Status) -> str:
 class TumTrajectoryWriter:
     def __init__(self, path: Path):
         self.path = Path(path)
-        self._fh = _open_for_writing(self.path)
-        self._fh.write("# timestamp tx ty tz qx qy qz qw  (R_wc: camera OpenCV axes to world, z up; "
-                       "position not estimated)\n")
-        self._fh.flush()
+        self._rows = RowFile(self.path)
+        self._rows.write_row("# timestamp tx ty tz qx qy qz qw  (R_wc: camera OpenCV axes to world, z up; "
+                             "position not estimated)\n", counts=False)
 
     def write(self, result: FrameResult) -> None:
         q = quat_xyzw(result.estimate.R_wc)
-        self._fh.write(f"{result.t_s:.9f} 0 0 0 {q[0]:.9f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f}\n")
-        self._fh.flush()
+        self._rows.write_row(f"{result.t_s:.9f} 0 0 0 {q[0]:.9f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f}\n")
+
+    def undo_last(self) -> None:
+        self._rows.drop_last_row()
 
     def close(self) -> None:
-        self._fh.close()
+        self._rows.close()
+
+
+def csv_line(row: list) -> str:
+    """One row in the csv module's dialect (quoting as needed, \\r\\n line end)."""
+    buffer = io.StringIO()
+    csv.writer(buffer).writerow(row)
+    return buffer.getvalue()
 
 
 class EstimatesCsvWriter:
     def __init__(self, path: Path):
         self.path = Path(path)
-        self._fh = _open_for_writing(self.path)
-        self._csv = csv.writer(self._fh)
-        self._csv.writerow(ESTIMATE_COLUMNS)
-        self._fh.flush()
+        self._rows = RowFile(self.path)
+        self._rows.write_row(csv_line(ESTIMATE_COLUMNS), counts=False)
 
     def write(self, result: FrameResult) -> None:
         est = result.estimate
@@ -76,11 +78,13 @@ class EstimatesCsvWriter:
                + ([f"{v:.6e}" for v in bias] if bias else ["", "", ""])
                + ["" if result.visual is None else f"{result.visual.quality:.4f}",
                   int(est.status), status_names(est.status)])
-        self._csv.writerow(row)
-        self._fh.flush()
+        self._rows.write_row(csv_line(row))
+
+    def undo_last(self) -> None:
+        self._rows.drop_last_row()
 
     def close(self) -> None:
-        self._fh.close()
+        self._rows.close()
 
 
 class EstimateLog:

@@ -35,12 +35,14 @@ class SourceNormals:
 
 
 class NormalFiles:
-    """Precomputed normal maps, one file per frame in sorted order (frame i reads the i-th file)."""
+    """Precomputed normal maps, one file per frame in sorted order (frame i reads the i-th file); hidden
+    files (an unfinished `.NAME.partial.npz` of an export that was killed) are not maps."""
 
     name = "files"
 
     def __init__(self, folder: Path):
-        self.files = sorted(p for p in folder.iterdir() if p.suffix.lower() in NORMAL_FILE_SUFFIXES)
+        self.files = sorted(p for p in folder.iterdir()
+                            if p.suffix.lower() in NORMAL_FILE_SUFFIXES and not p.name.startswith("."))
         if not self.files:
             raise InputError(f"{folder}: no normal maps ({', '.join(NORMAL_FILE_SUFFIXES)}) in this folder")
         self._count = 0

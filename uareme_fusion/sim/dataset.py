@@ -31,11 +31,11 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
 
-import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
+from ..io.safe_files import write_bytes_atomic, write_image_atomic, write_text_atomic
 from .imu import ImuNoise, simulate_imu
 from .render import Renderer, intrinsics_from_fov
 from .scenarios import SCENARIOS, build_scenario
@@ -99,27 +99,31 @@ class SequenceOptions:
 
 def _save_npz(path: Path, **arrays) -> None:
     """Uncompressed-array npz with fixed zip dates, so identical inputs give identical bytes."""
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+    archive = io.BytesIO()
+    with zipfile.ZipFile(archive, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name, value in arrays.items():
             buf = io.BytesIO()
             np.lib.format.write_array(buf, np.asanyarray(value), allow_pickle=False)
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
             info.compress_type = zipfile.ZIP_DEFLATED
             zf.writestr(info, buf.getvalue())
+    write_bytes_atomic(path, archive.getvalue())
 
 
 def _write_table(path: Path, header: str, t_s: np.ndarray, columns: np.ndarray, fmt: str) -> None:
     rows = np.column_stack([t_s, columns])
-    np.savetxt(path, rows, fmt=fmt, header=header, comments="# ")
+    text = io.StringIO()
+    np.savetxt(text, rows, fmt=fmt, header=header, comments="# ")
+    write_text_atomic(path, text.getvalue())
 
 
 def _write_euroc_imu(path: Path, t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray):
-    path.parent.mkdir(parents=True, exist_ok=True)
     t_ns = np.rint(t_s * 1e9).astype(np.int64)
     data = np.column_stack([t_ns.astype(np.float64), gyro_rad_s, accel_m_s2])
-    with open(path, "w", newline="") as fh:
-        fh.write(EUROC_IMU_HEADER + "\n")
-        np.savetxt(fh, data, fmt=["%d"] + ["%.10f"] * 6, delimiter=",")
+    text = io.StringIO(newline="")
+    text.write(EUROC_IMU_HEADER + "\n")
+    np.savetxt(text, data, fmt=["%d"] + ["%.10f"] * 6, delimiter=",")
+    write_text_atomic(path, text.getvalue())
 
 
 def prepare_out_dir(out_dir: Path, force: bool) -> None:
@@ -174,8 +178,8 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
         if dropped[i]:
             rgb[:] = 0
             depth_png[:] = 0
-        cv2.imwrite(str(out / "rgb" / f"{stamps[i]}.png"), rgb[..., ::-1])
-        cv2.imwrite(str(out / "depth" / f"{stamps[i]}.png"), depth_png)
+        write_image_atomic(out / "rgb" / f"{stamps[i]}.png", np.ascontiguousarray(rgb[..., ::-1]))
+        write_image_atomic(out / "depth" / f"{stamps[i]}.png", depth_png)
         R_wm = world.trajectory.R_wm(t)[0]
         R_wm_all.append(R_wm)
         _save_npz(out / "normals" / f"{i:06d}.npz", normals=normals_c,
@@ -190,10 +194,8 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
                  "\ntimestamp tx ty tz qx qy qz qw", t_frames, np.column_stack([sample.p_w, quat]),
                  "%.6f")
     for kind in ("rgb", "depth"):
-        with open(out / f"{kind}.txt", "w") as fh:
-            fh.write(f"# {kind} images (simulated, scenario {scenario}, seed {options.seed})\n"
-                     "# timestamp filename\n")
-            fh.writelines(f"{s} {kind}/{s}.png\n" for s in stamps)
+        write_text_atomic(out / f"{kind}.txt", f"# {kind} images (simulated, scenario {scenario}, seed "
+                          f"{options.seed})\n# timestamp filename\n" + "".join(f"{s} {kind}/{s}.png\n" for s in stamps))
     R_ci = np.asarray(options.R_ci, float)
     t_imu, gyro, accel = simulate_imu(world.trajectory, options.imu_rate_hz, options.imu_noise,
                                       seed=options.seed, R_ci=R_ci, time_offset_s=options.time_offset_s)
@@ -215,6 +217,5 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
                      "quaternions x y z w; accel is specific force (+9.81 up at rest); "
                      "IMU stamp t measures camera time t - time_offset_s; v_c = R_ci v_i"),
     )
-    with open(out / "scene.json", "w") as fh:
-        json.dump(summary, fh, indent=1, sort_keys=True, default=float)
+    write_text_atomic(out / "scene.json", json.dumps(summary, indent=1, sort_keys=True, default=float))
     return summary

@@ -78,7 +78,10 @@ class ManhattanSolver:
                      independent_regions: float | None = None) -> VisualRotation:
         """As `solve`, on arrays; `independent_regions` overrides the config's (see NormalMap)."""
         t0 = time.perf_counter()
-        moments = normal_moments(normals, kappa)
+        with np.errstate(over="ignore", invalid="ignore"):
+            moments = normal_moments(normals, kappa)
+        if not np.all(np.isfinite(moments.G)):  # huge finite kappa: the weighted sums overflowed
+            moments = normal_moments(normals, _scaled_kappa(kappa))
         t1 = time.perf_counter()
         n_pixels = int(np.prod(np.shape(normals)[:-1]))
         if moments.n_valid == 0 or not moments.total_weight > 0:
@@ -168,6 +171,18 @@ class ManhattanSolver:
         var = np.divide(residual, eigval, out=np.full(3, np.inf), where=eigval > 0) + cfg.floor_std_rad**2
         var = np.minimum(var, cfg.max_variance_rad2)
         return (eigvec * var) @ eigvec.T
+
+
+def _scaled_kappa(kappa) -> np.ndarray:
+    """kappa divided by a power of two that brings its largest finite value to 1 or below.
+
+    The rotation, cost and covariance depend on the weights only up to a common factor (the cost is
+    normalised by the total weight), so this changes nothing but keeps the moment sums finite for
+    any finite kappa (e.g. float32 3e38). Only used when the plain sums overflow."""
+    kappa = np.asarray(kappa)
+    finite = np.where(np.isfinite(kappa), np.abs(kappa), 0)
+    exponent = np.frexp(np.float64(finite.max(initial=0.0)))[1]
+    return np.ldexp(kappa.astype(np.float64) if kappa.dtype == np.float32 else kappa, -int(exponent))
 
 
 def _check_rotation(R) -> np.ndarray:
