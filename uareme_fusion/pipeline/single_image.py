@@ -1,7 +1,10 @@
-"""One image in: its Manhattan rotation, covariance and best guess of up, and an overlay.
+"""Images in: each one's Manhattan rotation, covariance, up vector, focal length and horizon, and an overlay.
 
 Without gravity, "up" is the scene axis nearest image up (`solver.up_candidate`); the rotation is
 `R_cm` (Manhattan to camera coordinates) with the covariance (rad^2) of its right perturbation.
+Cues: learned normals and line segments (`cues`); without intrinsics the focal length comes from
+the segments when they tell it (`solver/focal.py`), else from an assumed field of view. The horizon
+is `l ~ K^-T up_c` in pixels, scaled so that [a, b] is unit (a x + b y + c = 0, positive on the sky side).
 """
 
 from __future__ import annotations
@@ -13,37 +16,58 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..errors import InputError
-from ..io.images import read_image
-from ..overlay import side_by_side
-from ..overlay.compose import draw_overlay
-from ..rotations import quat_xyzw
-from ..solver import solve_manhattan
-from ..solver.manhattan import up_candidate
-from ..types import Frame, NormalMap, VisualRotation
-from .stages import CappedNormals, make_normal_estimator
 from ..drivers.base import SourceInfo
 from ..drivers.video import to_rgb8
+from ..errors import InputError
+from ..io.images import read_image
+from ..lines.detect import LineSegments, SegmentDetector
+from ..overlay import side_by_side
+from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K, check_K
+from ..overlay.compose import draw_overlay
+from ..overlay.horizon import horizon_line
+from ..rotations import quat_xyzw
+from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal
+from ..solver.joint import JointSolver
+from ..solver.manhattan import up_candidate
+from ..types import Frame, NormalMap, VisualRotation
+from .cues import DEFAULT_CUES, parse_cues
+from .stages import CappedNormals, make_normal_estimator
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
 @dataclass(frozen=True)
 class ImageAnalysis:
     path: Path
     rgb: np.ndarray
-    normal_map: NormalMap
+    normal_map: NormalMap | None
+    segments: LineSegments | None
     visual: VisualRotation
     up_c: np.ndarray
+    focal: FocalEstimate
     timing_ms: dict
+
+    @property
+    def horizon(self) -> np.ndarray:
+        """[a, b, c] with a x + b y + c = 0 in pixels, [a, b] unit, positive on the sky side."""
+        return horizon_line(self.up_c, self.focal.K)
 
     def as_dict(self) -> dict:
         v = self.visual
+        cues = {name: v.cues.get(name, {"present": False}) for name in ("normals", "lines")}
+        if not v.cues:  # the normals-only solver
+            cues["normals"] = {"share": 1.0, "cost": v.cost, "valid_pixels": v.n_valid}
+        for entry in cues.values():
+            entry.setdefault("present", True)
         return {"image": str(self.path), "R_cm": v.R_cm.tolist(), "q_cm_xyzw": quat_xyzw(v.R_cm).tolist(),
                 "cov_rad2": v.cov.tolist(), "std_deg": np.degrees(np.sqrt(np.diag(v.cov))).tolist(),
                 "up_c": self.up_c.tolist(), "quality": v.quality, "cost": v.cost, "valid_pixels": v.n_valid,
+                **self.focal.as_dict(), "horizon": self.horizon.tolist(), "cues": cues,
                 "timing_ms": self.timing_ms,
                 "conventions": "camera OpenCV (x right, y down, z forward); R_cm maps Manhattan to camera "
                                "coordinates; cov of the right perturbation; up_c = the Manhattan axis nearest "
-                               "image up"}
+                               "image up; horizon [a, b, c]: a x + b y + c = 0 in pixels, [a, b] unit, "
+                               "positive on the sky side"}
 
 
 def read_rgb(path: str | Path) -> np.ndarray:
@@ -56,24 +80,70 @@ def read_rgb(path: str | Path) -> np.ndarray:
         raise InputError(f"{path}: {exc}") from None
 
 
-def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0) -> ImageAnalysis:
-    path = Path(path)
-    rgb = read_rgb(path)
-    estimator = CappedNormals(make_normal_estimator(normals, SourceInfo(name=str(path))), kappa_cap)
-    t0 = time.perf_counter()
-    normal_map = estimator.estimate_frame(Frame(0.0, rgb=rgb, index=0))
-    t1 = time.perf_counter()
-    try:
-        visual = solve_manhattan(normal_map)
-    except InputError:
-        raise InputError(f"{path}: no confident normals in this image (blank or dark?)") from None
-    t2 = time.perf_counter()
-    _, up_c = up_candidate(visual.R_cm)
-    return ImageAnalysis(path, rgb, normal_map, visual, up_c,
-                         {"normals": 1e3 * (t1 - t0), "solver": 1e3 * (t2 - t1)})
+def image_paths(inputs: list[str | Path]) -> list[Path]:
+    """Image files named directly or found (sorted) in the folders given; an InputError when none."""
+    paths: list[Path] = []
+    for item in map(Path, inputs):
+        if item.is_dir():
+            found = sorted(p for p in item.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+            if not found:
+                raise InputError(f"{item}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder")
+            paths.extend(found)
+        else:
+            paths.append(item)
+    return paths
 
 
-def image_overlay(analysis: ImageAnalysis, K: np.ndarray | None = None, fov_deg: float = 60.0,
-                  panes: bool = True) -> np.ndarray:
-    image = draw_overlay(analysis.rgb, analysis.up_c, analysis.visual.R_cm, K, fov_deg)
-    return side_by_side(image, analysis.normal_map) if panes else image
+class ImageAnalyser:
+    """Loads the normal network and the segment detector once; `analyse(path)` per image."""
+
+    def __init__(self, normals: str = "learned", cues: str = DEFAULT_CUES, kappa_cap: float = 75.0,
+                 K: np.ndarray | None = None, assumed_fov_deg: float = DEFAULT_FOV_DEG,
+                 detector: SegmentDetector | None = None):
+        self.cues = parse_cues(cues)
+        self.estimator = (CappedNormals(make_normal_estimator(normals, SourceInfo(name="image")), kappa_cap)
+                          if "normals" in self.cues else None)
+        self.detector = (detector or SegmentDetector()) if "lines" in self.cues else None
+        self.K = None if K is None else check_K(K)
+        self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
+        self.solver = JointSolver()
+
+    def analyse(self, path: str | Path, rgb: np.ndarray | None = None) -> ImageAnalysis:
+        path = Path(path)
+        rgb = read_rgb(path) if rgb is None else rgb
+        h, w = rgb.shape[:2]
+        t0 = time.perf_counter()
+        normal_map = self.estimator.estimate_frame(Frame(0.0, rgb=rgb, index=0)) if self.estimator else None
+        t1 = time.perf_counter()
+        segments = self.detector.detect(rgb) if self.detector else None
+        t2 = time.perf_counter()
+        try:
+            if self.K is not None or segments is None or not len(segments):
+                K = self.K if self.K is not None else assumed_K(h, w, self.focal_config.assumed_fov_deg)
+                visual = solve_given_K(self.solver, normal_map, segments, K)
+                focal = FocalEstimate(K, "given" if self.K is not None else "assumed", width=w)
+            else:
+                visual, focal = solve_with_focal(self.solver, normal_map, segments, config=self.focal_config)
+        except InputError:
+            raise InputError(f"{path}: no confident normals and no line segments in this image "
+                             "(blank or dark?)") from None
+        t3 = time.perf_counter()
+        _, up_c = up_candidate(visual.R_cm)
+        return ImageAnalysis(path, rgb, normal_map, segments, visual, up_c, focal,
+                             {"normals": 1e3 * (t1 - t0), "lines": 1e3 * (t2 - t1), "solver": 1e3 * (t3 - t2)})
+
+
+def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0,
+                  cues: str = DEFAULT_CUES, K: np.ndarray | None = None) -> ImageAnalysis:
+    """One image through a fresh `ImageAnalyser` (load it once yourself for many images)."""
+    return ImageAnalyser(normals, cues, kappa_cap, K).analyse(path)
+
+
+def image_overlay(analysis: ImageAnalysis, panes: bool = True) -> np.ndarray:
+    """The horizon and axes drawn with the image's own focal length (estimated, given or assumed)."""
+    assumed = analysis.focal.source == "assumed"  # drawn with the "assumed FOV" note
+    image = draw_overlay(analysis.rgb, analysis.up_c, analysis.visual.R_cm, None if assumed else analysis.focal.K,
+                         analysis.focal.hfov_deg)
+    if panes and analysis.normal_map is not None:
+        return side_by_side(image, analysis.normal_map)
+    return image
