@@ -115,3 +115,58 @@ def icsl_scores(folders: list[Path], analyser, stride: int = 1) -> dict:
             "true_hfov_deg": true_hfov, "estimated_focal_fraction": len(est) / max(len(paths), 1),
             "median_hfov_deg": float(np.median(est)) if est else float("nan"),
             "hfov_error_percent": 100.0 * abs(np.median(est) - true_hfov) / true_hfov if est else float("nan")}
+
+
+def icl_scores(folder: Path, cues: str) -> dict:
+    """`eval` of the RGB-only single-frame backend on ICL-NUIM kt3 (learned normals), and the FOV
+    estimated from the first frames without the dataset's intrinsics."""
+    import tempfile
+
+    from ..pipeline import RunConfig
+    from ..pipeline.session import run_to_folder
+    from .. import pipeline  # noqa: F401
+
+    with tempfile.TemporaryDirectory() as out:
+        summary = run_to_folder(str(folder), out, RunConfig(backend="single", normals="learned", cues=cues),
+                                evaluate=True, command="bench horizon")
+    from ..pipeline.single_image import ImageAnalyser
+
+    analyser = ImageAnalyser(cues=cues)
+    hfov = [analyser.analyse(p).focal for p in sorted((folder / "rgb").glob("*.png"),
+                                                          key=lambda p: int(p.stem))[:100:10]]
+    est = [f.hfov_deg for f in hfov if f.source == "estimated"]
+    true_hfov = math.degrees(2 * math.atan2(640 / 2, ICL_FX))
+    return {"are_mean_deg": summary["are_deg"]["mean"], "nees_mean": summary["nees"]["mean"],
+            "fps": summary["fps"], "true_hfov_deg": true_hfov, "median_hfov_deg": float(np.median(est)) if est else float("nan"),
+            "hfov_error_percent": 100.0 * abs(np.median(est) - true_hfov) / true_hfov if est else float("nan")}
+
+
+def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, icsl_stride: int = 2,
+        console: Console | None = None) -> dict:
+    """Every figure of the module docstring beside its goal and baseline; returns them as a dict."""
+    from ..pipeline.single_image import ImageAnalyser
+
+    console = console or Console()
+    analyser = ImageAnalyser(cues=cues)
+    ecd = ecd_scores(data / "eurasian_cities", analyser, ecd_limit)
+    ecd.pop("errors")
+    icsl = icsl_scores([data / "icsl_corridor", data / "icsl_corridor_more"], analyser, icsl_stride)
+    icl = icl_scores(data / "icl_nuim_office_kt3", cues)
+    table = Table(title=f"bench horizon (cues {cues}; data under {data})")
+    for col in ("figure", "measured", "goal", "baseline"):
+        table.add_column(col)
+    table.add_row(f"ECD horizon AUC@0.25 ({ecd['images']} images)", f"{ecd['auc_percent']:.1f} %", ">= 90 %",
+                  f"level camera {ecd['level_auc_percent']:.1f} %")
+    table.add_row("ECD focal estimated / median HFOV", f"{100 * ecd['estimated_focal_fraction']:.0f} % / "
+                  f"{ecd['median_hfov_deg']:.1f} deg", "", "")
+    table.add_row(f"ICSL RGB vs depth rotation, mean ({icsl['frames']} frames)", f"{icsl['mean_angle_deg']:.2f} deg",
+                  "<= 2 deg", f"median {icsl['median_angle_deg']:.2f} deg")
+    table.add_row("ICSL RGB-only NEES mean", f"{icsl['nees_mean']:.2f}", "<= 6", "")
+    table.add_row("ICSL HFOV error", f"{icsl['hfov_error_percent']:.1f} % ({icsl['median_hfov_deg']:.1f} deg)",
+                  "<= 5 %", f"true {icsl['true_hfov_deg']:.1f} deg")
+    table.add_row("ICL kt3 RGB-only ARE mean", f"{icl['are_mean_deg']:.2f} deg", "<= 1.5 deg", "paper 2.72 deg")
+    table.add_row("ICL kt3 RGB-only NEES mean", f"{icl['nees_mean']:.2f}", "1.5 .. 6", "")
+    table.add_row("ICL kt3 HFOV error", f"{icl['hfov_error_percent']:.1f} % ({icl['median_hfov_deg']:.1f} deg)",
+                  "<= 5 %", f"true {icl['true_hfov_deg']:.1f} deg")
+    console.print(table)
+    return {"ecd": ecd, "icsl": icsl, "icl_kt3": icl}

@@ -2,6 +2,8 @@
 
 - `solver`: the single-frame solver's stages (one core), medians and p90;
 - `pipeline`: end-to-end fps and per-stage ms at 640x480, and memory over a long stream (issue 7);
+- `horizon`: RGB-only accuracy on real data (ECD horizon AUC, ICSL and ICL-NUIM rotations and focal
+  lengths) beside goals and baselines (issue 12);
 - `soak`: one simulated hour through the full pipeline: RSS growth, state sizes, accuracy (issue 8).
 """
 
@@ -14,7 +16,7 @@ import typer
 
 from .app import app, fail
 
-BENCHMARKS = ("solver", "pipeline", "soak")
+BENCHMARKS = ("solver", "pipeline", "soak", "horizon")
 
 
 @app.command()
@@ -31,6 +33,9 @@ def bench(
     normals_noise_deg: float = typer.Option(2.0, "--normals-noise-deg", min=0.0, max=90.0,
                                             help="soak: angular noise on the simulator's normals, deg."),
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
+    data: Path = typer.Option(Path("../shared/data"), "--data", help="horizon: the development data folder."),
+    cues: str = typer.Option("normals,lines", "--cues", help="horizon: visual cues (normals, lines or both)."),
+    ecd_limit: int = typer.Option(None, "--ecd-limit", min=1, help="horizon: score only the first N ECD images."),
     json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
 ) -> None:
     """Time a benchmark on this machine and print its figures against the goals."""
@@ -46,6 +51,12 @@ def bench(
         from ..benchmarks import pipeline
 
         results = pipeline.run(seconds, memory_minutes, normals)
+    elif what == "horizon":
+        from ..benchmarks import horizon
+
+        if not (data / "eurasian_cities").is_dir():
+            raise fail(f"--data {data}: no eurasian_cities/ folder there (see shared/data/README.md)")
+        results = horizon.run(data, cues, ecd_limit)
     else:
         from ..benchmarks import soak
 

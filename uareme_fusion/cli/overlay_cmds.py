@@ -26,13 +26,14 @@ def horizon_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    cues: Optional[str] = _o["cues"],
     panes: bool = typer.Option(False, "--panes", help="Add panes of normals and confidence beside each frame."),
     fov_deg: Optional[float] = typer.Option(None, "--fov-deg",
                                             help="Assumed horizontal field of view when K is unknown (default 60)."),
 ) -> None:
     """Draw the horizon and the Manhattan axes on every frame of a video."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
-                     assumed_fov_deg=fov_deg)
+                     assumed_fov_deg=fov_deg, cues=cues)
     if out.suffix.lower() not in VIDEO_CODECS:
         raise InputError(f"--out {out}: unsupported video extension; use one of {', '.join(VIDEO_CODECS)}")
 
@@ -52,13 +53,14 @@ def ground_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    cues: Optional[str] = _o["cues"],
     video: bool = typer.Option(False, "--video", help="Write the overlays as OUT/ground.mp4 instead of images."),
     threshold_deg: Optional[float] = typer.Option(None, "--threshold-deg",
                                                   help="Ground when the normal is within this angle of up (15)."),
 ) -> None:
     """Segment the ground: pixels whose normal is within a threshold of the estimated up vector."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
-                     ground_threshold_deg=threshold_deg)
+                     ground_threshold_deg=threshold_deg, cues=cues)
 
     def sinks(src, out_dir, cfg):
         needs_frames(src, "ground")

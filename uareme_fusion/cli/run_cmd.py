@@ -81,6 +81,7 @@ def _options():
         preset=typer.Option(None, "--preset", help="EKF preset: building, vehicle, handheld or a YAML path."),
         max_frames=typer.Option(None, "--max-frames", help="Stop after this many frames."),
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
+        cues=typer.Option(None, "--cues", help="Visual cues: normals, lines or both (comma-separated; default both)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
                                                      "(replay it later with 'run FOLDER')."),
     )
@@ -96,10 +97,10 @@ def run_command(
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
     max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
-    record: Optional[Path] = _o["record"],
+    record: Optional[Path] = _o["record"], cues: Optional[str] = _o["cues"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
-    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
+    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames, cues=cues)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record)
 
 
@@ -109,8 +110,8 @@ def eval_command(
     out: Path = typer.Option(..., "--out", help="Folder for the outputs of 'run' plus the scores in summary.json."),
     imu: Optional[Path] = _o["imu"], backend: Optional[str] = _o["backend"], normals: Optional[str] = _o["normals"],
     config: Optional[Path] = _o["config"], preset: Optional[str] = _o["preset"],
-    max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
+    max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"], cues: Optional[str] = _o["cues"],
 ) -> None:
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
-    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames)
+    cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames, cues=cues)
     execute(source, out, cfg, imu, fps, evaluate=True, command="eval")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 
 class RunConfig(BaseModel):
@@ -34,3 +34,12 @@ class RunConfig(BaseModel):
     """A pixel is ground when its normal is within this angle of up, degrees."""
     max_frames: int | None = Field(None, gt=0)
     """Stop after this many frames (None: the whole source)."""
+    cues: str = "normals,lines"
+    """Visual cues of the joint solver: normals, lines, or both (comma-separated); see pipeline/cues.py."""
+
+    @field_validator("cues")
+    @classmethod
+    def _known_cues(cls, value: str) -> str:
+        from .cues import parse_cues
+
+        return ",".join(parse_cues(value))

@@ -7,8 +7,14 @@ joint solver (`solver/joint.py`). Without intrinsics, the focal length is estima
 
 from __future__ import annotations
 
-from ..errors import ConfigError
+import numpy as np
+
+from ..errors import ConfigError, InputError
 from ..lines.detect import LineSegments, SegmentDetector
+from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
+from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal
+from ..solver.joint import JointSolver
+from ..types import Frame, NormalMap, VisualRotation
 
 VALID_CUES = ("normals", "lines")
 DEFAULT_CUES = "normals,lines"
@@ -25,13 +31,46 @@ def parse_cues(spec: str | tuple | list) -> tuple[str, ...]:
     return tuple(n for n in VALID_CUES if n in names)
 
 
-class LineCue:
-    """Segments of each frame (`detect(rgb) -> LineSegments`)."""
+FOCAL_ATTEMPTS = 30
+"""Frames on which a stream without intrinsics tries to estimate f before keeping the assumed FOV."""
 
-    name = "lines"
 
-    def __init__(self, detector: SegmentDetector | None = None):
-        self.detector = detector or SegmentDetector()
+class CueSolver:
+    """The visual rotation of each frame from its normal map and/or its segments (one joint solve).
 
-    def segments(self, rgb) -> LineSegments | None:
-        return None if rgb is None else self.detector.detect(rgb)
+    Intrinsics: the frame's K when it has one; otherwise f estimated from the scene on the first
+    frames that tell it (then kept: one camera per stream), the assumed field of view until then.
+    `focal` is the `FocalEstimate` in use.
+    """
+
+    def __init__(self, lines: bool = True, assumed_fov_deg: float = DEFAULT_FOV_DEG,
+                 detector: SegmentDetector | None = None):
+        self.detector = (detector or SegmentDetector()) if lines else None
+        self.solver = JointSolver()
+        self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
+        self.focal: FocalEstimate | None = None
+        self._attempts = 0
+
+    def solve(self, frame: Frame, normal_map: NormalMap | None, R_init=None) -> VisualRotation | None:
+        """None when neither cue is usable (a blank frame and no normals)."""
+        segments = self.detector.detect(frame.rgb) if self.detector is not None and frame.rgb is not None else None
+        try:
+            return self._solve(frame, normal_map, segments, R_init)
+        except InputError:
+            return None
+
+    def _solve(self, frame: Frame, normal_map, segments: LineSegments | None, R_init) -> VisualRotation:
+        if frame.K is not None:
+            self.focal = FocalEstimate(np.asarray(frame.K, float), "given", width=frame.rgb.shape[1]
+                                       if frame.rgb is not None else 0)
+            return solve_given_K(self.solver, normal_map, segments, frame.K, R_init, t=frame.t)
+        if segments is not None and len(segments) and self._attempts < FOCAL_ATTEMPTS and (
+                self.focal is None or self.focal.source == "assumed"):
+            self._attempts += 1
+            visual, focal = solve_with_focal(self.solver, normal_map, segments, R_init, self.focal_config, t=frame.t)
+            self.focal = focal
+            return visual
+        if self.focal is None:
+            h, w = (segments.height, segments.width) if segments is not None else normal_map.normals.shape[:2]
+            self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
+        return solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t=frame.t)

@@ -19,6 +19,7 @@ from ..metrics import attitude_errors, error_summary
 from ..rotations import align_constant
 from ..types import Status
 from .config import RunConfig
+from .cues import CueSolver, parse_cues
 from .runner import Pipeline, RunStats
 from .sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
 from .stages import CappedNormals, make_backend, make_normal_estimator
@@ -39,10 +40,13 @@ def make_output_folder(out_dir: str | Path) -> Path:
 
 
 def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipeline:
-    normals = None
+    normals, cues = None, None
     if source.info.has_frames:
-        normals = CappedNormals(make_normal_estimator(cfg.normals, source.info), cfg.kappa_cap)
-    return Pipeline(normals, make_backend(cfg, source.info), sinks)
+        chosen = parse_cues(cfg.cues)
+        if "normals" in chosen:
+            normals = CappedNormals(make_normal_estimator(cfg.normals, source.info), cfg.kappa_cap)
+        cues = CueSolver(lines="lines" in chosen, assumed_fov_deg=cfg.assumed_fov_deg)
+    return Pipeline(normals, make_backend(cfg, source.info), sinks, cues)
 
 
 def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False, extra_sinks: Iterable = (),
