@@ -37,6 +37,8 @@ INLIER_SINE = 0.035
 AMBIGUOUS_SINE = 0.05
 """A segment whose plane nearly contains two axes (second-smallest |p . r_k| below this, 3 deg) could run
 along either: it carries no information (`line_information`)."""
+MIN_OTHER_AXES_SUPPORT = 0.05
+"""Below this share of segments off axis k, rotation about r_k counts as unseen (`line_information`)."""
 _MIN_PLANE_NORM = 1e-12
 
 
@@ -168,7 +170,13 @@ def line_information(moments: LineMoments, R_cm: np.ndarray) -> np.ndarray:
     others[np.arange(len(u)), k] = 1.0
     a = np.prod(others, axis=1) * (second >= AMBIGUOUS_SINE)
     grad = np.cross(np.eye(3)[k], u)
-    return 2.0 * np.einsum("n,na,nb->ab", moments.weights * a, grad, grad) / moments.total_weight
+    info = 2.0 * np.einsum("n,na,nb->ab", moments.weights * a, grad, grad) / moments.total_weight
+    # Rotation about r_k is seen only by segments along the other axes: with (almost) none, drop it.
+    support = np.bincount(k, weights=moments.weights * (second >= AMBIGUOUS_SINE), minlength=3)
+    blind = (support.sum() - support) < MIN_OTHER_AXES_SUPPORT * max(support.sum(), 1e-300)
+    info[blind, :] = 0.0
+    info[:, blind] = 0.0
+    return info
 
 
 def inlier_fraction(moments: LineMoments, R_cm: np.ndarray, max_sine: float = INLIER_SINE) -> float:
