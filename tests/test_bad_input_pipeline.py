@@ -271,7 +271,7 @@ def test_horizon_and_ground_bad_options(world, tmp_path, case, args, message):
 
 IMAGE_CASES = [
     ("missing_file", ["W/nope.png"], "nope.png"),
-    ("folder", ["W/images"], "images"),
+    ("folder_without_images", ["W/no_normals"], "no_normals: no images"),
     ("zero_bytes", ["W/zero.png"], "zero.png: empty file"),
     ("text_file", ["W/text.png"], "text.png: not a readable image"),
     ("huge_header", ["W/huge.png"], "40000 x 40000 pixels"),

@@ -1,6 +1,7 @@
 """The line cue: sextic moments, joint solve with normals, focal length, degeneracy, clutter, real data."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -161,3 +162,31 @@ def test_icsl_focal_length_within_five_percent(shared_data):
     scores = icsl_scores([shared_data / "icsl_corridor"], ImageAnalyser(cues="lines"), stride=16)
     assert scores["estimated_focal_fraction"] >= 0.6
     assert scores["hfov_error_percent"] < 5.0
+
+
+def test_image_command_takes_a_folder_and_prints_one_json_per_image(tmp_path):
+    import json
+
+    import cv2
+    from typer.testing import CliRunner
+
+    from uareme_fusion.cli import app
+
+    K = assumed_K(H, W, 60.0)
+    seg = manhattan_segments(exp_so3([0.05, 0.1, 0.0]), K, W, H, noise_px=0.0, rng=np.random.default_rng(8))
+    img = np.full((H, W, 3), 30, np.uint8)
+    for (x1, y1), (x2, y2) in seg.endpoints_px:
+        cv2.line(img, (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2))), (230, 230, 230), 2)
+    for name in ("a.png", "b.png"):
+        cv2.imwrite(str(tmp_path / name), img)
+    cv2.imwrite(str(tmp_path / "blank.png"), np.full((H, W, 3), 128, np.uint8))
+    result = CliRunner().invoke(app, ["image", str(tmp_path), "--json", "--cues", "lines"])
+    assert result.exit_code != 0 and "blank.png" in result.output  # no cue at all in a blank image
+    (tmp_path / "blank.png").unlink()
+    result = CliRunner().invoke(app, ["image", str(tmp_path), "--json", "--cues", "lines"])
+    docs = [json.loads(line) for line in result.stdout.splitlines()]
+    assert result.exit_code == 0 and [Path(d["image"]).name for d in docs] == ["a.png", "b.png"]
+    for d in docs:
+        assert d["focal_source"] in ("estimated", "assumed") and len(d["horizon"]) == 3
+        assert math.hypot(*d["horizon"][:2]) == pytest.approx(1.0)
+        assert d["cues"]["normals"] == {"present": False} and d["cues"]["lines"]["present"]

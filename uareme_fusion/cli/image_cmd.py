@@ -20,7 +20,7 @@ from .app import app
 
 @app.command("image")
 def image_command(
-    images: List[Path] = typer.Argument(..., help="PNG/JPEG images of man-made scenes, or folders of them."),
+    image: List[Path] = typer.Argument(..., help="PNG/JPEG images of man-made scenes, or folders of them."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON object per image, one per line."),
     out: Optional[Path] = typer.Option(None, "--out", help="Overlay image (one input) or folder (several)."),
     normals: str = typer.Option("learned", "--normals", help="learned or a model file (.pt)."),
@@ -31,7 +31,7 @@ def image_command(
     """Manhattan rotation, covariance, up vector, focal length and horizon of images, with optional overlays."""
     if not 1.0 < fov_deg < 179.0:  # also refuses NaN
         raise InputError(f"--fov-deg must be between 1 and 179 degrees, got {fov_deg}")
-    paths = image_paths(images)
+    paths = image_paths(image)
     several = len(paths) > 1
     if out is not None and not several and out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise InputError(f"{out}: the overlay is an image; use a .png or .jpg name")
