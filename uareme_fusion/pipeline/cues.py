@@ -2,7 +2,8 @@
 
 The line cue detects segments in each frame and hands them, with the frame's intrinsics, to the
 joint solver (`solver/joint.py`). Without intrinsics, the focal length is estimated from the scene
-(`solver/focal.py`) on frames until one gives a confident estimate, and then kept for the stream.
+(`solver/focal.py`) on the first `FOCAL_ATTEMPTS` frames; the stream uses the median of the
+confident per-frame estimates (one camera per stream), and keeps it after those frames.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import numpy as np
 from ..errors import ConfigError, InputError
 from ..lines.detect import LineSegments, SegmentDetector
 from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
-from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal
+from ..solver.focal import FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal
 from ..solver.joint import JointSolver
 from ..types import Frame, NormalMap, VisualRotation
 
@@ -32,7 +33,7 @@ def parse_cues(spec: str | tuple | list) -> tuple[str, ...]:
 
 
 FOCAL_ATTEMPTS = 30
-"""Frames on which a stream without intrinsics tries to estimate f before keeping the assumed FOV."""
+"""Frames on which a stream without intrinsics estimates f; afterwards the median is kept."""
 
 
 class CueSolver:
@@ -50,6 +51,7 @@ class CueSolver:
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.focal: FocalEstimate | None = None
         self._attempts = 0
+        self._focal_px: list[float] = []
 
     def solve(self, frame: Frame, normal_map: NormalMap | None, R_init=None) -> VisualRotation | None:
         """None when neither cue is usable (a blank frame and no normals)."""
@@ -64,13 +66,31 @@ class CueSolver:
             self.focal = FocalEstimate(np.asarray(frame.K, float), "given", width=frame.rgb.shape[1]
                                        if frame.rgb is not None else 0)
             return solve_given_K(self.solver, normal_map, segments, frame.K, R_init, t=frame.t)
-        if segments is not None and len(segments) and self._attempts < FOCAL_ATTEMPTS and (
-                self.focal is None or self.focal.source == "assumed"):
+        if segments is not None and len(segments) and self._attempts < FOCAL_ATTEMPTS:
             self._attempts += 1
             visual, focal = solve_with_focal(self.solver, normal_map, segments, R_init, self.focal_config, t=frame.t)
-            self.focal = focal
-            return visual
+            if focal.source == "estimated":
+                self._focal_px.append(focal.f_px)
+            if focal.source == "estimated" and len(self._focal_px) < 3:
+                self.focal = focal
+                return visual
+            if len(self._focal_px) >= 3:
+                self.focal = stream_focal(self._focal_px, segments.height, segments.width)
+            elif self.focal is None or self.focal.source == "assumed":
+                self.focal = focal
+                return visual
+            return solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t=frame.t)
         if self.focal is None:
             h, w = (segments.height, segments.width) if segments is not None else normal_map.normals.shape[:2]
             self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
         return solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t=frame.t)
+
+
+def stream_focal(focal_px: list[float], height: int, width: int) -> FocalEstimate:
+    """The median of per-frame focal estimates, with the standard error of a median (1.25 sigma / sqrt n,
+    sigma from the median absolute deviation)."""
+    f = np.asarray(focal_px, float)
+    median = float(np.median(f))
+    sigma = 1.4826 * float(np.median(np.abs(f - median)))
+    return FocalEstimate(centred_K(median, height, width), "estimated", std_px=1.25 * sigma / np.sqrt(len(f)),
+                         width=width)

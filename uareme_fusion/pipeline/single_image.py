@@ -34,6 +34,9 @@ from .cues import DEFAULT_CUES, parse_cues
 from .stages import CappedNormals, make_normal_estimator
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+IMAGE_DETECT_WIDTH_PX = 640
+"""Single images are not time-critical: LSD at 640 px wide scores ECD AUC 63.4% against 60.5% at
+the stream's 320 px (lines only), for 4x the detection time (12 vs 3.3 ms at 640x480)."""
 
 
 @dataclass(frozen=True)
@@ -103,7 +106,7 @@ class ImageAnalyser:
         self.cues = parse_cues(cues)
         self.estimator = (CappedNormals(make_normal_estimator(normals, SourceInfo(name="image")), kappa_cap)
                           if "normals" in self.cues else None)
-        self.detector = (detector or SegmentDetector()) if "lines" in self.cues else None
+        self.detector = (detector or SegmentDetector(IMAGE_DETECT_WIDTH_PX)) if "lines" in self.cues else None
         self.K = None if K is None else check_K(K)
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.solver = JointSolver()
