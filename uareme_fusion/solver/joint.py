@@ -22,19 +22,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..rotations import exp_so3, nearest_symmetric
+from ..rotations import nearest_symmetric
 from ..types import NormalMap, VisualRotation
 from .lines import (RANDOM_LINES_COST, LineMoments, line_cost_gradient_hessian, inlier_fraction, line_information,
                     normalised_line_cost)
 from .manhattan import (R_CM_UPRIGHT, RANDOM_NORMALS_COST, ManhattanSolver, SolverConfig, _cell_candidates,
                         _check_rotation)
-from .moments import NormalMoments, normal_moments
+from .levenberg import levenberg_marquardt_so3
+from .moments import normal_moments
 from .quartic import gradient_hessian, normalised_cost
-
-# Levenberg-Marquardt damping relative to the joint Hessian's scale.
-_DAMPING_START = 1e-6
-_DAMPING_MIN = 1e-9
-_DAMPING_GIVE_UP = 1e8
 
 
 @dataclass(frozen=True)
@@ -183,32 +179,19 @@ class JointSolver:
         return float(sum(c.alpha * c.cost(R) for c in cues))
 
     def _refine(self, cues: list[_Cue], R0: np.ndarray) -> tuple[np.ndarray, int, float, bool]:
-        """Levenberg-Marquardt on SO(3) with right increments over J; O(1) per iteration."""
-        R, J = R0, self.joint_cost(cues, R0)
+        """Levenberg-Marquardt on SO(3) over J (Hessian scaled by sum a_c); O(1) per iteration."""
         scale = max(sum(c.alpha for c in cues), 1e-300)
-        damping, iterations = _DAMPING_START, 0
-        while iterations < self.config.max_iterations:
-            iterations += 1
+
+        def gradient_hessian(R):
             grad, hess = np.zeros(3), np.zeros((3, 3))
             for c in cues:
                 _, g, h = c.derivatives(R)
                 grad += c.alpha * g
                 hess += c.alpha * h
-            grad, hess = grad / scale, hess / scale
-            mu = max(damping, _DAMPING_MIN - np.linalg.eigvalsh(hess)[0])
-            step = np.linalg.solve(hess + mu * np.eye(3), -grad)
-            R_new = R @ exp_so3(step)
-            if np.linalg.norm(step) < self.config.step_tolerance_rad:
-                return R_new, iterations, self.joint_cost(cues, R_new), True
-            J_new = self.joint_cost(cues, R_new)
-            if J_new <= J:
-                R, J = R_new, J_new
-                damping = max(damping / 4.0, _DAMPING_MIN)
-            else:
-                damping = mu * 8.0
-                if damping > _DAMPING_GIVE_UP:
-                    break
-        return R, iterations, J, False
+            return grad / scale, hess / scale
+
+        return levenberg_marquardt_so3(lambda R: self.joint_cost(cues, R) / scale, gradient_hessian, R0,
+                                       self.config.max_iterations, self.config.step_tolerance_rad)
 
     # --- covariance -------------------------------------------------------------------------------
     def _covariance(self, cues: list[_Cue], R_cm: np.ndarray, extra_info: np.ndarray | None = None) -> np.ndarray:
