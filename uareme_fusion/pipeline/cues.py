@@ -13,7 +13,8 @@ import numpy as np
 from ..errors import ConfigError, InputError
 from ..lines.detect import LineSegments, SegmentDetector
 from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
-from ..solver.focal import FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal
+from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
+                            unknown_centre_floor)
 from ..solver.joint import JointSolver
 from ..types import Frame, NormalMap, VisualRotation
 
@@ -71,19 +72,16 @@ class CueSolver:
             visual, focal = solve_with_focal(self.solver, normal_map, segments, R_init, self.focal_config, t=frame.t)
             if focal.source == "estimated":
                 self._focal_px.append(focal.f_px)
-            if focal.source == "estimated" and len(self._focal_px) < 3:
-                self.focal = focal
-                return visual
             if len(self._focal_px) >= 3:
                 self.focal = stream_focal(self._focal_px, segments.height, segments.width)
-            elif self.focal is None or self.focal.source == "assumed":
+            elif focal.source == "estimated" or self.focal is None or self.focal.source == "assumed":
                 self.focal = focal
                 return visual
-            return solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t=frame.t)
         if self.focal is None:
             h, w = (segments.height, segments.width) if segments is not None else normal_map.normals.shape[:2]
             self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
-        return solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t=frame.t)
+        visual = solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t=frame.t)
+        return unknown_centre_floor(visual, self.focal, self.focal_config, self.solver)
 
 
 def stream_focal(focal_px: list[float], height: int, width: int) -> FocalEstimate:

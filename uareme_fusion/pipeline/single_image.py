@@ -26,7 +26,7 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K, check_K
 from ..overlay.compose import draw_overlay
 from ..overlay.horizon import horizon_line
 from ..rotations import quat_xyzw
-from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal
+from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal, unknown_centre_floor
 from ..solver.joint import JointSolver
 from ..solver.manhattan import up_candidate
 from ..types import Frame, NormalMap, VisualRotation
@@ -125,6 +125,8 @@ class ImageAnalyser:
                 K = self.K if self.K is not None else assumed_K(h, w, self.focal_config.assumed_fov_deg)
                 visual = solve_given_K(self.solver, normal_map, segments, K)
                 focal = FocalEstimate(K, "given" if self.K is not None else "assumed", width=w)
+                if self.K is None:
+                    visual = unknown_centre_floor(visual, focal, self.focal_config, self.solver)
             else:
                 visual, focal = solve_with_focal(self.solver, normal_map, segments, config=self.focal_config)
         except InputError:

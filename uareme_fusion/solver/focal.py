@@ -36,6 +36,10 @@ class FocalConfig:
     max_relative_std: float = 0.1
     """Above this std(f)/f the estimate is not trusted and the assumed field of view is used."""
     assumed_fov_deg: float = DEFAULT_FOV_DEG
+    principal_point_std_fraction: float = 0.02
+    """Without intrinsics the principal point is taken at the image centre; real cameras put it this
+    far off (std, fraction of the width: ICSL's is 6 px from the centre of 640): the rotation gets an
+    isotropic floor of (this * width / f)^2 rad^2 (`unknown_centre_floor`)."""
     endpoint_noise_px: float = 1.5
     """Segment end point noise (full-resolution pixels) behind `pixel_consistency`."""
 
@@ -84,8 +88,21 @@ def solve_given_K(solver: JointSolver, normal_map: NormalMap | None, segments: L
 
 def solve_with_focal(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments, R_init=None,
                      config: FocalConfig | None = None, t: float | None = None) -> tuple[VisualRotation, FocalEstimate]:
-    """Rotation and focal length together (see the module docstring); `segments` sets the image size."""
+    """Rotation and focal length together (see the module docstring); `segments` sets the image size.
+    The rotation's covariance includes `unknown_centre_floor`."""
     cfg = config or FocalConfig()
+    visual, focal = _solve_with_focal(solver, normal_map, segments, R_init, cfg, t)
+    return unknown_centre_floor(visual, focal, cfg, solver), focal
+
+
+def unknown_centre_floor(visual: VisualRotation, focal: FocalEstimate, config: FocalConfig,
+                         solver: JointSolver) -> VisualRotation:
+    """`visual` with (principal_point_std_fraction * width / f)^2 added to each variance (capped)."""
+    std_rad = config.principal_point_std_fraction * focal.width / focal.f_px
+    return _replace_cov(visual, solver, visual.cov + std_rad**2 * np.eye(3))
+
+
+def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t) -> tuple[VisualRotation, FocalEstimate]:
     h, w = segments.height, segments.width
     K_assumed = assumed_K(h, w, cfg.assumed_fov_deg)
     reference = solve_given_K(solver, normal_map, segments, K_assumed, R_init, t)
