@@ -82,11 +82,11 @@ class MemoryProbe:
         pass
 
 
-def throughput(seconds: float = 10.0, normals: str = "learned") -> dict:
+def throughput(seconds: float = 10.0, normals: str = "learned", cues: str = "normals,lines") -> dict:
     """fps and per-stage ms over a rendered room walk at 640x480 (30 fps, 200 Hz IMU)."""
     source = ReplaySource("room", seconds)
     with tempfile.TemporaryDirectory() as tmp:
-        summary = run_source(source, Path(tmp), RunConfig(normals=normals, mekf_preset="handheld"))
+        summary = run_source(source, Path(tmp), RunConfig(normals=normals, mekf_preset="handheld", cues=cues))
     pipeline_ms = {k: v for k, v in summary["timing_ms"].items() if k not in ("source", "total")}
     pipeline_total = sum(pipeline_ms.values())
     return {"frames": summary["frames"], "timing_ms": pipeline_ms, "pipeline_ms": pipeline_total,
@@ -118,6 +118,9 @@ def run(seconds: float = 10.0, memory_minutes: float = 10.0, normals: str = "lea
     print(f"pipeline, 640x480 input, {normals} normals, mekf + 200 Hz IMU, {tp['frames']} frames:")
     print(f"  ms per frame: {stages}; total {tp['pipeline_ms']:.1f} ms")
     print(f"  {tp['fps']:.1f} fps (goal >= 15: ratio {tp['fps'] / 15:.2f})")
+    result["throughput_normals_only"] = alone = throughput(seconds, normals, cues="normals")
+    print(f"  normals only (--cues normals): {alone['fps']:.1f} fps, solver {alone['timing_ms']['solver']:.1f} ms; "
+          f"the line cue costs {tp['timing_ms']['solver'] - alone['timing_ms']['solver']:.1f} ms per frame")
     if memory_minutes > 0:
         result["memory"] = mem = memory(memory_minutes, normals)
         print(f"memory over a {mem['stream_minutes']:g}-minute stream ({mem['frames']} frames, "
