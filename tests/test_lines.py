@@ -190,3 +190,35 @@ def test_image_command_takes_a_folder_and_prints_one_json_per_image(tmp_path):
         assert d["focal_source"] in ("estimated", "assumed") and len(d["horizon"]) == 3
         assert math.hypot(*d["horizon"][:2]) == pytest.approx(1.0)
         assert d["cues"]["normals"] == {"present": False} and d["cues"]["lines"]["present"]
+
+
+def test_stream_focal_is_the_median_of_the_frames():
+    from uareme_fusion.pipeline.cues import stream_focal
+
+    focal = stream_focal([500.0, 510.0, 490.0, 900.0, 505.0], H, W)
+    assert focal.f_px == 505.0 and focal.source == "estimated"
+    assert 0 < focal.std_px < 20  # the outlier does not widen it
+    assert focal.K[0, 2] == (W - 1) / 2 and focal.K[1, 2] == (H - 1) / 2
+
+
+def test_lines_only_pipeline_on_drawn_segments(tmp_path):
+    """A stream with no normal estimator: the line cue alone gives the visual rotations."""
+    from uareme_fusion.backends.single import SingleFrame
+    from uareme_fusion.pipeline.cues import CueSolver
+    from uareme_fusion.pipeline.runner import Pipeline
+    from uareme_fusion.types import Frame
+
+    import cv2
+
+    K = assumed_K(H, W, 60.0)
+    R_true = exp_so3([0.05, 0.1, 0.0])
+    seg = manhattan_segments(R_true, K, W, H, noise_px=0.0, rng=np.random.default_rng(9))
+    img = np.full((H, W, 3), 30, np.uint8)
+    for (x1, y1), (x2, y2) in seg.endpoints_px:
+        cv2.line(img, (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2))), (230, 230, 230), 2)
+    pipe = Pipeline(None, SingleFrame(), cues=CueSolver(lines=True))
+    results = [pipe.process_frame(Frame(0.1 * i, rgb=img, K=K, index=i)) for i in range(3)]
+    for r in results:
+        assert r.normal_map is None and r.visual is not None and r.visual.cues["lines"]["share"] == 1.0
+        assert _error_and_nees(r.visual, R_true)[0] < 1.0
+        np.testing.assert_array_equal(r.K, K)
