@@ -15,6 +15,7 @@ view and `source` says so.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -162,8 +163,7 @@ def _rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, f_p
 
 
 def _replace_cov(visual: VisualRotation, solver: JointSolver, cov: np.ndarray) -> VisualRotation:
-    import dataclasses
-
+    """`visual` with the covariance `cov` (symmetrised, eigenvalues clipped to [0, the solver's cap])."""
     val, vec = np.linalg.eigh(0.5 * (cov + cov.T))
     val = np.minimum(np.maximum(val, 0.0), solver.config.max_variance_rad2)
     return dataclasses.replace(visual, cov=(vec * val) @ vec.T)

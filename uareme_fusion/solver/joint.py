@@ -6,7 +6,10 @@ its information per unit cost, a_c = n_c / (s_c E_c*): n_c its effective number 
 measurements, E_c* its residual at the solution, s_c a constant fitted so that NEES averages about 3
 (the normals' s_c and n_c are the normal-only solver's). Then Hess J = sum_c a_c H_c is the inverse
 covariance of the right perturbation delta in `R_cm_true = R_cm @ Exp(delta)` (rad^2), and each
-cue's share of the information is trace(a_c H_c) / trace(Hess J). The residuals are not known
+cue's share of the information is trace(a_c H_c) / trace(Hess J). For the lines, H_L in the
+covariance is a Gauss-Newton form that sees nothing of rotations the segments cannot tell
+(`lines.line_information`), and it is discounted when few segments fit the frame better than
+random ones would (clutter: `LineCueConfig.clutter_power`). The residuals are not known
 before the solve, so J is solved twice: with the residuals of the best global candidate (or of
 `R_init`), then with those of the first solution.
 
@@ -17,7 +20,7 @@ normals-only `ManhattanSolver` (same figures).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,6 +34,10 @@ from .manhattan import (R_CM_UPRIGHT, RANDOM_NORMALS_COST, ManhattanSolver, Solv
 from .levenberg import levenberg_marquardt_so3
 from .moments import normal_moments
 from .quartic import gradient_hessian, normalised_cost
+
+
+_NORMALS_MIN_COST = 1e-6
+"""Floor on E_N* in a_N: an exact synthetic normal map does not get infinite weight."""
 
 
 @dataclass(frozen=True)
@@ -53,40 +60,80 @@ class LineCueConfig:
     """f0: the inlier fraction the solver reaches on segments in random directions (synthetic)."""
 
 
-@dataclass
 class _Cue:
-    name: str
-    moments: object
-    n_effective: float
-    scale: float
-    min_cost: float
-    random_cost: float
-    clutter_power: float
-    random_inlier_fraction: float = 0.0
-    alpha: float = 1.0
-    discount: float = 1.0
-    """Applied to the information only (a cluttered cue still steers the solve, but claims less)."""
-    info: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    """One cue's part of J: its cost E_c, derivatives, weight a_c and information a_c q H_c."""
+
+    name = ""
+    random_cost = 1.0
+    """E_c of a rotation unrelated to the measurements (for `quality`)."""
+
+    def __init__(self, moments, n_effective: float, scale: float, min_cost: float):
+        self.moments, self.n_effective, self.scale, self.min_cost = moments, n_effective, scale, min_cost
+        self.alpha = 1.0
+        self.discount = 1.0
+        """Applied to the information only (a cluttered cue still steers the solve, but claims less)."""
+        self.info = np.zeros((3, 3))
 
     def cost(self, R):
-        if self.name == "normals":
-            return np.clip(normalised_cost(self.moments.G, self.moments.total_weight, R), 0.0, 1.0)
-        return normalised_line_cost(self.moments, R)
+        raise NotImplementedError
 
     def derivatives(self, R) -> tuple[float, np.ndarray, np.ndarray]:
-        if self.name == "normals":
-            g, h = gradient_hessian(self.moments.tensor(), self.moments.total_weight, R)
-            return float(self.cost(R)), g, h
-        return line_cost_gradient_hessian(self.moments, R)
+        raise NotImplementedError
+
+    def information_hessian(self, R) -> np.ndarray:
+        """The H_c of the covariance (the cost's Hessian unless a cue says otherwise)."""
+        return self.derivatives(R)[2]
 
     def set_alpha(self, R) -> None:
-        """a_c = n_c / (s_c max(E*, floor)), and the clutter discount q^power, at the rotation R."""
-        residual = float(self.cost(R))
-        self.alpha = self.n_effective / (self.scale * max(residual, self.min_cost))
-        if self.name == "lines":
-            f0 = self.random_inlier_fraction
-            q = float(np.clip((inlier_fraction(self.moments, R) - f0) / (1.0 - f0), 0.0, 1.0))
-            self.discount = q**self.clutter_power
+        """a_c = n_c / (s_c max(E*, floor)) at the rotation R."""
+        self.alpha = self.n_effective / (self.scale * max(float(self.cost(R)), self.min_cost))
+
+    def summary(self) -> dict:
+        raise NotImplementedError
+
+
+class _NormalCue(_Cue):
+    name = "normals"
+    random_cost = RANDOM_NORMALS_COST
+
+    def cost(self, R):
+        return np.clip(normalised_cost(self.moments.G, self.moments.total_weight, R), 0.0, 1.0)
+
+    def derivatives(self, R):
+        g, h = gradient_hessian(self.moments.tensor(), self.moments.total_weight, R)
+        return float(self.cost(R)), g, h
+
+    def summary(self) -> dict:
+        return {"valid_pixels": self.moments.n_valid}
+
+
+class _LineCue(_Cue):
+    name = "lines"
+    random_cost = RANDOM_LINES_COST
+
+    def __init__(self, moments: LineMoments, config: LineCueConfig):
+        super().__init__(moments, min(moments.n_effective, config.independent_segments), config.covariance_scale,
+                         config.min_cost)
+        self.config = config
+
+    def cost(self, R):
+        return normalised_line_cost(self.moments, R)
+
+    def derivatives(self, R):
+        return line_cost_gradient_hessian(self.moments, R)
+
+    def information_hessian(self, R) -> np.ndarray:
+        return line_information(self.moments, R)
+
+    def set_alpha(self, R) -> None:
+        """As for any cue, plus the clutter discount q^power (`LineCueConfig.clutter_power`)."""
+        super().set_alpha(R)
+        f0 = self.config.random_inlier_fraction
+        q = float(np.clip((inlier_fraction(self.moments, R) - f0) / (1.0 - f0), 0.0, 1.0))
+        self.discount = q**self.config.clutter_power
+
+    def summary(self) -> dict:
+        return {"segments": self.moments.n_segments, "effective_segments": self.moments.n_effective}
 
 
 class JointSolver:
@@ -96,8 +143,6 @@ class JointSolver:
         self.normal_solver = ManhattanSolver(config)
         self.config = self.normal_solver.config
         self.line_config = line_config or LineCueConfig()
-        self.last_alphas: dict[str, float] = {}
-        """The cue weights a_c of the last joint solve."""
 
     def line_cue_present(self, lines: LineMoments | None) -> bool:
         return lines is not None and lines.n_effective >= self.line_config.min_effective_segments
@@ -112,7 +157,7 @@ class JointSolver:
                 raise InputError("No visual cue in this frame: no normal map and too few line segments")
             return self.normal_solver.solve(normal_map, R_init)
         t0 = time.perf_counter()
-        cues = [self._line_cue(lines)]
+        cues: list[_Cue] = [_LineCue(lines, self.line_config)]
         if normal_map is not None:
             normal_cue = self._normal_cue(normal_map)
             if normal_cue is not None:
@@ -120,7 +165,6 @@ class JointSolver:
         t1 = time.perf_counter()
         R_cm, iterations, converged = self._solve_cues(cues, R_init)
         cov = self._covariance(cues, R_cm)
-        self.last_alphas = {c.name: c.alpha for c in cues}
         t2 = time.perf_counter()
         return self._result(cues, R_cm, cov, iterations, converged, t, {"moments": 1e3 * (t1 - t0),
                                                                          "optimise": 1e3 * (t2 - t1)})
@@ -133,12 +177,7 @@ class JointSolver:
         n_pixels = int(np.prod(np.shape(normal_map.normals)[:-1]))
         regions = normal_map.independent_regions or self.config.independent_regions
         n_eff = max(min(float(moments.n_valid), regions * moments.n_valid / max(n_pixels, 1)), 1.0)
-        return _Cue("normals", moments, n_eff, self.config.covariance_scale, 1e-6, RANDOM_NORMALS_COST, 0.0)
-
-    def _line_cue(self, lines: LineMoments) -> _Cue:
-        lc = self.line_config
-        return _Cue("lines", lines, min(lines.n_effective, lc.independent_segments), lc.covariance_scale,
-                    lc.min_cost, RANDOM_LINES_COST, lc.clutter_power, lc.random_inlier_fraction)
+        return _NormalCue(moments, n_eff, self.config.covariance_scale, _NORMALS_MIN_COST)
 
     # --- optimisation -----------------------------------------------------------------------------
     def _solve_cues(self, cues: list[_Cue], R_init) -> tuple[np.ndarray, int, bool]:
@@ -167,14 +206,6 @@ class JointSolver:
             R_cm, _ = nearest_symmetric(R_cm, R_CM_UPRIGHT)
         return R_cm, iterations + its, converged
 
-    def cost_with_weights(self, alphas: dict, normal_map: NormalMap | None, lines: LineMoments | None,
-                          R_cm: np.ndarray) -> float:
-        """J(R) with given cue weights {name: a_c} (the focal-length profile keeps them fixed)."""
-        cues = [self._line_cue(lines)] if self.line_cue_present(lines) else []
-        if normal_map is not None and "normals" in alphas:
-            cues.append(self._normal_cue(normal_map))
-        return float(sum(alphas.get(c.name, 0.0) * c.cost(R_cm) for c in cues if c is not None))
-
     def joint_cost(self, cues: list[_Cue], R) -> float:
         return float(sum(c.alpha * c.cost(R) for c in cues))
 
@@ -194,33 +225,26 @@ class JointSolver:
                                        self.config.max_iterations, self.config.step_tolerance_rad)
 
     # --- covariance -------------------------------------------------------------------------------
-    def _covariance(self, cues: list[_Cue], R_cm: np.ndarray, extra_info: np.ndarray | None = None) -> np.ndarray:
+    def _covariance(self, cues: list[_Cue], R_cm: np.ndarray) -> np.ndarray:
         """(sum_c a_c H_c)^-1 with each H_c made positive semi-definite, plus the floor, capped.
 
         The normals' H_c is their cost's Hessian (as the normal-only solver); the lines' is the
         Gauss-Newton form of `line_information`, which gives nothing about directions they cannot see."""
         for c in cues:
-            h = line_information(c.moments, R_cm) if c.name == "lines" else c.derivatives(R_cm)[2]
+            h = c.information_hessian(R_cm)
             val, vec = np.linalg.eigh(0.5 * (h + h.T))
             c.info = (vec * (c.alpha * c.discount * np.maximum(val, 0.0))) @ vec.T
-        info = sum(c.info for c in cues)
-        if extra_info is not None:
-            info = info + extra_info
-        return information_to_covariance(info, self.config)
+        return information_to_covariance(sum(c.info for c in cues), self.config)
 
     def _result(self, cues, R_cm, cov, iterations, converged, t, timing_ms) -> VisualRotation:
         total = sum(float(np.trace(c.info)) for c in cues)
         summary = {}
         for c in cues:
-            entry = {"share": float(np.trace(c.info)) / total if total > 0 else 0.0, "cost": float(c.cost(R_cm))}
-            if c.name == "lines":
-                entry.update(segments=c.moments.n_segments, effective_segments=c.moments.n_effective)
-            else:
-                entry.update(valid_pixels=c.moments.n_valid)
-            summary[c.name] = entry
+            summary[c.name] = {"share": float(np.trace(c.info)) / total if total > 0 else 0.0,
+                               "cost": float(c.cost(R_cm)), **c.summary()}
         main = cues[0]
         cost = float(main.cost(R_cm))
-        normals = next((c for c in cues if c.name == "normals"), None)
+        normals = next((c for c in cues if isinstance(c, _NormalCue)), None)
         return VisualRotation(
             R_cm=R_cm, cov=cov, cost=cost, iterations=iterations,
             n_valid=normals.moments.n_valid if normals else 0,
