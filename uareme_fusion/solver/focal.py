@@ -5,7 +5,8 @@ K^-1). With the principal point at the image centre and square pixels, for each 
 spanning `FocalConfig.hfov_range_deg` we solve R jointly (normals and lines, `joint.py`) and score
 how many segments point at a vanishing point of R_f, in pixels (`pixel_consistency`): the angle
 cost E_L itself cannot compare focal lengths, since every plane tends to contain the optical axis
-as f grows. A parabola through the best grid point and its neighbours in log f gives f, and
+as f grows. Both ends of the range are degenerate, so the highest interior peak is taken
+(`best_interior_peak`). A parabola through it and its neighbours in log f gives f, and
 var(log f) from its curvature, taking -n log S as the negative log-likelihood (n effective
 segments). The rotation's covariance then absorbs the focal uncertainty: cov_R += var(log f) s s^T,
 s = d delta / d log f of the solved rotation. When the profile has no interior maximum, or std(f)/f
@@ -117,9 +118,8 @@ def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t) -> tuple[Vis
         v = solve_given_K(solver, normal_map, segments, K, None, t)
         rotations.append(v.R_cm)
         profile.append(pixel_consistency(segments, K, v.R_cm, cfg.endpoint_noise_px))
-    profile = np.array(profile)
-    i = int(np.argmax(profile))
-    if i == 0 or i == len(profile) - 1:
+    i = best_interior_peak(np.array(profile))
+    if i is None:
         return reference, FocalEstimate(K_assumed, "assumed", width=w)
     step = log_f[1] - log_f[0]
     y0, y1, y2 = profile[i - 1: i + 2]
@@ -137,6 +137,17 @@ def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t) -> tuple[Vis
     slope = _rotation_slope(solver, normal_map, segments, f, visual.R_cm, t)
     visual = _replace_cov(visual, solver, visual.cov + std_log_f**2 * np.outer(slope, slope))
     return visual, FocalEstimate(K, "estimated", std_px=f * std_log_f, width=w)
+
+
+def best_interior_peak(profile: np.ndarray) -> int | None:
+    """Index of the highest local maximum strictly inside the grid, None when there is none.
+
+    Both ends of the range are degenerate for any segment set (as f -> inf every plane contains
+    the optical axis; as f -> 0 every plane normal tends to it), so a profile still rising at an
+    end says nothing about f; a peak inside the range does."""
+    inner = np.arange(1, len(profile) - 1)
+    peaks = inner[(profile[inner] >= profile[inner - 1]) & (profile[inner] >= profile[inner + 1])]
+    return None if len(peaks) == 0 else int(peaks[np.argmax(profile[peaks])])
 
 
 def pixel_consistency(segments: LineSegments, K: np.ndarray, R_cm: np.ndarray, noise_px: float) -> float:
