@@ -99,7 +99,10 @@ def solve_with_focal(solver: JointSolver, normal_map: NormalMap | None, segments
 
 def unknown_centre_floor(visual: VisualRotation, focal: FocalEstimate, config: FocalConfig,
                          solver: JointSolver) -> VisualRotation:
-    """`visual` with (principal_point_std_fraction * width / f)^2 added to each variance (capped)."""
+    """`visual` with (principal_point_std_fraction * width / f)^2 added to each variance (capped), when
+    segments took part; the normals use no intrinsics, so a normals-only rotation is returned as it is."""
+    if "lines" not in visual.cues:
+        return visual
     std_rad = config.principal_point_std_fraction * focal.width / focal.f_px
     return _replace_cov(visual, solver, visual.cov + std_rad**2 * np.eye(3))
 
