@@ -62,6 +62,8 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
     pipeline = build_pipeline(source, cfg, sinks)
     stats = pipeline.run(source, max_frames=cfg.max_frames, on_result=on_result)
     summary = summary_document(stats, cfg, command, source)
+    if pipeline.cues is not None and pipeline.cues.focal is not None:  # K given, estimated or assumed
+        summary["intrinsics"] = pipeline.cues.focal.as_dict()
     if log is not None:
         summary.update(evaluation(log, truth, gravity_aware=source.info.has_imu and cfg.backend in
                                   GRAVITY_AWARE_BACKENDS))
