@@ -22,7 +22,7 @@ from uareme_fusion.io.paths import read_pipe_text
 from uareme_fusion.pipeline.single_image import ANALYSIS_MAX_PIXELS, read_rgb
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.solver.manhattan import solve_manhattan
-from test_safe_outputs import REPO, _env, cli, error_lines  # pytest puts tests/ on sys.path
+from test_safe_outputs import _env, cli, error_lines  # pytest puts tests/ on sys.path
 
 BILLION_LAUGHS = "a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
     f"{c}: &{c} [{', '.join([f'*{p}'] * 9)}]\n" for p, c in zip("abcdefgh", "bcdefghi"))

@@ -171,6 +171,9 @@ OPTION_CASES = [
     ("normals_model_missing", ["W/clip.avi", "--normals", "W/nope.pt"], "nope.pt: model file not found"),
     ("normals_model_corrupt", ["W/clip.avi", "--normals", "W/model.pt"], "model.pt"),
     ("normals_folder_without_maps", ["W/clip.avi", "--normals", "W/no_normals"], "no normal maps"),
+    ("cues_unknown", ["W/sim4", "--cues", "normals,edges"],
+     r"--cues 'normals,edges': expected a comma-separated selection of normals, lines"),
+    ("cues_empty", ["W/sim4", "--cues", ","], "expected a comma-separated selection of normals, lines"),
     ("preset_unknown", ["W/sim4", "--preset", "rocket"], "rocket"),
     ("preset_missing_yaml", ["W/sim4", "--preset", "W/nope.yaml"], "nope.yaml"),
     ("max_frames_zero", ["W/sim4", "--max-frames", "0"], "max_frames"),
@@ -272,7 +275,7 @@ def test_horizon_and_ground_bad_options(world, tmp_path, case, args, message):
 
 IMAGE_CASES = [
     ("missing_file", ["W/nope.png"], "nope.png"),
-    ("folder", ["W/images"], "images"),
+    ("folder_without_images", ["W/no_normals"], "no_normals: no images"),
     ("zero_bytes", ["W/zero.png"], "zero.png: empty file"),
     ("text_file", ["W/text.png"], "text.png: not a readable image"),
     ("huge_header", ["W/huge.png"], "40000 x 40000 pixels"),
@@ -347,6 +350,7 @@ BENCH_CASES = [
     ("soak_noise_above_90", ["soak", "--normals-noise-deg", "120"], "Invalid value for '--normals-noise-deg'"),
     ("pipeline_seconds_zero", ["pipeline", "--seconds", "0"], "Invalid value for '--seconds'"),
     ("pipeline_memory_negative", ["pipeline", "--memory-minutes", "-1"], "Invalid value for '--memory-minutes'"),
+    ("horizon_without_data", ["horizon", "--data", "/nonexistent"], "--data /nonexistent: no eurasian_cities/ folder"),
 ]
 
 

@@ -39,7 +39,7 @@ from .errors import InputError
 from .metrics import JUMP_DEG, attitude_errors, jump_counts
 from .sim.normal_maps import manhattan_normal_map
 from .solver import solve_manhattan
-from .types import Estimate, Status, VisualRotation
+from .types import Status
 
 BACKEND_NAMES = ("single", "smoother", "smoother-gyro", "mekf")
 

@@ -77,6 +77,9 @@ class VisualRotation:
     converged: bool = True
     t: float = float("nan")
     timing_ms: dict = field(default_factory=dict)
+    cues: dict = field(default_factory=dict)
+    """Per visual cue ("normals", "lines") that took part: its share of the information (trace of
+    its information matrix over the total), cost and count. Empty for the normals-only solver."""
 
     def symmetric_to(self, R_cm_ref: np.ndarray) -> "VisualRotation":
         """The same measurement expressed with the Manhattan labelling nearest `R_cm_ref`.

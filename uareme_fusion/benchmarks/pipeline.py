@@ -107,7 +107,7 @@ def busy_neighbour():
 
 
 def throughput(seconds: float = 10.0, normals: str = "learned", threads: int | None = None,
-               source: Source | None = None) -> dict:
+               source: Source | None = None, cues: str = "normals,lines") -> dict:
     """fps and per-stage ms over a rendered room walk at 640x480 (30 fps, 200 Hz IMU)."""
     source = source or ReplaySource("room", seconds)
     cfg = RunConfig(normals=normals, mekf_preset="handheld", **({} if threads is None else {"threads": threads}))
@@ -157,6 +157,9 @@ def run(seconds: float = 10.0, memory_minutes: float = 10.0, normals: str = "lea
     print(f"  beside one busy process: {busy['fps']:.1f} fps, {result['busy_ratio']:.2f}x of alone "
           f"(goal >= {BUSY_GOAL_RATIO}: ratio {result['busy_ratio'] / BUSY_GOAL_RATIO:.2f}); "
           f"normals {busy['timing_ms'].get('normals', float('nan')):.1f} ms")
+    result["throughput_normals_only"] = alone = throughput(seconds, normals, threads, source, cues="normals")
+    print(f"  normals only (--cues normals): {alone['fps']:.1f} fps, solver {alone['timing_ms']['solver']:.1f} ms; "
+          f"the line cue costs {tp['timing_ms']['solver'] - alone['timing_ms']['solver']:.1f} ms per frame")
     if memory_minutes > 0:
         result["memory"] = mem = memory(memory_minutes, normals)
         print(f"memory over a {mem['stream_minutes']:g}-minute stream ({mem['frames']} frames, "

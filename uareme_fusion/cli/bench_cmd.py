@@ -3,7 +3,9 @@
 - `solver`: the single-frame solver's stages (one core), medians and p90;
 - `pipeline`: end-to-end fps and per-stage ms at 640x480, and memory over a long stream (issue 7);
 - `soak`: one simulated hour through the full pipeline: RSS growth, state sizes, accuracy (issue 8);
-- `broad`: BROAD IMU trials with default options beside imu_only, vehicle and vqf 6D (issue 14).
+- `broad`: BROAD IMU trials with default options beside imu_only, vehicle and vqf 6D (issue 14);
+- `horizon`: RGB-only accuracy on real data (ECD horizon AUC, ICSL and ICL-NUIM rotations and focal
+  lengths) beside goals and baselines (issue 12).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import typer
 
 from .app import app, fail
 
-BENCHMARKS = ("solver", "pipeline", "soak", "broad")
+BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon")
 
 
 @app.command()
@@ -32,10 +34,13 @@ def bench(
     normals_noise_deg: float = typer.Option(2.0, "--normals-noise-deg", min=0.0, max=90.0,
                                             help="soak: angular noise on the simulator's normals, deg."),
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
-    data: Path = typer.Option(Path("../shared/data/broad_subset"), "--data",
-                              help="broad: folder of BROAD .hdf5 trials (needs the bench extra for vqf)."),
+    data: Path = typer.Option(None, "--data", help="broad: folder of BROAD .hdf5 trials (default "
+                              "../shared/data/broad_subset; needs the bench extra for vqf); horizon: the "
+                              "development data folder (default ../shared/data)."),
     threads: int = typer.Option(None, "--threads", min=1, max=256,
                                 help="pipeline: torch CPU threads of the learned normals (default 1)."),
+    cues: str = typer.Option("normals,lines", "--cues", help="horizon: visual cues (normals, lines or both)."),
+    ecd_limit: int = typer.Option(None, "--ecd-limit", min=1, help="horizon: score only the first N ECD images."),
     json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
 ) -> None:
     """Time a benchmark on this machine and print its figures against the goals."""
@@ -54,7 +59,14 @@ def bench(
     elif what == "broad":
         from ..benchmarks import broad
 
-        results = broad.run(data)
+        results = broad.run(data or Path("../shared/data/broad_subset"))
+    elif what == "horizon":
+        from ..benchmarks import horizon
+
+        data = data or Path("../shared/data")
+        if not (data / "eurasian_cities").is_dir():
+            raise fail(f"--data {data}: no eurasian_cities/ folder there (see shared/data/README.md)")
+        results = horizon.run(data, cues, ecd_limit)
     else:
         from ..benchmarks import soak
 

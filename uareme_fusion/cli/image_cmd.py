@@ -1,10 +1,11 @@
-"""`uareme-fusion image IMAGE [--json] [--out PNG]`: one image in, rotation, covariance, up and an overlay out."""
+"""`uareme-fusion image IMAGE... [--json] [--out PNG|DIR]`: images in; rotation, covariance, up, focal
+length, horizon and an overlay out (the model is loaded once)."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import numpy as np
 import typer
@@ -12,43 +13,59 @@ import typer
 from ..drivers.intrinsics import parse_intrinsics
 from ..errors import InputError
 from ..io.safe_files import refuse_input_as_output, write_image_atomic
+from ..pipeline.cues import DEFAULT_CUES
 from ..pipeline.session import make_output_folder
-from ..pipeline.single_image import analyse_image, image_overlay
+from ..pipeline.single_image import ImageAnalyser, image_overlay, image_paths
 from .app import app
 from .run_cmd import _o
 
 
 @app.command("image")
 def image_command(
-    image: Path = typer.Argument(..., help="A PNG/JPEG image of a man-made scene."),
-    json_out: bool = typer.Option(False, "--json", help="Print the result as JSON."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Write the overlay (horizon, axes, normal panes) here."),
+    image: List[Path] = typer.Argument(..., help="PNG/JPEG images of man-made scenes, or folders of them."),
+    json_out: bool = typer.Option(False, "--json", help="Print one JSON object per image, one per line."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Overlay image (one input) or folder (several)."),
     normals: str = typer.Option("learned", "--normals", help="learned or a model file (.pt)."),
-    fov_deg: float = typer.Option(60.0, "--fov-deg", help="Assumed horizontal field of view for drawing, degrees."),
+    cues: str = typer.Option(DEFAULT_CUES, "--cues", help="Visual cues: normals, lines or both (comma-separated)."),
+    fov_deg: float = typer.Option(60.0, "--fov-deg",
+                                  help="Horizontal field of view assumed when the scene cannot tell the focal length."),
     intrinsics: Optional[str] = _o["intrinsics"],
 ) -> None:
-    """Manhattan rotation, its covariance and the up vector of one image, with an optional overlay."""
+    """Manhattan rotation, covariance, up vector, focal length and horizon of images, with optional overlays."""
     if not 1.0 < fov_deg < 179.0:  # also refuses NaN
         raise InputError(f"--fov-deg must be between 1 and 179 degrees, got {fov_deg}")
-    if out is not None and out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+    paths = image_paths(image)
+    several = len(paths) > 1
+    if out is not None and not several and out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise InputError(f"{out}: the overlay is an image; use a .png or .jpg name")
     camera = parse_intrinsics(intrinsics) if intrinsics is not None else None
     if out is not None:
-        refuse_input_as_output(out, [image])
-    result = analyse_image(image, normals, camera=camera)
-    if out is not None:
-        overlay = image_overlay(result, fov_deg=fov_deg)
-        make_output_folder(out.parent)
-        write_image_atomic(out, overlay[..., ::-1])
-    doc = result.as_dict()
-    if json_out:
-        typer.echo(json.dumps(doc, indent=2))
-        return
+        refuse_input_as_output(out, paths)
+    analyser = ImageAnalyser(normals, cues, camera=camera, assumed_fov_deg=fov_deg)
+    for path in paths:
+        result = analyser.analyse(path)
+        if out is not None:
+            target = make_output_folder(out) / f"{path.stem}.png" if several else out
+            make_output_folder(target.parent)
+            write_image_atomic(target, image_overlay(result)[..., ::-1])
+        doc = result.as_dict()
+        if json_out:
+            typer.echo(json.dumps(doc))
+            continue
+        _print_text(result, doc)
+
+
+def _print_text(result, doc: dict) -> None:
     np.set_printoptions(precision=4, suppress=True)
-    typer.echo(f"{image}: quality {result.visual.quality:.2f}, {result.visual.n_valid} valid pixels")
-    typer.echo(f"R_cm (Manhattan axes as columns, camera frame):\n{result.visual.R_cm}")
+    v = result.visual
+    typer.echo(f"{result.path}: quality {v.quality:.2f}, {v.n_valid} valid pixels, "
+               f"{doc['cues']['lines'].get('segments', 0)} line segments")
+    typer.echo(f"R_cm (Manhattan axes as columns, camera frame):\n{v.R_cm}")
     typer.echo(f"std (deg) about x, y, z: {np.round(doc['std_deg'], 3)}")
     typer.echo(f"up in the camera frame: {np.round(result.up_c, 4)}")
-    typer.echo(f"normals {doc['timing_ms']['normals']:.1f} ms, solver {doc['timing_ms']['solver']:.1f} ms")
-    if out is not None:
-        typer.echo(f"wrote {out}")
+    f_std = f" +- {doc['f_std_px']:.1f}" if doc["f_std_px"] is not None else ""
+    typer.echo(f"focal length {doc['f_px']:.1f}{f_std} px ({doc['focal_source']}), HFOV {doc['hfov_deg']:.1f} deg")
+    typer.echo(f"horizon a x + b y + c = 0: {np.round(doc['horizon'], 4)}")
+    shares = ", ".join(f"{k} {e['share']:.2f}" for k, e in doc["cues"].items() if e.get("present"))
+    typer.echo(f"information share: {shares}")
+    typer.echo(", ".join(f"{k} {t:.1f} ms" for k, t in doc["timing_ms"].items()))

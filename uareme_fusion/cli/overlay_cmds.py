@@ -30,6 +30,7 @@ def horizon_command(
     intrinsics: Optional[str] = _o["intrinsics"],
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
+    cues: Optional[str] = _o["cues"],
     panes: bool = typer.Option(False, "--panes", help="Add panes of normals and confidence beside each frame."),
     fov_deg: Optional[float] = typer.Option(None, "--fov-deg",
                                             help="Assumed horizontal field of view when K is unknown (default 60)."),
@@ -38,7 +39,7 @@ def horizon_command(
     """Draw the horizon and the Manhattan axes on every frame of a video."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
-                     imu_time_offset_s=imu_time_offset_s, assumed_fov_deg=fov_deg)
+                     imu_time_offset_s=imu_time_offset_s, assumed_fov_deg=fov_deg, cues=cues)
     if out.suffix.lower() not in VIDEO_CODECS:
         raise InputError(f"--out {out}: unsupported video extension; use one of {', '.join(VIDEO_CODECS)}")
     refuse_input_as_output(out, [source, imu])
@@ -65,6 +66,7 @@ def ground_command(
     intrinsics: Optional[str] = _o["intrinsics"],
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
+    cues: Optional[str] = _o["cues"],
     video: bool = typer.Option(False, "--video", help="Write the overlays as OUT/ground.mp4 instead of images."),
     threshold_deg: Optional[float] = typer.Option(None, "--threshold-deg",
                                                   help="Ground when the normal is within this angle of up (15)."),
@@ -73,7 +75,7 @@ def ground_command(
     """Segment the ground: pixels whose normal is within a threshold of the estimated up vector."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
-                     imu_time_offset_s=imu_time_offset_s, ground_threshold_deg=threshold_deg)
+                     imu_time_offset_s=imu_time_offset_s, ground_threshold_deg=threshold_deg, cues=cues)
 
     def sinks(src, out_dir, cfg):
         needs_frames(src, "ground")

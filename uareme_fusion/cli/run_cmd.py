@@ -136,6 +136,7 @@ def _options():
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
         offline=typer.Option(None, "--offline", help="A recorded IMU-only file: smooth it forward and backward "
                              "(more accurate than the streaming filter)."),
+        cues=typer.Option(None, "--cues", help="Visual cues: normals, lines or both (comma-separated; default both)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
                                                      "(replay it later with 'run FOLDER')."),
         threads=typer.Option(None, "--threads", min=1, max=256,
@@ -169,11 +170,12 @@ def run_command(
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
     record: Optional[Path] = _o["record"], rerun: Optional[Path] = _o["rerun"], force: bool = _o["force"],
     intrinsics: Optional[str] = _o["intrinsics"], offline: Optional[bool] = _o["offline"],
+    cues: Optional[str] = _o["cues"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
-                     imu_time_offset_s=imu_time_offset_s, offline=offline)
+                     imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record,
             extra_sinks_factory=rerun_sinks(rerun), force=force)
 
@@ -188,6 +190,7 @@ def eval_command(
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"], rerun: Optional[Path] = _o["rerun"],
     intrinsics: Optional[str] = _o["intrinsics"], offline: Optional[bool] = _o["offline"],
+    cues: Optional[str] = _o["cues"],
     gt: Optional[Path] = typer.Option(None, "--gt", help="Ground-truth trajectory (TUM 'timestamp tx ty tz qx qy qz "
                                                          "qw', or EuRoC gt0/data.csv) in place of the source's own."),
     gt_time_offset_s: float = typer.Option(0.0, "--gt-time-offset-s",
@@ -196,6 +199,6 @@ def eval_command(
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
-                     imu_time_offset_s=imu_time_offset_s, offline=offline)
+                     imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues)
     execute(source, out, cfg, imu, fps, evaluate=True, command="eval", extra_sinks_factory=rerun_sinks(rerun),
             gt=gt, gt_time_offset_s=gt_time_offset_s, force=force)

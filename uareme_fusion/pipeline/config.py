@@ -64,3 +64,12 @@ class RunConfig(BaseModel):
             except ConfigError as exc:  # "imu_rotation 'x': why" -> "why" (the key and value are named by pydantic)
                 raise ValueError(str(exc).split(": ", 1)[-1]) from None
         return value
+    cues: str = "normals,lines"
+    """Visual cues of the joint solver: normals, lines, or both (comma-separated); see pipeline/cues.py."""
+
+    @field_validator("cues")
+    @classmethod
+    def _known_cues(cls, value: str) -> str:
+        from .cues import parse_cues
+
+        return ",".join(parse_cues(value))

@@ -35,8 +35,8 @@ def estimate_R_cm(result: FrameResult) -> np.ndarray | None:
 
 def overlay_image(result: FrameResult, fov_deg: float, panes: bool) -> np.ndarray:
     """The frame with horizon and Manhattan axes drawn (and normal/confidence panes when `panes`)."""
-    image = draw_overlay(result.frame.rgb, result.estimate.up_c, estimate_R_cm(result), result.frame.K, fov_deg)
-    return side_by_side(image, result.normal_map) if panes else image
+    image = draw_overlay(result.frame.rgb, result.estimate.up_c, estimate_R_cm(result), result.K, fov_deg)
+    return side_by_side(image, result.normal_map) if panes and result.normal_map is not None else image
 
 
 def _frames_in_video(path: Path) -> int:

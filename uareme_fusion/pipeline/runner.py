@@ -14,6 +14,8 @@ from collections import Counter, defaultdict
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ..backends.base import Backend
 from ..drivers.base import ImuBatch, Source
 from ..errors import InputError, OutputError, SourceError
@@ -34,6 +36,8 @@ class FrameResult:
     frame: Frame | None = None
     normal_map: NormalMap | None = None
     visual: VisualRotation | None = None
+    K: np.ndarray | None = None
+    """The intrinsics the visual cues used (given, or estimated from the scene), None if unknown."""
 
 
 class StageTimes:
@@ -103,8 +107,10 @@ class Pipeline:
     and searches globally on the first frame.
     """
 
-    def __init__(self, normals, backend: Backend, sinks: Iterable = ()):
+    def __init__(self, normals, backend: Backend, sinks: Iterable = (), cues=None):
         self.normals, self.backend, self.sinks = normals, backend, list(sinks)
+        self.cues = cues
+        """A `cues.CueSolver` (normals and/or lines); None: the normals-only solver."""
         self._R_cm_prev = None
         self.stats = RunStats(backend=backend.name)
 
@@ -115,14 +121,18 @@ class Pipeline:
         self.stats.imu_samples += len(batch)
         self.stats.times.add("backend", time.perf_counter() - t0)
 
-    def visual_rotation(self, normal_map: NormalMap | None, t_s: float) -> VisualRotation | None:
-        """The solver's rotation for one map, None when there is no map or it has no valid normals."""
-        if normal_map is None:
-            return None
+    def visual_rotation(self, normal_map: NormalMap | None, t_s: float, frame: Frame | None = None) -> VisualRotation | None:
+        """The solver's rotation for one frame, None when it has no usable cue (no valid normals, no lines)."""
         R_init = self.backend.predicted_R_cm(t_s)
-        try:
-            visual = solve_manhattan(normal_map, R_init=R_init if R_init is not None else self._R_cm_prev)
-        except InputError:  # a blank or black frame: no valid normals
+        R_init = R_init if R_init is not None else self._R_cm_prev
+        if self.cues is not None and frame is not None:
+            visual = self.cues.solve(frame, normal_map, R_init)
+        else:
+            try:
+                visual = solve_manhattan(normal_map, R_init=R_init)
+            except InputError:  # a blank or black frame: no valid normals
+                visual = None
+        if visual is None:
             return None
         self._R_cm_prev = visual.R_cm
         return visual
@@ -130,12 +140,12 @@ class Pipeline:
     def process_frame(self, frame: Frame) -> FrameResult:
         times = self.stats.times
         t0 = time.perf_counter()
-        normal_map = self.normals.estimate_frame(frame)
+        normal_map = self.normals.estimate_frame(frame) if self.normals is not None else None
         t1 = time.perf_counter()
-        visual = self.visual_rotation(normal_map, frame.t)
+        visual = self.visual_rotation(normal_map, frame.t, frame)
         t2 = time.perf_counter()
         estimate = self.backend.process_frame(frame.t, visual)
-        if normal_map is None and frame.depth is None:
+        if normal_map is None and frame.depth is None and self.normals is not None and self.normals.name == "depth":
             estimate = dataclasses.replace(estimate, status=estimate.status | Status.DEPTH_MISSING)
             self.stats.frames_without_depth += 1
         t3 = time.perf_counter()
@@ -144,7 +154,9 @@ class Pipeline:
         times.add("backend", t3 - t2)
         self.stats.frames += 1
         self.stats.frames_without_visual += visual is None
-        return self._emit(FrameResult(frame.t, estimate, frame, normal_map, visual))
+        focal = getattr(self.cues, "focal", None)
+        K = focal.K if focal is not None and focal.source != "assumed" else frame.K
+        return self._emit(FrameResult(frame.t, estimate, frame, normal_map, visual, K))
 
     def estimate_now(self, t_s: float) -> FrameResult:
         """An estimate with no image (IMU-only sources)."""

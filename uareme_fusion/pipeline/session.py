@@ -24,6 +24,7 @@ from ..metrics import attitude_errors, error_summary
 from ..rotations import align_constant
 from ..types import Status
 from .config import RunConfig
+from .cues import CueSolver, parse_cues
 from .imu_rotation_check import ImuRotationCheck
 from .runner import Pipeline, RunStats
 from . import stop_signals
@@ -67,9 +68,12 @@ def make_output_folder(out_dir: str | Path) -> Path:
 
 
 def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipeline:
-    normals = None
+    normals, cues = None, None
     if source.info.has_frames:
-        normals = CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
+        chosen = parse_cues(cfg.cues)
+        if "normals" in chosen:
+            normals = CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
+        cues = CueSolver(lines="lines" in chosen, assumed_fov_deg=cfg.assumed_fov_deg)
     backend = make_backend(cfg, source.info)
     if cfg.offline:
         from ..backends.mekf_offline import offline_backend
@@ -77,7 +81,7 @@ def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipe
         if cfg.backend != "mekf":
             raise InputError(f"--offline smooths with the mekf backend, not {cfg.backend}")
         backend = offline_backend(backend.config, source)
-    return Pipeline(normals, backend, sinks)
+    return Pipeline(normals, backend, sinks, cues)
 
 
 def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False, extra_sinks: Iterable = (),
@@ -99,6 +103,8 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
                          on_result=on_result)
     with stop_signals.writing():  # a signal now waits until summary.json is complete
         summary = summary_document(stats, cfg, command, source)
+        if pipeline.cues is not None and pipeline.cues.focal is not None:  # K given, estimated or assumed
+            summary["intrinsics"] = pipeline.cues.focal.as_dict()
         for sink in extra_sinks:
             summary.update(getattr(sink, "summary", dict)())
         if check is not None:

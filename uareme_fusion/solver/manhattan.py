@@ -14,18 +14,14 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
-from ..rotations import exp_so3, manhattan_symmetries, nearest_symmetric
+from ..rotations import nearest_symmetric
 from ..types import NormalMap, VisualRotation
+from .levenberg import levenberg_marquardt_so3
 from .moments import NormalMoments, normal_moments
 from .quartic import gradient_hessian, normalised_cost
 
 RANDOM_NORMALS_COST = 0.4
 """Expected normalised cost of isotropic random normals: 1 - 3 E[c^4] = 1 - 3/5."""
-
-# Levenberg-Marquardt damping of the normalised cost's Hessian (dimensionless, O(1) at a minimum).
-_DAMPING_START = 1e-6
-_DAMPING_MIN = 1e-9
-_DAMPING_GIVE_UP = 1e8
 
 R_CM_UPRIGHT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """Labelling used when there is no prior: m's x is nearest camera right, m's z nearest image up
@@ -126,32 +122,9 @@ class ManhattanSolver:
 
     def _refine(self, moments: NormalMoments, R0: np.ndarray) -> tuple[np.ndarray, int, float, bool]:
         """Levenberg-Marquardt on SO(3) with right increments; each iteration is O(1) in pixels."""
-        cfg = self.config
         G, W, T = moments.G, moments.total_weight, moments.tensor()
-        R = R0
-        cost = float(normalised_cost(G, W, R))
-        damping = _DAMPING_START
-        iterations = 0
-        while iterations < cfg.max_iterations:
-            iterations += 1
-            grad, hess = gradient_hessian(T, W, R)
-            eig_min = np.linalg.eigvalsh(hess)[0]
-            # Levenberg-Marquardt: a shift that makes the model convex, grown while steps fail.
-            mu = max(damping, _DAMPING_MIN - eig_min)
-            step = np.linalg.solve(hess + mu * np.eye(3), -grad)
-            R_new = R @ exp_so3(step)
-            if np.linalg.norm(step) < cfg.step_tolerance_rad:
-                # Converged: below this the cost change is under double precision anyway.
-                return R_new, iterations, float(normalised_cost(G, W, R_new)), True
-            cost_new = float(normalised_cost(G, W, R_new))
-            if cost_new <= cost:
-                R, cost = R_new, cost_new
-                damping = max(damping / 4.0, _DAMPING_MIN)
-            else:
-                damping = mu * 8.0
-                if damping > _DAMPING_GIVE_UP:
-                    break
-        return R, iterations, cost, False
+        return levenberg_marquardt_so3(lambda R: normalised_cost(G, W, R), lambda R: gradient_hessian(T, W, R),
+                                       R0, self.config.max_iterations, self.config.step_tolerance_rad)
 
     def _covariance(self, moments: NormalMoments, R_cm: np.ndarray, cost: float, n_pixels: int,
                     independent_regions: float) -> np.ndarray:

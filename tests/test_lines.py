@@ -1,0 +1,224 @@
+"""The line cue: sextic moments, joint solve with normals, focal length, degeneracy, clutter, real data."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uareme_fusion.errors import ConfigError
+from uareme_fusion.lines.detect import detect_segments
+from uareme_fusion.overlay.camera import assumed_K
+from uareme_fusion.pipeline.cues import parse_cues
+from uareme_fusion.rotations import exp_so3, log_so3, nearest_symmetric
+from uareme_fusion.sim.line_segments import manhattan_segments
+from uareme_fusion.solver import solve_manhattan
+from uareme_fusion.solver.focal import segment_moments, solve_with_focal
+from uareme_fusion.solver.joint import JointSolver
+from uareme_fusion.solver.lines import interpretation_planes, line_cost_gradient_hessian, line_moments
+from uareme_fusion.types import NormalMap
+
+W, H = 640, 480
+
+
+def _error_and_nees(visual, R_true):
+    R, P = nearest_symmetric(visual.R_cm, R_true)
+    d = log_so3(R.T @ R_true)
+    return math.degrees(np.linalg.norm(d)), float(d @ np.linalg.solve(P.T @ visual.cov @ P, d))
+
+
+def test_moment_form_matches_brute_force_cost_gradient_and_hessian():
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(40, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    w = rng.random(40)
+    m = line_moments(p, w)
+    R = exp_so3(rng.normal(size=3))
+
+    def brute(R):
+        return float((w * np.prod((p @ R) ** 2, axis=1)).sum() / w.sum())
+
+    cost, grad, hess = line_cost_gradient_hessian(m, R)
+    h = 1e-5
+    E = np.eye(3)
+    grad_fd = [(brute(R @ exp_so3(h * e)) - brute(R @ exp_so3(-h * e))) / (2 * h) for e in E]
+    h = 1e-4
+    hess_fd = [[(brute(R @ exp_so3(h * (a + b))) - brute(R @ exp_so3(h * (a - b))) - brute(R @ exp_so3(h * (b - a)))
+                 + brute(R @ exp_so3(-h * (a + b)))) / (4 * h * h) for b in E] for a in E]
+    assert cost == pytest.approx(brute(R), rel=1e-9)
+    np.testing.assert_allclose(grad, grad_fd, atol=1e-9)
+    np.testing.assert_allclose(hess, hess_fd, atol=1e-6)
+
+
+def test_noiseless_segments_give_the_exact_rotation():
+    K = assumed_K(H, W, 70.0)
+    R_true = exp_so3([0.3, -0.4, 0.2])
+    seg = manhattan_segments(R_true, K, W, H, noise_px=0.0, rng=np.random.default_rng(1))
+    planes, ok = interpretation_planes(seg.endpoints_px, K)
+    visual = JointSolver().solve(None, line_moments(planes[ok], seg.weights[ok]))
+    err, _ = _error_and_nees(visual, R_true)
+    assert err < 0.01
+    assert visual.cues["lines"]["share"] == 1.0 and "normals" not in visual.cues
+
+
+def test_noisy_segments_have_calibrated_covariance():
+    K = assumed_K(H, W, 70.0)
+    rng = np.random.default_rng(2)
+    nees = []
+    for _ in range(20):
+        R_true = exp_so3(rng.normal(size=3) * 0.5)
+        seg = manhattan_segments(R_true, K, W, H, noise_px=1.0, rng=rng)
+        planes, ok = interpretation_planes(seg.endpoints_px, K)
+        nees.append(_error_and_nees(JointSolver().solve(None, line_moments(planes[ok], seg.weights[ok])), R_true)[1])
+    assert 1.0 < np.mean(nees) < 6.0
+
+
+@pytest.mark.parametrize("per_axis, clutter", [((0, 0, 40), 0), ((0, 0, 0), 80), ((5, 5, 5), 60)],
+                         ids=["parallel_only", "clutter_only", "mostly_clutter"])
+def test_degenerate_and_cluttered_views_report_large_covariance(per_axis, clutter):
+    K = assumed_K(H, W, 70.0)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        R_true = exp_so3(rng.normal(size=3) * 0.5)
+        seg = manhattan_segments(R_true, K, W, H, per_axis=per_axis, clutter=clutter, noise_px=1.0, rng=rng)
+        visual = JointSolver().solve(None, segment_moments(seg, K))
+        std_deg = np.degrees(np.sqrt(np.linalg.eigvalsh(visual.cov)))
+        assert np.all(np.isfinite(visual.cov)) and np.all(np.isfinite(visual.R_cm))
+        assert std_deg.max() > 3.0  # some direction is (honestly) poorly known
+        err, nees = _error_and_nees(visual, R_true)
+        assert nees < 30.0 or err < 3.0  # never confidently wrong
+
+
+@pytest.mark.parametrize("hfov_deg", [45.0, 75.0, 90.0])
+def test_focal_length_from_segments_along_three_axes(hfov_deg):
+    K = assumed_K(H, W, hfov_deg)
+    R_true = exp_so3([0.2, 0.5, -0.1])
+    seg = manhattan_segments(R_true, K, W, H, noise_px=1.0, rng=np.random.default_rng(4))
+    visual, focal = solve_with_focal(JointSolver(), None, seg)
+    assert focal.source == "estimated"
+    assert abs(focal.hfov_deg - hfov_deg) / hfov_deg < 0.05
+    assert abs(focal.f_px - K[0, 0]) < 3 * focal.std_px + 0.02 * K[0, 0]
+    assert _error_and_nees(visual, R_true)[0] < 1.5
+
+
+def test_parallel_lines_cannot_tell_the_focal_length():
+    K = assumed_K(H, W, 70.0)
+    seg = manhattan_segments(exp_so3([0.1, 0.2, 0.0]), K, W, H, per_axis=(0, 40, 0), rng=np.random.default_rng(5))
+    _, focal = solve_with_focal(JointSolver(), None, seg)
+    assert focal.source == "assumed" and focal.hfov_deg == pytest.approx(60.0)
+
+
+def _normal_map(R_cm, rng, n=2000):
+    axes = R_cm[:, rng.integers(0, 3, n)].T * rng.choice([-1, 1], (n, 1))
+    noisy = axes + rng.normal(scale=0.05, size=axes.shape)
+    return NormalMap(noisy.reshape(40, 50, 3), np.full((40, 50), 10.0))
+
+
+def test_without_lines_the_joint_solver_is_the_normal_solver():
+    rng = np.random.default_rng(6)
+    nm = _normal_map(exp_so3([0.1, 0.2, 0.3]), rng)
+    blank = np.full((H, W, 3), 128, np.uint8)
+    seg = detect_segments(blank)
+    assert len(seg) == 0
+    joint = JointSolver().solve(nm, None)
+    alone = solve_manhattan(nm)
+    np.testing.assert_array_equal(joint.R_cm, alone.R_cm)
+    np.testing.assert_array_equal(joint.cov, alone.cov)
+
+
+def test_lines_that_disagree_with_normals_give_a_finite_wider_covariance():
+    rng = np.random.default_rng(7)
+    K = assumed_K(H, W, 70.0)
+    R_normals = exp_so3([0.1, 0.2, 0.3])
+    nm = _normal_map(R_normals, rng)
+    agree = segment_moments(manhattan_segments(R_normals, K, W, H, rng=rng), K)
+    disagree = segment_moments(manhattan_segments(R_normals @ exp_so3([0.0, 0.0, 0.35]), K, W, H, rng=rng), K)
+    v_agree = JointSolver().solve(nm, agree)
+    v_disagree = JointSolver().solve(nm, disagree)
+    assert np.all(np.isfinite(v_disagree.cov)) and np.all(np.isfinite(v_disagree.R_cm))
+    assert np.trace(v_disagree.cov) > 3 * np.trace(v_agree.cov)
+    assert set(v_agree.cues) == {"normals", "lines"}
+    assert sum(c["share"] for c in v_agree.cues.values()) == pytest.approx(1.0)
+
+
+def test_cue_selection():
+    assert parse_cues("lines, normals") == ("normals", "lines")
+    with pytest.raises(ConfigError, match="normals, lines"):
+        parse_cues("normals,edges")
+
+
+def test_ecd_subset_horizon_beats_the_level_camera(shared_data):
+    from uareme_fusion.benchmarks.horizon import ecd_scores
+    from uareme_fusion.pipeline.single_image import ImageAnalyser
+
+    scores = ecd_scores(shared_data / "eurasian_cities", ImageAnalyser(cues="lines"), limit=20)
+    assert scores["auc_percent"] > scores["level_auc_percent"] + 15.0
+
+
+def test_icsl_focal_length_within_five_percent(shared_data):
+    from uareme_fusion.benchmarks.horizon import icsl_scores
+    from uareme_fusion.pipeline.single_image import ImageAnalyser
+
+    scores = icsl_scores([shared_data / "icsl_corridor"], ImageAnalyser(cues="lines"), stride=16)
+    assert scores["estimated_focal_fraction"] >= 0.6
+    assert scores["hfov_error_percent"] < 5.0
+
+
+def test_image_command_takes_a_folder_and_prints_one_json_per_image(tmp_path):
+    import json
+
+    import cv2
+    from typer.testing import CliRunner
+
+    from uareme_fusion.cli import app
+
+    K = assumed_K(H, W, 60.0)
+    seg = manhattan_segments(exp_so3([0.05, 0.1, 0.0]), K, W, H, noise_px=0.0, rng=np.random.default_rng(8))
+    img = np.full((H, W, 3), 30, np.uint8)
+    for (x1, y1), (x2, y2) in seg.endpoints_px:
+        cv2.line(img, (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2))), (230, 230, 230), 2)
+    for name in ("a.png", "b.png"):
+        cv2.imwrite(str(tmp_path / name), img)
+    cv2.imwrite(str(tmp_path / "blank.png"), np.full((H, W, 3), 128, np.uint8))
+    result = CliRunner().invoke(app, ["image", str(tmp_path), "--json", "--cues", "lines"])
+    assert result.exit_code != 0 and "blank.png" in result.output  # no cue at all in a blank image
+    (tmp_path / "blank.png").unlink()
+    result = CliRunner().invoke(app, ["image", str(tmp_path), "--json", "--cues", "lines"])
+    docs = [json.loads(line) for line in result.stdout.splitlines()]
+    assert result.exit_code == 0 and [Path(d["image"]).name for d in docs] == ["a.png", "b.png"]
+    for d in docs:
+        assert d["focal_source"] in ("estimated", "assumed") and len(d["horizon"]) == 3
+        assert math.hypot(*d["horizon"][:2]) == pytest.approx(1.0)
+        assert d["cues"]["normals"] == {"present": False} and d["cues"]["lines"]["present"]
+
+
+def test_stream_focal_is_the_median_of_the_frames():
+    from uareme_fusion.pipeline.cues import stream_focal
+
+    focal = stream_focal([500.0, 510.0, 490.0, 900.0, 505.0], H, W)
+    assert focal.f_px == 505.0 and focal.source == "estimated"
+    assert 0 < focal.std_px < 20  # the outlier does not widen it
+    assert focal.K[0, 2] == (W - 1) / 2 and focal.K[1, 2] == (H - 1) / 2
+
+
+def test_lines_only_pipeline_on_drawn_segments(tmp_path):
+    """A stream with no normal estimator: the line cue alone gives the visual rotations."""
+    from uareme_fusion.backends.single import SingleFrame
+    from uareme_fusion.pipeline.cues import CueSolver
+    from uareme_fusion.pipeline.runner import Pipeline
+    from uareme_fusion.types import Frame
+
+    import cv2
+
+    K = assumed_K(H, W, 60.0)
+    R_true = exp_so3([0.05, 0.1, 0.0])
+    seg = manhattan_segments(R_true, K, W, H, noise_px=0.0, rng=np.random.default_rng(9))
+    img = np.full((H, W, 3), 30, np.uint8)
+    for (x1, y1), (x2, y2) in seg.endpoints_px:
+        cv2.line(img, (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2))), (230, 230, 230), 2)
+    pipe = Pipeline(None, SingleFrame(), cues=CueSolver(lines=True))
+    results = [pipe.process_frame(Frame(0.1 * i, rgb=img, K=K, index=i)) for i in range(3)]
+    for r in results:
+        assert r.normal_map is None and r.visual is not None and r.visual.cues["lines"]["share"] == 1.0
+        assert _error_and_nees(r.visual, R_true)[0] < 1.0
+        np.testing.assert_array_equal(r.K, K)

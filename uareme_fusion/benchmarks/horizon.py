@@ -1,0 +1,172 @@
+"""Real-image accuracy of the RGB-only estimate: ECD horizons, ICSL and ICL-NUIM rotations, focal lengths.
+
+Each figure is printed beside its goal (issue 12) and its baseline:
+- ECD (Eurasian Cities, Barinova et al. 2010; academic use): horizon error = the largest vertical
+  distance between the estimated and true horizon lines over the image width, divided by the image
+  height; AUC of its cumulative distribution up to 0.25, in %. Baseline: a level camera (the
+  horizon through the image centre).
+- ICSL corridor (LPVO repository, MIT): the RGB-only rotation against the depth-normal rotation of
+  the same frame (with the published intrinsics), after the 24-fold Manhattan symmetry; NEES of the
+  RGB-only covariance against it; the estimated horizontal FOV against fx = 537.6.
+- ICL-NUIM kt3 (Handa et al. 2014, CC BY 3.0): `eval` ARE and NEES of the RGB-only single-frame
+  backend; the estimated FOV against fx = 481.2.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.io
+from rich.console import Console
+from rich.table import Table
+
+from ..errors import InputError
+from ..io.images import read_image
+from ..rotations import log_so3, nearest_symmetric
+
+AUC_CUTOFF = 0.25
+ICSL_FX, ICSL_FY, ICSL_CX, ICSL_CY = 537.60, 539.03, 316.15, 245.52
+ICL_FX = 481.20
+
+
+def horizon_error(line_est, line_true, height: int, width: int) -> float:
+    """Largest vertical distance between two horizon lines a x + b y + c = 0 over x in [0, width - 1],
+    divided by `height` (the ECD score); inf when a line is vertical or at infinity."""
+    def y_at(line, x):
+        a, b, c = line
+        return -(a * x + c) / b if abs(b) > 1e-12 else np.inf
+    return max(abs(y_at(line_est, x) - y_at(line_true, x)) for x in (0.0, width - 1.0)) / height
+
+
+def auc_percent(errors, cutoff: float = AUC_CUTOFF) -> float:
+    """Area under the cumulative error curve on [0, cutoff], divided by cutoff, in %."""
+    e = np.sort(np.asarray(errors, float))
+    grid = np.linspace(0.0, cutoff, 2001)
+    cdf = np.searchsorted(e, grid, side="right") / len(e)
+    return float(100.0 * np.trapezoid(cdf, grid) / cutoff)
+
+
+def level_horizon(height: int, width: int) -> np.ndarray:
+    """The horizon of a level camera: y = (height - 1) / 2, sky above."""
+    return np.array([0.0, -1.0, (height - 1) / 2.0])
+
+
+def ecd_scores(folder: Path, analyser, limit: int | None = None) -> dict:
+    """Horizon errors of `analyser` (an `ImageAnalyser`) and of the level camera on ECD."""
+    images = sorted(folder.glob("*.jpg"))[:limit]
+    if not images:
+        raise InputError(f"{folder}: no ECD images (NNN.jpg with NNNhor.mat)")
+    est, level, hfov, sources, ms = [], [], [], [], []
+    for path in images:
+        truth = scipy.io.loadmat(path.with_name(path.stem + "hor.mat"))["horizon"].ravel()
+        t0 = time.perf_counter()
+        result = analyser.analyse(path)
+        ms.append(1e3 * (time.perf_counter() - t0))
+        h, w = result.rgb.shape[:2]
+        est.append(horizon_error(result.horizon, truth, h, w))
+        level.append(horizon_error(level_horizon(h, w), truth, h, w))
+        hfov.append(result.focal.hfov_deg)
+        sources.append(result.focal.source)
+    return {"images": len(images), "auc_percent": auc_percent(est), "level_auc_percent": auc_percent(level),
+            "median_error": float(np.median(est)), "errors": est,
+            "estimated_focal_fraction": float(np.mean([s == "estimated" for s in sources])),
+            "median_hfov_deg": float(np.median(hfov)), "ms_per_image": float(np.median(ms))}
+
+
+def icsl_depth_reference(rgb_path: Path):
+    """The depth-normal rotation and its covariance for one ICSL frame (published intrinsics)."""
+    from ..normals.depth import DepthNormals
+    from ..solver import solve_manhattan
+    from ..types import Frame
+
+    K = np.array([[ICSL_FX, 0, ICSL_CX], [0, ICSL_FY, ICSL_CY], [0, 0, 1.0]])
+    depth = read_image(rgb_path.parent.parent / "depth" / rgb_path.name, -1).astype(np.float32) / 1000.0
+    nm = DepthNormals().estimate_frame(Frame(0.0, depth=depth, K=K))
+    return solve_manhattan(nm)
+
+
+def rotation_nees(R_est, cov_est, R_ref) -> tuple[float, float]:
+    """(angle deg, NEES) of `R_est` against `R_ref` after the Manhattan symmetry nearest the reference."""
+    R_sym, P = nearest_symmetric(R_est, R_ref)
+    d = log_so3(R_sym.T @ R_ref)
+    cov = P.T @ cov_est @ P
+    return float(np.degrees(np.linalg.norm(d))), float(d @ np.linalg.solve(cov, d))
+
+
+def icsl_scores(folders: list[Path], analyser, stride: int = 1) -> dict:
+    """RGB-only rotation vs the depth-normal rotation on ICSL frames, and the estimated FOV."""
+    paths = [p for f in folders for p in sorted((f / "rgb").glob("*.png"))][::stride]
+    angles, nees, hfov, sources = [], [], [], []
+    for path in paths:
+        ref = icsl_depth_reference(path)
+        result = analyser.analyse(path)
+        a, n = rotation_nees(result.visual.R_cm, result.visual.cov, ref.R_cm)
+        angles.append(a)
+        nees.append(n)
+        hfov.append(result.focal.hfov_deg)
+        sources.append(result.focal.source)
+    true_hfov = math.degrees(2 * math.atan2(640 / 2, ICSL_FX))
+    est = [h for h, s in zip(hfov, sources) if s == "estimated"]
+    return {"frames": len(paths), "mean_angle_deg": float(np.mean(angles)), "median_angle_deg": float(np.median(angles)),
+            "nees_mean": float(np.mean(nees)), "nees_median": float(np.median(nees)),
+            "true_hfov_deg": true_hfov, "estimated_focal_fraction": len(est) / max(len(paths), 1),
+            "median_hfov_deg": float(np.median(est)) if est else float("nan"),
+            "hfov_error_percent": 100.0 * abs(np.median(est) - true_hfov) / true_hfov if est else float("nan")}
+
+
+def icl_scores(folder: Path, cues: str) -> dict:
+    """`eval` of the RGB-only single-frame backend on ICL-NUIM kt3 (learned normals), and the FOV
+    estimated from the first frames without the dataset's intrinsics."""
+    import tempfile
+
+    from ..pipeline import RunConfig
+    from ..pipeline.session import run_to_folder
+    from .. import pipeline  # noqa: F401
+
+    with tempfile.TemporaryDirectory() as out:
+        summary = run_to_folder(str(folder), out, RunConfig(backend="single", normals="learned", cues=cues),
+                                evaluate=True, command="bench horizon")
+    from ..pipeline.single_image import ImageAnalyser
+
+    analyser = ImageAnalyser(cues=cues)
+    hfov = [analyser.analyse(p).focal for p in sorted((folder / "rgb").glob("*.png"),
+                                                          key=lambda p: int(p.stem))[:100:10]]
+    est = [f.hfov_deg for f in hfov if f.source == "estimated"]
+    true_hfov = math.degrees(2 * math.atan2(640 / 2, ICL_FX))
+    return {"are_mean_deg": summary["are_deg"]["mean"], "nees_mean": summary["nees"]["mean"],
+            "fps": summary["fps"], "true_hfov_deg": true_hfov, "median_hfov_deg": float(np.median(est)) if est else float("nan"),
+            "hfov_error_percent": 100.0 * abs(np.median(est) - true_hfov) / true_hfov if est else float("nan")}
+
+
+def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, icsl_stride: int = 2,
+        console: Console | None = None) -> dict:
+    """Every figure of the module docstring beside its goal and baseline; returns them as a dict."""
+    from ..pipeline.single_image import ImageAnalyser
+
+    console = console or Console()
+    analyser = ImageAnalyser(cues=cues)
+    ecd = ecd_scores(data / "eurasian_cities", analyser, ecd_limit)
+    ecd.pop("errors")
+    icsl = icsl_scores([data / "icsl_corridor", data / "icsl_corridor_more"], analyser, icsl_stride)
+    icl = icl_scores(data / "icl_nuim_office_kt3", cues)
+    table = Table(title=f"bench horizon (cues {cues}; data under {data})")
+    for col in ("figure", "measured", "goal", "baseline"):
+        table.add_column(col)
+    table.add_row(f"ECD horizon AUC@0.25 ({ecd['images']} images)", f"{ecd['auc_percent']:.1f} %", ">= 90 %",
+                  f"level camera {ecd['level_auc_percent']:.1f} %")
+    table.add_row("ECD focal estimated / median HFOV", f"{100 * ecd['estimated_focal_fraction']:.0f} % / "
+                  f"{ecd['median_hfov_deg']:.1f} deg", "", "")
+    table.add_row(f"ICSL RGB vs depth rotation, mean ({icsl['frames']} frames)", f"{icsl['mean_angle_deg']:.2f} deg",
+                  "<= 2 deg", f"median {icsl['median_angle_deg']:.2f} deg")
+    table.add_row("ICSL RGB-only NEES mean", f"{icsl['nees_mean']:.2f}", "<= 6", "")
+    table.add_row("ICSL HFOV error", f"{icsl['hfov_error_percent']:.1f} % ({icsl['median_hfov_deg']:.1f} deg)",
+                  "<= 5 %", f"true {icsl['true_hfov_deg']:.1f} deg")
+    table.add_row("ICL kt3 RGB-only ARE mean", f"{icl['are_mean_deg']:.2f} deg", "<= 1.5 deg", "paper 2.72 deg")
+    table.add_row("ICL kt3 RGB-only NEES mean", f"{icl['nees_mean']:.2f}", "1.5 .. 6", "")
+    table.add_row("ICL kt3 HFOV error", f"{icl['hfov_error_percent']:.1f} % ({icl['median_hfov_deg']:.1f} deg)",
+                  "<= 5 %", f"true {icl['true_hfov_deg']:.1f} deg")
+    console.print(table)
+    return {"ecd": ecd, "icsl": icsl, "icl_kt3": icl}

@@ -1,0 +1,94 @@
+"""Which visual cues a run uses (`--cues normals,lines`), and the per-frame line cue stage.
+
+The line cue detects segments in each frame and hands them, with the frame's intrinsics, to the
+joint solver (`solver/joint.py`). Without intrinsics, the focal length is estimated from the scene
+(`solver/focal.py`) on the first `FOCAL_ATTEMPTS` frames; the stream uses the median of the
+confident per-frame estimates (one camera per stream), and keeps it after those frames.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ConfigError, InputError
+from ..lines.detect import LineSegments, SegmentDetector
+from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
+from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
+                            unknown_centre_floor)
+from ..solver.joint import JointSolver
+from ..types import Frame, NormalMap, VisualRotation
+
+VALID_CUES = ("normals", "lines")
+DEFAULT_CUES = "normals,lines"
+
+
+def parse_cues(spec: str | tuple | list) -> tuple[str, ...]:
+    """`"normals,lines"` -> ("normals", "lines"); an unknown or empty selection is a one-line ConfigError."""
+    names = [s.strip() for s in (spec.split(",") if isinstance(spec, str) else spec)]
+    names = [n for n in names if n]
+    bad = [n for n in names if n not in VALID_CUES]
+    if bad or not names:
+        raise ConfigError(f"--cues {','.join(names) if isinstance(spec, (list, tuple)) else spec!r}: "
+                          f"expected a comma-separated selection of {', '.join(VALID_CUES)}")
+    return tuple(n for n in VALID_CUES if n in names)
+
+
+FOCAL_ATTEMPTS = 30
+"""Frames on which a stream without intrinsics estimates f; afterwards the median is kept."""
+
+
+class CueSolver:
+    """The visual rotation of each frame from its normal map and/or its segments (one joint solve).
+
+    Intrinsics: the frame's K when it has one; otherwise f estimated from the scene on the first
+    frames that tell it (then kept: one camera per stream), the assumed field of view until then.
+    `focal` is the `FocalEstimate` in use.
+    """
+
+    def __init__(self, lines: bool = True, assumed_fov_deg: float = DEFAULT_FOV_DEG,
+                 detector: SegmentDetector | None = None):
+        self.detector = (detector or SegmentDetector()) if lines else None
+        self.solver = JointSolver()
+        self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
+        self.focal: FocalEstimate | None = None
+        self._attempts = 0
+        self._focal_px: list[float] = []
+
+    def solve(self, frame: Frame, normal_map: NormalMap | None, R_init=None) -> VisualRotation | None:
+        """None when neither cue is usable (a blank frame and no normals)."""
+        segments = self.detector.detect(frame.rgb) if self.detector is not None and frame.rgb is not None else None
+        try:
+            return self._solve(frame, normal_map, segments, R_init)
+        except InputError:
+            return None
+
+    def _solve(self, frame: Frame, normal_map, segments: LineSegments | None, R_init) -> VisualRotation:
+        if frame.K is not None:
+            self.focal = FocalEstimate(np.asarray(frame.K, float), "given", width=frame.rgb.shape[1]
+                                       if frame.rgb is not None else 0)
+            return solve_given_K(self.solver, normal_map, segments, frame.K, R_init, t=frame.t)
+        if segments is not None and len(segments) and self._attempts < FOCAL_ATTEMPTS:
+            self._attempts += 1
+            visual, focal = solve_with_focal(self.solver, normal_map, segments, R_init, self.focal_config, t=frame.t)
+            if focal.source == "estimated":
+                self._focal_px.append(focal.f_px)
+            if len(self._focal_px) >= 3:
+                self.focal = stream_focal(self._focal_px, segments.height, segments.width)
+            elif focal.source == "estimated" or self.focal is None or self.focal.source == "assumed":
+                self.focal = focal
+                return visual
+        if self.focal is None:
+            h, w = (segments.height, segments.width) if segments is not None else normal_map.normals.shape[:2]
+            self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
+        visual = solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t=frame.t)
+        return unknown_centre_floor(visual, self.focal, self.focal_config, self.solver)
+
+
+def stream_focal(focal_px: list[float], height: int, width: int) -> FocalEstimate:
+    """The median of per-frame focal estimates, with the standard error of a median (1.25 sigma / sqrt n,
+    sigma from the median absolute deviation)."""
+    f = np.asarray(focal_px, float)
+    median = float(np.median(f))
+    sigma = 1.4826 * float(np.median(np.abs(f - median)))
+    return FocalEstimate(centred_K(median, height, width), "estimated", std_px=1.25 * sigma / np.sqrt(len(f)),
+                         width=width)

@@ -1,0 +1,183 @@
+"""The focal length from the scene: a 1-D profile of the joint Manhattan cost over f.
+
+Segments along two or more Manhattan axes fix f (their vanishing points must be orthogonal through
+K^-1). With the principal point at the image centre and square pixels, for each f on a log grid
+spanning `FocalConfig.hfov_range_deg` we solve R jointly (normals and lines, `joint.py`) and score
+how many segments point at a vanishing point of R_f, in pixels (`pixel_consistency`): the angle
+cost E_L itself cannot compare focal lengths, since every plane tends to contain the optical axis
+as f grows. Both ends of the range are degenerate, so the highest interior peak is taken
+(`best_interior_peak`). A parabola through it and its neighbours in log f gives f, and
+var(log f) from its curvature, taking -n log S as the negative log-likelihood (n effective
+segments). The rotation's covariance then absorbs the focal uncertainty: cov_R += var(log f) s s^T,
+s = d delta / d log f of the solved rotation. When the profile has no interior maximum, or std(f)/f
+exceeds `FocalConfig.max_relative_std`, the scene cannot tell: f comes from the assumed field of
+view and `source` says so.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..lines.detect import LineSegments
+from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
+from ..rotations import log_so3
+from ..types import NormalMap, VisualRotation
+from .joint import JointSolver
+from .lines import LineMoments, interpretation_planes, line_moments
+
+
+@dataclass(frozen=True)
+class FocalConfig:
+    hfov_range_deg: tuple[float, float] = (30.0, 120.0)
+    """Horizontal fields of view searched (degrees over the full image width)."""
+    grid_points: int = 19
+    max_relative_std: float = 0.1
+    """Above this std(f)/f the estimate is not trusted and the assumed field of view is used."""
+    assumed_fov_deg: float = DEFAULT_FOV_DEG
+    principal_point_std_fraction: float = 0.02
+    """Without intrinsics the principal point is taken at the image centre; real cameras put it this
+    far off (std, fraction of the width: ICSL's is 6 px from the centre of 640): the rotation gets an
+    isotropic floor of (this * width / f)^2 rad^2 (`unknown_centre_floor`)."""
+    endpoint_noise_px: float = 1.5
+    """Segment end point noise (full-resolution pixels) behind `pixel_consistency`."""
+
+
+@dataclass(frozen=True)
+class FocalEstimate:
+    """The camera matrix used for one image and where its focal length came from."""
+
+    K: np.ndarray
+    source: str
+    """estimated (from the segments), given (by the user or the dataset) or assumed (a field of view)."""
+    std_px: float = float("nan")
+    """Standard deviation of f in pixels (estimated only)."""
+    width: int = 0
+
+    @property
+    def f_px(self) -> float:
+        return float(self.K[0, 0])
+
+    @property
+    def hfov_deg(self) -> float:
+        return math.degrees(2.0 * math.atan2(self.width / 2.0, self.f_px))
+
+    def as_dict(self) -> dict:
+        return {"K": self.K.tolist(), "hfov_deg": self.hfov_deg, "focal_source": self.source,
+                "f_px": self.f_px, "f_std_px": None if not np.isfinite(self.std_px) else self.std_px}
+
+
+def centred_K(f_px: float, height: int, width: int) -> np.ndarray:
+    """Square pixels, focal `f_px`, principal point at the image centre ((W-1)/2, (H-1)/2)."""
+    return np.array([[f_px, 0.0, (width - 1) / 2.0], [0.0, f_px, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
+def segment_moments(segments: LineSegments, K: np.ndarray) -> LineMoments:
+    """The sixth-order moments of `segments`' interpretation planes under `K`."""
+    planes, ok = interpretation_planes(segments.endpoints_px, K)
+    return line_moments(planes[ok], segments.weights[ok])
+
+
+def solve_given_K(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments | None,
+                  K: np.ndarray, R_init=None, t: float | None = None) -> VisualRotation:
+    """The joint solve with known intrinsics (segments may be None or empty)."""
+    lines = segment_moments(segments, K) if segments is not None and len(segments) else None
+    return solver.solve(normal_map, lines, R_init, t=t)
+
+
+def solve_with_focal(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments, R_init=None,
+                     config: FocalConfig | None = None, t: float | None = None) -> tuple[VisualRotation, FocalEstimate]:
+    """Rotation and focal length together (see the module docstring); `segments` sets the image size.
+    The rotation's covariance includes `unknown_centre_floor`."""
+    cfg = config or FocalConfig()
+    visual, focal = _solve_with_focal(solver, normal_map, segments, R_init, cfg, t)
+    return unknown_centre_floor(visual, focal, cfg, solver), focal
+
+
+def unknown_centre_floor(visual: VisualRotation, focal: FocalEstimate, config: FocalConfig,
+                         solver: JointSolver) -> VisualRotation:
+    """`visual` with (principal_point_std_fraction * width / f)^2 added to each variance (capped), when
+    segments took part; the normals use no intrinsics, so a normals-only rotation is returned as it is."""
+    if "lines" not in visual.cues:
+        return visual
+    std_rad = config.principal_point_std_fraction * focal.width / focal.f_px
+    return _replace_cov(visual, solver, visual.cov + std_rad**2 * np.eye(3))
+
+
+def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t) -> tuple[VisualRotation, FocalEstimate]:
+    h, w = segments.height, segments.width
+    K_assumed = assumed_K(h, w, cfg.assumed_fov_deg)
+    reference = solve_given_K(solver, normal_map, segments, K_assumed, R_init, t)
+    if "lines" not in reference.cues:
+        return reference, FocalEstimate(K_assumed, "assumed", width=w)
+    lo, hi = (w / 2.0 / math.tan(math.radians(a) / 2.0) for a in cfg.hfov_range_deg[::-1])
+    log_f = np.linspace(math.log(lo), math.log(hi), cfg.grid_points)
+    profile, rotations = [], []
+    for lf in log_f:
+        K = centred_K(math.exp(lf), h, w)
+        v = solve_given_K(solver, normal_map, segments, K, None, t)
+        rotations.append(v.R_cm)
+        profile.append(pixel_consistency(segments, K, v.R_cm, cfg.endpoint_noise_px))
+    i = best_interior_peak(np.array(profile))
+    if i is None:
+        return reference, FocalEstimate(K_assumed, "assumed", width=w)
+    step = log_f[1] - log_f[0]
+    y0, y1, y2 = profile[i - 1: i + 2]
+    curvature = -(y0 - 2 * y1 + y2) / step**2
+    if not curvature > 0:
+        return reference, FocalEstimate(K_assumed, "assumed", width=w)
+    lf_best = log_f[i] + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2) * step
+    # -n log(S / S_max) as the negative log-likelihood of log f (n effective segments).
+    std_log_f = 1.0 / math.sqrt(segments.n_effective * curvature / y1)
+    if std_log_f > cfg.max_relative_std:
+        return reference, FocalEstimate(K_assumed, "assumed", width=w)
+    f = math.exp(lf_best)
+    K = centred_K(f, h, w)
+    visual = solve_given_K(solver, normal_map, segments, K, rotations[i], t)
+    slope = _rotation_slope(solver, normal_map, segments, f, visual.R_cm, t)
+    visual = _replace_cov(visual, solver, visual.cov + std_log_f**2 * np.outer(slope, slope))
+    return visual, FocalEstimate(K, "estimated", std_px=f * std_log_f, width=w)
+
+
+def best_interior_peak(profile: np.ndarray) -> int | None:
+    """Index of the highest local maximum strictly inside the grid, None when there is none.
+
+    Both ends of the range are degenerate for any segment set (as f -> inf every plane contains
+    the optical axis; as f -> 0 every plane normal tends to it), so a profile still rising at an
+    end says nothing about f; a peak inside the range does."""
+    inner = np.arange(1, len(profile) - 1)
+    peaks = inner[(profile[inner] >= profile[inner - 1]) & (profile[inner] >= profile[inner + 1])]
+    return None if len(peaks) == 0 else int(peaks[np.argmax(profile[peaks])])
+
+
+def pixel_consistency(segments: LineSegments, K: np.ndarray, R_cm: np.ndarray, noise_px: float) -> float:
+    """S = sum_j w_j exp(-c_j^2 / (2 s_j^2)) / sum_j w_j: how many segments point at a vanishing point of R.
+
+    c_j = min_k |p_j . r_k| and s_j = noise_px / length_j: the plane angle that end point noise of
+    `noise_px` pixels gives a segment of that length, whatever f. The angle cost E_L alone is no
+    measure across f: as f grows every plane tends to contain the optical axis, and E_L -> 0.
+    """
+    planes, ok = interpretation_planes(segments.endpoints_px, K)
+    length = np.linalg.norm(segments.endpoints_px[:, 1] - segments.endpoints_px[:, 0], axis=1)
+    c = np.abs(planes @ R_cm).min(axis=1)
+    s = noise_px / np.maximum(length, 1.0)
+    w = segments.weights * ok
+    return float((w * np.exp(-0.5 * (c / s) ** 2)).sum() / max(w.sum(), 1e-300))
+
+
+def _rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, f_px: float, R_cm, t,
+                    h: float = 0.02) -> np.ndarray:
+    """d delta / d log f: how the solved rotation moves (right perturbation, rad) as f changes."""
+    ends = [solve_given_K(solver, normal_map, segments, centred_K(f_px * math.exp(s * h), segments.height,
+                                                                   segments.width), R_cm, t).R_cm for s in (1, -1)]
+    return log_so3(R_cm.T @ ends[0]) / (2 * h) - log_so3(R_cm.T @ ends[1]) / (2 * h)
+
+
+def _replace_cov(visual: VisualRotation, solver: JointSolver, cov: np.ndarray) -> VisualRotation:
+    """`visual` with the covariance `cov` (symmetrised, eigenvalues clipped to [0, the solver's cap])."""
+    val, vec = np.linalg.eigh(0.5 * (cov + cov.T))
+    val = np.minimum(np.maximum(val, 0.0), solver.config.max_variance_rad2)
+    return dataclasses.replace(visual, cov=(vec * val) @ vec.T)
