@@ -46,7 +46,7 @@ def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipe
         normals = CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
     backend = make_backend(cfg, source.info)
     if cfg.offline:
-        from ..backends.mekf_offline import offline_backend
+        from ..backends.mekf.offline import offline_backend
 
         if cfg.backend != "mekf":
             raise InputError(f"--offline smooths with the mekf backend, not {cfg.backend}")
