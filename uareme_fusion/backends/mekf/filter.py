@@ -51,9 +51,12 @@ class Mekf(Backend):
     >>> t = np.arange(1, 201) / 200.0                    # 1 s of IMU at 200 Hz
     >>> filt.process_imu(t, np.zeros((200, 3)), np.tile([0.0, -9.81, 0.0], (200, 1)))
     >>> R_cm = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])   # camera y down = world -z
-    >>> est = filt.process_frame(1.0, VisualRotation(R_cm, 1e-4 * np.eye(3)))
+    >>> visual = VisualRotation(R_cm, 1e-4 * np.eye(3), cost=0.0, iterations=1, n_valid=1000)
+    >>> est = filt.process_frame(1.0, visual)
     >>> bool(np.allclose(est.R_wc @ [0, -1, 0], [0, 0, 1], atol=1e-6))   # image up is world up
     True
+    >>> est.R_wm is not None, filt.counters["nonfinite_updates"]        # the scene frame is known
+    (True, 0)
     """
 
     name = "mekf"
