@@ -9,9 +9,8 @@ import sys
 import numpy as np
 import pytest
 
+from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels, state
 from uareme_fusion.backends.mekf import compiled as mekf_compiled
-from uareme_fusion.backends.mekf import kernels, state
-from uareme_fusion.backends.mekf import Mekf, MekfConfig
 from uareme_fusion.config import load_config
 from uareme_fusion.rotations import angle_between, exp_so3
 from uareme_fusion.sim.imu import simulate_imu

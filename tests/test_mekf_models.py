@@ -13,6 +13,7 @@ import pytest
 from filterpy.kalman import update as kf_update
 
 from jacobians import fd_jacobian
+
 from uareme_fusion.backends.mekf.accel import AccelPeriod
 from uareme_fusion.backends.mekf.measurements import gravity_model, stack, vertical_model, visual_model
 from uareme_fusion.backends.mekf.measurements import zero_rate_model

@@ -12,8 +12,8 @@ import numpy as np
 
 from ...types import Status
 from . import kernels as K
-from .kernels import KERNEL  # noqa: F401 -- filter imports it from here
 from .accel import PERIOD_TOLERANCE_S, chunk_bounds
+from .kernels import KERNEL
 from .state import ORTHONORMALISE_EVERY
 
 

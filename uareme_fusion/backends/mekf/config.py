@@ -10,6 +10,7 @@ import enum
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+
 class MekfMode(str, enum.Enum):
     """Which inputs the filter uses. `auto`: visual + IMU when IMU samples arrived before the first
     frame, else visual only."""
