@@ -63,7 +63,7 @@ def both(config: MekfConfig):
 
 @needs_numba
 def test_orthonormalisation_period_is_the_reference_one():
-    p = mekf_compiled._parameter_vector(Mekf(MekfConfig()), defer=False)
+    p = mekf_compiled.parameter_vector(Mekf(MekfConfig()), defer=False)
     assert p[kernels.P_ORTHO_EVERY] == state.ORTHONORMALISE_EVERY
 
 

@@ -33,13 +33,15 @@ def _parameters(filt, defer: bool) -> np.ndarray:
         cache = filt._kernel_parameters = {}
         for manhattan in (False, True):
             for deferred in (False, True):
-                p = _parameter_vector(filt, deferred)
+                p = parameter_vector(filt, deferred)
                 p[K.P_MF_INIT] = float(manhattan)
                 cache[manhattan, deferred] = p
     return cache[filt.manhattan_initialised, defer]
 
 
-def _parameter_vector(filt, defer: bool) -> np.ndarray:
+def parameter_vector(filt, defer: bool) -> np.ndarray:
+    """The kernels' parameter vector (`K.P_SIZE`,) for filter `filt`, from its configuration; `defer`:
+    an update due at the end of a batch waits for the frame."""
     cfg = filt.config
     p = np.empty(K.P_SIZE)
     p[K.P_Q_GYRO], p[K.P_Q_BIAS], p[K.P_Q_RATE] = filt.q_gyro, filt.q_bias, filt.q_rate

@@ -26,7 +26,7 @@ import numpy as np
 
 from ... import jit
 from .measurements import gravity_model, zero_rate_model
-from .state import reset_jacobian, skew3
+from .state import orthonormal, reset_jacobian, skew3
 
 # Layout of the float64 state vector `s` that `integrate_batch` reads and updates in place.
 S_T_STATE, S_ACC_TIME, S_ACC_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
@@ -67,11 +67,6 @@ def exp3(phi):
         b = (1.0 - math.cos(theta)) / theta2
     K = skew3(phi)
     return np.eye(3) + a * K + b * (K @ K)
-
-
-def orthonormal3(R):
-    """One Newton step of the polar decomposition (as `state.orthonormal`)."""
-    return 0.5 * R @ (3.0 * np.eye(3) - R.T @ R)
 
 
 def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoid, q_gyro, q_bias, q_rate,
@@ -145,7 +140,7 @@ def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
     R_wc = R_wc @ exp3(dx[0:3])
     s[S_PRODUCTS] += 1
     if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
-        R_wc, R_wm = orthonormal3(R_wc), orthonormal3(R_wm)
+        R_wc, R_wm = orthonormal(R_wc), orthonormal(R_wm)
         s[S_PRODUCTS] = 0
     b_c += dx[3:6]
     if s[S_LP_VALID] > 0:
@@ -243,7 +238,7 @@ def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_su
         R_wc_cur = R_wc_cur @ C_N
         s[S_PRODUCTS] += 1
         if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
-            R_wc_cur, R_wm_cur = orthonormal3(R_wc_cur), orthonormal3(R_wm_cur)
+            R_wc_cur, R_wm_cur = orthonormal(R_wc_cur), orthonormal(R_wm_cur)
             s[S_PRODUCTS] = 0
         last_gyro[:] = gyro[b - 1]
         # Specific force, time-weighted, in the chunk's end frame.
@@ -295,8 +290,8 @@ ACCEL_UPDATE = None
 """`accel_update_in_place` compiled, or None."""
 if jit.available():
     try:
-        _pure = (skew3, reset_jacobian, gravity_model, zero_rate_model, inv3, exp3, orthonormal3, propagate_chunk, accel_measurement, zero_rate_measurement,
-                 kalman_update, accel_and_rest_update)
+        _pure = (skew3, reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3, propagate_chunk,
+                 accel_measurement, zero_rate_measurement, kalman_update, accel_and_rest_update)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = jit.compiled(integrate_batch, cache=True, error_model="numpy")
