@@ -293,6 +293,26 @@ def test_unknown_config_key_is_an_error(tmp_path):
         load_config(path, MekfConfig)
 
 
+def test_auto_mode_resolves_once_at_the_first_input():
+    """`auto`: a frame before any IMU sample fixes visual-only (later IMU is ignored, no bias is
+    reported); IMU first fixes visual + IMU."""
+    R_cm = R_CM_UPRIGHT
+    vis = VisualRotation(R_cm, 1e-4 * np.eye(3), 0.0, 1, 100)
+    t = np.arange(1, 41) / RATE_HZ
+    gyro, accel = np.zeros((t.size, 3)), np.tile([0.0, -9.81, 0.0], (t.size, 1))
+    frame_first = Mekf(MekfConfig())
+    assert frame_first.mode == "auto"
+    frame_first.process_frame(0.0, vis)
+    frame_first.process_imu(t, gyro, accel)
+    est = frame_first.process_frame(t[-1], vis)
+    assert frame_first.mode == "visual_only" and frame_first.counters["imu_ignored"] == t.size
+    assert est.gyro_bias_rad_s is None
+    imu_first = Mekf(MekfConfig())
+    imu_first.process_imu(t, gyro, accel)
+    est = imu_first.process_frame(t[-1], vis)
+    assert imu_first.mode == "visual_imu" and est.gyro_bias_rad_s is not None
+
+
 def test_the_docstring_example_runs():
     import doctest
 
