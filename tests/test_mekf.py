@@ -1,12 +1,13 @@
-"""Unit tests of the multiplicative EKF on hand-made data (no simulator): Jacobians against finite
-differences, noiseless convergence, seeded NEES, symmetry handling, presets."""
+"""Unit tests of the multiplicative EKF on hand-made data (no simulator): noiseless convergence,
+seeded NEES, symmetry handling, the rate-proportional gyro noise, stacked updates, non-finite updates,
+presets. The models' Jacobians are tested in test_mekf_models.py."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from uareme_fusion.backends.mekf import BG, MF, N_STATE, TH, Mekf, MekfConfig, _prefix_products
+from uareme_fusion.backends.mekf import Mekf, MekfConfig
 from uareme_fusion.config import load_config
 from uareme_fusion.errors import ConfigError
 from uareme_fusion.rotations import WORLD_UP, align_yaw, angle_between, exp_so3, log_so3, manhattan_symmetries, nees
@@ -54,80 +55,6 @@ def run_fused(omega_c, duration_s, seed, gyro_noise=2e-4, bias=np.zeros(3), visu
         ests.append(filt.process_frame(t_f, vis))
         truth.append(R_wc[k - 1])
     return ests, np.array(truth), filt
-
-
-# ------------------------------------------------------------------------------------ Jacobians
-def test_prefix_products_match_sequential_products():
-    rng = np.random.default_rng(0)
-    M = exp_so3(rng.normal(size=(11, 3)))
-    C = _prefix_products(M)
-    acc = np.eye(3)
-    for k in range(11):
-        acc = acc @ M[k]
-        np.testing.assert_allclose(C[k], acc, atol=1e-12)
-
-
-def test_propagation_jacobian_matches_finite_differences():
-    """The chunk transition F (attitude and bias columns) against perturbed re-integration."""
-    rng = np.random.default_rng(1)
-    n = 9
-    t = 0.005 * np.arange(1, n + 1)
-    gyro = rng.normal(size=(n, 3))
-    cfg = MekfConfig(gyro_sampling="interval")
-
-    def integrate(R0, b):
-        f = Mekf(cfg)
-        f.initialised, f.t_state, f.R_wc, f.b_c = True, 0.0, R0.copy(), b.copy()
-        f._last_gyro_c = gyro[0]
-        f.P = np.eye(N_STATE) * 1e-6
-        f._integrate_chunk(t, gyro, np.zeros((n, 3)), np.zeros(n, bool))
-        return f
-
-    R0, b0 = exp_so3(rng.normal(size=3)), 0.01 * rng.normal(size=3)
-    nominal = integrate(R0, b0)
-    F_filter = nominal._F.copy()  # the transition the filter just used
-    eps = 1e-6
-    for j, block in ((0, TH), (3, BG)):
-        for i in range(3):
-            d = np.zeros(3)
-            d[i] = eps
-            if block == TH:
-                pert = integrate(R0 @ exp_so3(d), b0)
-            else:
-                pert = integrate(R0, b0 + d)
-            fd = log_so3(nominal.R_wc.T @ pert.R_wc) / eps  # column of d(dtheta_N)/d(state)
-            np.testing.assert_allclose(fd, F_filter[TH, block][:, i], atol=2e-4 if block == BG else 1e-5)
-
-
-def test_visual_measurement_jacobian_matches_finite_differences():
-    rng = np.random.default_rng(2)
-    R_wc, R_wm = exp_so3(rng.normal(size=3)), exp_so3(rng.normal(size=3))
-    h0 = R_wc.T @ R_wm
-    H = np.zeros((3, N_STATE))
-    H[:, TH], H[:, MF] = -h0.T, np.eye(3)  # the model the filter uses
-    eps = 1e-7
-    for block in (TH, MF):
-        for i in range(3):
-            d = np.zeros(3)
-            d[i] = eps
-            Rc = R_wc @ exp_so3(d) if block == TH else R_wc
-            Rm = R_wm @ exp_so3(d) if block == MF else R_wm
-            fd = log_so3(h0.T @ (Rc.T @ Rm)) / eps
-            np.testing.assert_allclose(fd, H[:, block][:, i], atol=1e-6)
-
-
-def test_gravity_direction_jacobian_matches_finite_differences():
-    from uareme_fusion.rotations import skew
-
-    rng = np.random.default_rng(3)
-    R_wc = exp_so3(rng.normal(size=3))
-    h0 = R_wc.T @ WORLD_UP
-    eps = 1e-7
-    for i in range(3):
-        d = np.zeros(3)
-        d[i] = eps
-        fd = ((R_wc @ exp_so3(d)).T @ WORLD_UP - h0) / eps
-        np.testing.assert_allclose(fd, skew(h0)[:, i], atol=1e-6)
 
 
 # ------------------------------------------------------------------------------ convergence, NEES
@@ -278,37 +205,6 @@ def test_long_imu_batch_gets_one_accelerometer_update_per_period():
         assert expected - 2 <= filt.counters["accel_updates"] <= expected + 1, (period, filt.counters)
 
 
-def test_lowpass_bias_sensitivity_matches_finite_differences():
-    """`_acc_lp_J` (how the low-passed accelerometer, carried along by the gyro, depends on the gyro
-    bias) against re-running the same stream with a perturbed bias."""
-    rng = np.random.default_rng(4)
-    t = np.arange(1, 401) / RATE_HZ
-    gyro = 0.5 * rng.normal(size=(t.size, 3))
-    accel = rng.normal(size=(t.size, 3)) + [0.0, -9.81, 0.0]
-    # The model takes each period's own mean as bias-free: short periods against long low-pass stages.
-    cfg = MekfConfig(mode="imu_only", accel_lowpass_tau_s=1.0, accel_update_period_s=0.02)
-
-    def run(b):
-        f = Mekf(cfg)
-        f.initialised, f.t_state, f.b_c, f._last_gyro_c = True, 0.0, b.copy(), gyro[0]
-        f.P = np.eye(N_STATE) * 1e-6
-        f._kalman_update = lambda *rows: None  # keep the nominal state fixed: only the low-pass moves
-        f._queue(f.stream.push(t, gyro, accel))
-        f._queue(f.stream.flush())
-        f._integrate_pending()
-        return f
-
-    b0 = 0.01 * rng.normal(size=3)
-    nominal = run(b0)
-    eps = 1e-6
-    for i in range(3):
-        d = np.zeros(3)
-        d[i] = eps
-        # Were the true bias b0 + d, the low-pass would read lp + J d: that run is the truth.
-        fd = (run(b0 + d)._acc_lp_c - nominal._acc_lp_c) / eps
-        np.testing.assert_allclose(fd, nominal._acc_lp_J[:, :, i], rtol=0.03, atol=0.02)
-
-
 def test_zero_rate_update_learns_every_bias_axis_at_rest():
     """At rest the accelerometer only sees the horizontal bias components; with rest detection the
     mean gyro reading measures all three."""
@@ -331,36 +227,53 @@ def test_zero_rate_update_learns_every_bias_axis_at_rest():
 
 
 def test_rate_proportional_gyro_noise_grows_the_attitude_variance():
-    """`gyro_rate_noise_sqrt_s` adds (this |omega|)^2 per second to each attitude variance."""
+    """`gyro_rate_noise_sqrt_s` adds (this |omega|)^2 per second to each attitude variance (an IMU-only
+    run in free fall: no accelerometer update, so the covariance is the prediction alone)."""
     omega = np.array([0.0, 0.0, 3.0])
     t = np.arange(1, 21) / RATE_HZ
     traces = {}
     for q in (0.0, 0.01):
-        f = Mekf(MekfConfig(gyro_sampling="interval", gyro_rate_noise_sqrt_s=q))
-        f.initialised, f.t_state, f._last_gyro_c = True, 0.0, omega
-        f._integrate_chunk(t, np.tile(omega, (t.size, 1)), np.zeros((t.size, 3)), np.zeros(t.size))
-        traces[q] = np.trace(f.P[TH, TH])
-    assert traces[0.01] - traces[0.0] == pytest.approx(3 * 0.01**2 * 9.0 * t[-1], rel=1e-9)
+        f = Mekf(MekfConfig(mode="imu_only", gyro_sampling="interval", gyro_rate_noise_sqrt_s=q))
+        f.process_imu(t, np.tile(omega, (t.size, 1)), np.zeros((t.size, 3)))
+        f.flush()
+        assert f.counters["accel_updates"] == 0 and f.t_state == t[-1]
+        traces[q] = np.trace(f.estimate().cov)
+    assert traces[0.01] - traces[0.0] == pytest.approx(3 * 0.01**2 * 9.0 * (t[-1] - t[0]), rel=1e-9)
 
 
-def test_accelerometer_update_stacked_into_the_visual_update_matches_sequential_updates():
-    """An accelerometer update due at a frame rides in that frame's visual update: the result equals
-    applying the two updates one after the other (to first order)."""
-    ests, truth, filt = run_fused([0.1, 0.2, -0.1], 2.0, seed=6)
-    rng = np.random.default_rng(7)
-    vis = visual_measurement(truth[-1].T, 1e-4 * np.eye(3), rng)
-    filt._acc_sum_c = 0.1 * (filt.R_wc.T @ (9.81 * WORLD_UP) + np.array([0.05, 0.0, 0.02]))
-    filt._acc_time_s, filt._accel_due = 0.1, True
-    import copy
+@pytest.mark.parametrize("compiled", [True, False])
+def test_accelerometer_update_due_at_a_frame_rides_in_its_visual_update(compiled):
+    """With the accelerometer period equal to the frame period every update falls due at a frame:
+    each frame's visual update takes it (none is left pending, none is applied on its own)."""
+    cfg = MekfConfig(gyro_noise_rad_s_sqrt_hz=2e-4, accel_update_period_s=1.0 / FPS, compiled=compiled)
+    ests, truth, filt = run_fused([0.1, 0.2, -0.1], 2.0, seed=6, config=cfg)
+    assert not filt.accel.due
+    assert filt.counters["accel_updates"] >= len(ests) - 3
+    assert filt.counters["visual_updates"] == len(ests) - 1  # the first frame initialises m
+    err = np.degrees(angle_between(ests[-1].R_wc, truth[-1]))
+    assert err < 1.0
 
-    sequential = copy.deepcopy(filt)
-    sequential._accel_update()
-    sequential._visual_update(vis)
-    filt._visual_update(vis)
-    assert not filt._accel_due
-    assert filt.counters["accel_updates"] == sequential.counters["accel_updates"]
-    assert np.degrees(angle_between(filt.R_wc, sequential.R_wc)) < 1e-4
-    np.testing.assert_allclose(filt.P, sequential.P, rtol=1e-3, atol=1e-12)
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_non_finite_update_is_dropped_counted_and_flagged(compiled):
+    """An absurd accelerometer reading (1e200 m/s^2, finite, so the stream keeps it) makes the update's
+    variance overflow: the update changes nothing, is counted and flags the next estimate."""
+    t = np.arange(1, 101) / RATE_HZ
+    accel = np.tile([0.0, -9.81, 0.0], (t.size, 1))
+    ok = Mekf(MekfConfig(mode="imu_only", compiled=compiled))
+    ok.process_imu(t, np.zeros((t.size, 3)), accel)
+    ok.flush()
+    accel[60:70] = [0.0, -1e200, 0.0]
+    bad = Mekf(MekfConfig(mode="imu_only", compiled=compiled))
+    with np.errstate(over="ignore", invalid="ignore"):
+        bad.process_imu(t, np.zeros((t.size, 3)), accel)
+        bad.flush()
+    assert ok.counters["nonfinite_updates"] == 0
+    assert bad.counters["nonfinite_updates"] == 2
+    est = bad.process_frame(float(t[-1]), None)
+    assert est.status & Status.UPDATE_NONFINITE
+    assert np.isfinite(est.cov).all() and np.isfinite(est.R_wc).all()
+    assert not (bad.process_frame(float(t[-1]) + 0.01, None).status & Status.UPDATE_NONFINITE)
 
 
 # ------------------------------------------------------------------------------------ presets
@@ -378,3 +291,33 @@ def test_unknown_config_key_is_an_error(tmp_path):
     path.write_text("R_ci: [[1, 0, 0], [0, 1, 0], [0, 0, 2]]\n")
     with pytest.raises(ConfigError, match="R_ci"):
         load_config(path, MekfConfig)
+
+
+def test_auto_mode_resolves_once_at_the_first_input():
+    """`auto`: a frame before any IMU sample fixes visual-only (later IMU is ignored, no bias is
+    reported); IMU first fixes visual + IMU."""
+    R_cm = R_CM_UPRIGHT
+    vis = VisualRotation(R_cm, 1e-4 * np.eye(3), 0.0, 1, 100)
+    t = np.arange(1, 41) / RATE_HZ
+    gyro, accel = np.zeros((t.size, 3)), np.tile([0.0, -9.81, 0.0], (t.size, 1))
+    frame_first = Mekf(MekfConfig())
+    assert frame_first.mode == "auto"
+    frame_first.process_frame(0.0, vis)
+    frame_first.process_imu(t, gyro, accel)
+    est = frame_first.process_frame(t[-1], vis)
+    assert frame_first.mode == "visual_only" and frame_first.counters["imu_ignored"] == t.size
+    assert est.gyro_bias_rad_s is None
+    imu_first = Mekf(MekfConfig())
+    imu_first.process_imu(t, gyro, accel)
+    est = imu_first.process_frame(t[-1], vis)
+    assert imu_first.mode == "visual_imu" and est.gyro_bias_rad_s is not None
+
+
+def test_the_docstring_example_runs():
+    import doctest
+
+    tests = doctest.DocTestFinder().find(Mekf, "Mekf", globs={"Mekf": Mekf, "MekfConfig": MekfConfig})
+    runner = doctest.DocTestRunner()
+    for test in tests:
+        runner.run(test)
+    assert tuple(runner.summarize(verbose=False)) == (0, 10)

@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from uareme_fusion.backends import mekf, mekf_compiled
-from uareme_fusion.backends.mekf import Mekf, MekfConfig
+from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels, state
+from uareme_fusion.backends.mekf import compiled as mekf_compiled
 from uareme_fusion.config import load_config
 from uareme_fusion.rotations import angle_between, exp_so3
 from uareme_fusion.sim.imu import simulate_imu
@@ -63,7 +63,8 @@ def both(config: MekfConfig):
 
 @needs_numba
 def test_orthonormalisation_period_is_the_reference_one():
-    assert mekf_compiled._ORTHONORMALISE_EVERY == mekf._ORTHONORMALISE_EVERY
+    p = mekf_compiled.parameter_vector(Mekf(MekfConfig()), defer=False)
+    assert p[kernels.P_ORTHO_EVERY] == state.ORTHONORMALISE_EVERY
 
 
 @needs_numba

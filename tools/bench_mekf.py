@@ -12,7 +12,7 @@ Prints, per scenario, absolute figures:
 - EuRoC V1_02, first 40 s (IMU-only, large gyro bias): tilt RMSE of mekf (online and offline) and
   vqf 6D against the ground truth on the same samples;
 - issue 17 goals beside each figure: BROAD online <= 0.95 x vqf 6D per trial, offline
-  (`mekf_offline.forward_backward_imu`) <= 0.85 x, EuRoC <= 1.0 x; IMU-only library batch
+  (`mekf.offline.forward_backward_imu`) <= 0.85 x, EuRoC <= 1.0 x; IMU-only library batch
   <= 1 us/sample and whole `run` on a BROAD file <= 2 us/sample, with vqf's and imufusion's
   cost on the same samples in the same run; fused 200 Hz IMU at 30 fps <= 3 us per IMU sample;
 - cost: us per IMU sample (IMU-only on BROAD, and amortised in the fused runs) and ms per visual
@@ -37,7 +37,7 @@ from scipy.spatial.transform import Rotation
 
 from uareme_fusion.benchmarks.peers import vqf_6d_R_wi
 from uareme_fusion.backends.mekf import Mekf, MekfConfig
-from uareme_fusion.backends.mekf_offline import forward_backward_imu
+from uareme_fusion.backends.mekf.offline import forward_backward_imu
 from uareme_fusion.backends.single import SingleFrame
 from uareme_fusion.config import load_config
 from uareme_fusion.rotations import align_yaw, are_deg, nees, tilt_error_deg, up_in_camera

@@ -1,6 +1,6 @@
 """Loading YAML presets into pydantic models, with errors that name the file and the key.
 
-Each component owns its pydantic model (e.g. `MekfConfig` in `backends/mekf.py`); this module only
+Each component owns its pydantic model (e.g. `MekfConfig` in `backends/mekf/config.py`); this module only
 reads files. Presets live in `uareme_fusion/configs/` and are found by
 name: `load_config("vehicle", MekfConfig)` or by path: `load_config("my.yaml", MekfConfig)`.
 A key given twice in one mapping is an error (plain YAML loading would keep the last silently), and

@@ -114,6 +114,8 @@ class Status(enum.IntFlag):
     """A smoother optimisation failed; the window restarted from the last good estimate."""
     DEPTH_MISSING = enum.auto()
     """Depth normals were asked for and this frame has no depth map: it used the remaining cues."""
+    UPDATE_NONFINITE = enum.auto()
+    """A filter update gave a non-finite correction or covariance and was dropped."""
 
 
 @dataclass(frozen=True)

@@ -43,11 +43,10 @@ import logging
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, M, X
+from gtsam.symbol_shorthand import M, X
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from ..errors import InputError
-from ..rotations import WORLD_UP, manhattan_symmetries
+from ..rotations import manhattan_symmetries
 from ..types import Estimate, Status, VisualRotation
 from .base import Backend
 
@@ -147,90 +146,84 @@ def label_up_as_z(R_cm: np.ndarray, up_c: np.ndarray) -> np.ndarray:
 class Smoother(Backend):
     """Sliding-window factor-graph smoother over camera attitudes (see module docstring).
 
+    `Smoother(config)` builds the variant that `config.mode` names, once: `PaperSmoother` (the
+    paper's graph) or `GyroSmoother` (gyro-aided, `backends/smoother_gyro.py`); this base holds the
+    window, the optimisation and the failure handling, and the variants the factors they differ in.
     Estimates carry `R_wc` (camera to world) and the smoother's marginal covariance of its right
     perturbation (rad^2); `R_wm` is the identity in paper mode and estimated in gyro mode, where
     `gyro_bias_rad_s` is the bias of the latest frame in the IMU frame (estimated in the camera frame).
     """
 
+    def __new__(cls, config: SmootherConfig | None = None):
+        variant = cls
+        if cls is Smoother:
+            if (config or SmootherConfig()).mode is SmootherMode.GYRO:
+                from .smoother_gyro import GyroSmoother
+
+                variant = GyroSmoother
+            else:
+                variant = PaperSmoother
+        return super().__new__(variant)
+
     def __init__(self, config: SmootherConfig | None = None):
         self.config = config or SmootherConfig()
-        self.name = "smoother" if self.config.mode is SmootherMode.PAPER else "smoother-gyro"
-        self._gyro = self.config.mode is SmootherMode.GYRO
         self._R_ci = np.asarray(self.config.R_ci, dtype=float)
         self._between_noise = gtsam.noiseModel.Isotropic.Sigma(3, self.config.between_sigma_rad)
-        self._pim_params = gtsam.PreintegratedRotationParams()
-        self._pim_params.setGyroscopeCovariance(self.config.gyro_noise_rad_s_sqrt_hz**2 * np.eye(3))
         self._smoother: BatchFixedLagSmoother | None = None
         self._k = -1  # index of the latest frame in the graph
         self._t_frame = float("nan")
         self._last: Estimate | None = None  # last successfully optimised estimate
         self._R_wm = np.eye(3)
         self._bias = np.zeros(3)
-        self._t_imu: float | None = None
         self._dropped_imu = 0
         self._reset_interval()
 
-    # ----------------------------------------------------------------------------- IMU
+    # ----------------------------------------------------------------------------- variant hooks
     def _reset_interval(self) -> None:
-        self._pim = gtsam.PreintegratedAhrsMeasurements(self._pim_params, self._bias)
-        self._accel_c: list[np.ndarray] = []
+        """Start collecting the IMU of the next frame interval (nothing in the paper's graph)."""
 
-    def process_imu(self, t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> None:
-        """Preintegrate gyro samples and collect accelerometer samples (gyro mode; ignored in paper mode).
+    def _predicted_R_wc(self) -> np.ndarray:
+        """`R_wc` (3, 3) predicted at the next frame: the last estimate (paper)."""
+        return self._last.R_wc
 
-        `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3) in the IMU frame, rotated to the camera
-        by `R_ci`. Non-finite or out-of-order samples are dropped and counted (`Status.IMU_DROPPED`).
-        """
-        if not self._gyro:
-            return
-        t_s = np.atleast_1d(np.asarray(t_s, dtype=float)) - self.config.imu_time_offset_s
-        gyro = np.atleast_2d(np.asarray(gyro_rad_s, dtype=float))
-        accel = np.atleast_2d(np.asarray(accel_m_s2, dtype=float))
-        if t_s.ndim != 1 or gyro.shape != (len(t_s), 3) or accel.shape != (len(t_s), 3):
-            raise InputError(
-                f"Expected IMU arrays t_s (N,), gyro_rad_s (N, 3), accel_m_s2 (N, 3), got "
-                f"{t_s.shape}, {gyro.shape}, {accel.shape}"
-            )
-        finite = np.isfinite(t_s) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1)
-        gyro_c, accel_c = gyro @ self._R_ci.T, accel @ self._R_ci.T
-        for t, w_c, a_c, ok in zip(t_s, gyro_c, accel_c, finite):
-            if not ok or (self._t_imu is not None and t <= self._t_imu):
-                self._dropped_imu += 1
-                continue
-            if self._t_imu is not None:
-                self._pim.integrateMeasurement(w_c, t - self._t_imu)
-            self._t_imu = t
-            self._accel_c.append(a_c)
+    def _visual_factor(self, k: int, visual: VisualRotation) -> gtsam.NonlinearFactor:
+        """f^z of paper eq. 7: the single-frame rotation as a robust prior on X(k)."""
+        return gtsam.PriorFactorRot3(X(k), gtsam.Rot3(visual.R_cm.T), self._visual_noise(visual))
 
-    def _gravity_factor(self, key: int) -> gtsam.NonlinearFactor | None:
-        """Paper-free addition: accelerometer up direction since the last frame, noise inflated by motion."""
-        if not self._accel_c:
-            return None
-        accel = np.asarray(self._accel_c)
-        mean = accel.mean(axis=0)
-        norm = np.linalg.norm(mean)
-        if norm < 1e-6:
-            return None
-        spread = np.sqrt(np.mean(np.sum((accel - mean) ** 2, axis=1)))
-        cfg = self.config
-        sigma = cfg.accel_sigma_rad + cfg.accel_inflation_rad_per_m_s2 * (abs(norm - cfg.gravity_m_s2) + spread)
-        noise = _robust(cfg.gravity_huber_k, gtsam.noiseModel.Isotropic.Sigma(2, sigma))
-        # Error: up_w (x) R_wc @ up_c, with up_c the measured specific-force direction.
-        return gtsam.AttitudeFactorRot3(key, gtsam.Unit3(WORLD_UP), noise, gtsam.Unit3(mean / norm))
+    def _add_motion_factors(self, graph, values, stamps, k: int, t_s: float) -> None:
+        """f^s of paper eq. 7: identity between consecutive frames, isotropic sigma."""
+        graph.add(self._smoothness_factor(k))
+
+    def _window_stamps(self, stamps, k: int) -> None:
+        """Timestamps of variables kept in the window besides X(k) (none in the paper's graph)."""
+
+    def _start_priors(self, graph, values, stamps, visual: VisualRotation) -> VisualRotation:
+        """Priors of the first frame besides its visual factor; returns the visual rotation as labelled
+        for it (the paper's: as the solver gave it; the world is that Manhattan frame)."""
+        return visual
+
+    def _restart_priors(self, graph, values, stamps, k: int) -> None:
+        """Priors a restarted window needs besides X(k) (none in the paper's graph)."""
+
+    def _world_and_bias(self, values) -> tuple[np.ndarray, np.ndarray | None]:
+        """`(R_wm (3, 3), gyro bias (3,) rad/s camera frame, or None)` from the optimised values."""
+        return np.eye(3), None
+
+    # ----------------------------------------------------------------------------- shared factors
+    def _visual_noise(self, visual: VisualRotation) -> gtsam.noiseModel.Base:
+        return _robust(self.config.huber_k, gtsam.noiseModel.Gaussian.Covariance(visual_R_wc_covariance(visual)))
+
+    def _smoothness_factor(self, k: int) -> gtsam.NonlinearFactor:
+        return gtsam.BetweenFactorRot3(X(k - 1), X(k), gtsam.Rot3(), self._between_noise)
 
     # ----------------------------------------------------------------------------- frames
     def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
-        """`R_cm` of the latest estimate (paper: it initialises the next frame's solver); in gyro mode
-        propagated by the gyro preintegrated since that frame. None before the first visual rotation."""
+        """`R_cm` (3, 3) of the latest estimate (paper: it initialises the next frame's solver); in
+        gyro mode propagated by the gyro preintegrated since that frame. None before the first visual
+        rotation."""
         if self._last is None:
             return None
         return self._predicted_R_wc().T @ self._R_wm
-
-    def _predicted_R_wc(self) -> np.ndarray:
-        R_wc = self._last.R_wc
-        if self._gyro and self._pim.deltaTij() > 0:
-            R_wc = R_wc @ self._pim.deltaRij().matrix()
-        return R_wc
 
     def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
         """Add frame `t_s` (its visual rotation, or None) to the window, optimise, and return the
@@ -256,8 +249,7 @@ class Smoother(Backend):
             self._add_motion_factors(graph, values, stamps, k, t_s)
             values.insert(X(k), gtsam.Rot3(R_wc_pred))
             stamps[X(k)] = float(k)
-            if self._gyro:
-                stamps[MANHATTAN_KEY] = float(k)  # keep R_wm inside the window
+            self._window_stamps(stamps, k)
             self._optimise(graph, values, stamps)
             self._k, self._t_frame = k, t_s
             est = self._estimate(t_s, status)
@@ -269,32 +261,6 @@ class Smoother(Backend):
         self._last = est
         return est
 
-    def _visual_factor(self, k: int, visual: VisualRotation) -> gtsam.NonlinearFactor:
-        """f^z of paper eq. 7: the single-frame rotation as a robust prior on X(k) (or relative to M)."""
-        R_mc = gtsam.Rot3(visual.R_cm.T)
-        noise = _robust(self.config.huber_k, gtsam.noiseModel.Gaussian.Covariance(visual_R_wc_covariance(visual)))
-        if self._gyro:
-            return gtsam.BetweenFactorRot3(MANHATTAN_KEY, X(k), R_mc, noise)
-        return gtsam.PriorFactorRot3(X(k), R_mc, noise)
-
-    def _add_motion_factors(self, graph, values, stamps, k: int, t_s: float) -> None:
-        """f^s of paper eq. 7 (identity between, isotropic sigma), or gyro preintegration + gravity."""
-        if not self._gyro:
-            graph.add(gtsam.BetweenFactorRot3(X(k - 1), X(k), gtsam.Rot3(), self._between_noise))
-            return
-        if self._pim.deltaTij() > 0:
-            graph.add(gtsam.AHRSFactor(X(k - 1), X(k), B(k - 1), self._pim))
-        else:  # no gyro sample between the frames: fall back to the paper's smoothness factor
-            graph.add(gtsam.BetweenFactorRot3(X(k - 1), X(k), gtsam.Rot3(), self._between_noise))
-        dt = max(t_s - self._t_frame, 1e-3)
-        walk = gtsam.noiseModel.Isotropic.Sigma(3, self.config.gyro_bias_walk_rad_s2_sqrt_hz * np.sqrt(dt))
-        graph.add(gtsam.BetweenFactorVector(B(k - 1), B(k), np.zeros(3), walk))
-        values.insert(B(k), self._bias)
-        stamps[B(k)] = float(k)
-        gravity = self._gravity_factor(X(k))
-        if gravity is not None:
-            graph.add(gravity)
-
     def _new_smoother(self) -> BatchFixedLagSmoother:
         # Timestamps are frame indices; keys older than k - lag are marginalised, so lag = window - 1.
         return BatchFixedLagSmoother(float(self.config.window_frames - 1), gtsam.LevenbergMarquardtParams())
@@ -303,15 +269,7 @@ class Smoother(Backend):
         """First visual rotation: X(0) (and M, B(0) in gyro mode) with their priors."""
         self._smoother = self._new_smoother()
         graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
-        if self._gyro:
-            if self._accel_c:
-                up_c = np.mean(self._accel_c, axis=0)
-                visual = visual.symmetric_to(label_up_as_z(visual.R_cm, up_c / np.linalg.norm(up_c)))
-            self._add_world_priors(graph, values, stamps, 0, np.eye(3), self._bias,
-                                   self.config.gyro_bias_prior_sigma_rad_s**2 * np.eye(3))
-            gravity = self._gravity_factor(X(0))
-            if gravity is not None:
-                graph.add(gravity)
+        visual = self._start_priors(graph, values, stamps, visual)
         graph.add(self._visual_factor(0, visual))
         values.insert(X(0), gtsam.Rot3(self._R_wm @ visual.R_cm.T))
         stamps[X(0)] = 0.0
@@ -321,18 +279,6 @@ class Smoother(Backend):
         self._reset_interval()
         self._last = est
         return est
-
-    def _add_world_priors(self, graph, values, stamps, k: int, R_wm: np.ndarray, bias: np.ndarray,
-                          bias_cov: np.ndarray) -> None:
-        """Gyro mode: R_wm (gauge on yaw, loose tilt) and the gyro bias B(k)."""
-        cfg = self.config
-        sig = [cfg.manhattan_tilt_sigma_rad, cfg.manhattan_tilt_sigma_rad, cfg.world_yaw_sigma_rad]
-        graph.add(gtsam.PriorFactorRot3(MANHATTAN_KEY, gtsam.Rot3(R_wm), gtsam.noiseModel.Diagonal.Sigmas(sig)))
-        graph.add(gtsam.PriorFactorVector(B(k), bias, gtsam.noiseModel.Gaussian.Covariance(bias_cov)))
-        values.insert(MANHATTAN_KEY, gtsam.Rot3(R_wm))
-        values.insert(B(k), bias)
-        stamps[MANHATTAN_KEY] = float(k)
-        stamps[B(k)] = float(k)
 
     def _restart_window(self, t_s: float, k: int, R_wc_pred: np.ndarray, status: Status) -> Estimate:
         """After a failure: a fresh window holding X(k) at the last good estimate (propagated by the
@@ -344,9 +290,7 @@ class Smoother(Backend):
         graph.add(gtsam.PriorFactorRot3(X(k), gtsam.Rot3(R_wc_pred), gtsam.noiseModel.Gaussian.Covariance(cov)))
         values.insert(X(k), gtsam.Rot3(R_wc_pred))
         stamps[X(k)] = float(k)
-        if self._gyro:
-            self._add_world_priors(graph, values, stamps, k, self._R_wm, self._bias,
-                                   self.config.gyro_bias_prior_sigma_rad_s**2 * np.eye(3))
+        self._restart_priors(graph, values, stamps, k)
         try:
             self._smoother.update(graph, values, stamps)
             self._k, self._t_frame = k, t_s
@@ -364,11 +308,7 @@ class Smoother(Backend):
         values = self._smoother.calculateEstimate()
         R_wc = values.atRot3(X(self._k)).matrix()
         cov = gtsam.Marginals(self._smoother.getFactors(), values).marginalCovariance(X(self._k))
-        if self._gyro:
-            R_wm = values.atRot3(MANHATTAN_KEY).matrix()
-            bias = np.asarray(values.atVector(B(self._k)), dtype=float)
-        else:
-            R_wm, bias = np.eye(3), None
+        R_wm, bias = self._world_and_bias(values)
         if not (np.all(np.isfinite(R_wc)) and np.all(np.isfinite(cov)) and np.all(np.isfinite(R_wm))):
             raise OptimiserFailure("non-finite estimate")
         self._R_wm = R_wm
@@ -376,3 +316,9 @@ class Smoother(Backend):
             self._bias = bias
         return Estimate(t_s, R_wc, 0.5 * (cov + cov.T), status, R_wm=R_wm.copy(),
                         gyro_bias_rad_s=None if bias is None else self._R_ci.T @ bias)
+
+
+class PaperSmoother(Smoother):
+    """The paper's graph (Sec. 3.2): visual priors and identity smoothness factors; IMU ignored."""
+
+    name = "smoother"

@@ -41,7 +41,7 @@ class RunConfig(BaseModel):
     a camera file (OpenCV YAML/JSON, Kalibr camchain, EuRoC sensor.yaml); None: the source's own."""
     offline: bool = False
     """A recorded IMU-only file: estimates from the EKF run forward and backward over the whole log
-    (`backends.mekf_offline`) instead of the streaming filter."""
+    (`backends.mekf.offline`) instead of the streaming filter."""
     max_frames: int | None = Field(None, gt=0)
     """Stop after this many frames (None: the whole source)."""
     threads: int = Field(1, ge=1, le=256)

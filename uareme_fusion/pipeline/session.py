@@ -76,7 +76,7 @@ def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipe
         cues = CueSolver(lines="lines" in chosen, assumed_fov_deg=cfg.assumed_fov_deg)
     backend = make_backend(cfg, source.info)
     if cfg.offline:
-        from ..backends.mekf_offline import offline_backend
+        from ..backends.mekf.offline import offline_backend
 
         if cfg.backend != "mekf":
             raise InputError(f"--offline smooths with the mekf backend, not {cfg.backend}")

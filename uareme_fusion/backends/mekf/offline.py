@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
-from ..rotations import WORLD_UP, exp_so3
-from ..types import Estimate, Status, VisualRotation
-from .base import Backend
-from .imu_stream import check_imu_arrays
-from .mekf import GyroSampling, Mekf, MekfConfig, MekfMode
+from ...errors import InputError
+from ...rotations import WORLD_UP, exp_so3
+from ...types import Estimate, Status, VisualRotation
+from ..base import Backend
+from ..imu_stream import check_imu_arrays
+from .config import GyroSampling, MekfConfig, MekfMode
+from .filter import Mekf
 
 
 def _recorded(config: MekfConfig, t_s, gyro, accel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,8 +1,8 @@
 """Compiled IMU propagation and accelerometer/zero-rate updates of `Mekf` (issue 17).
 
-The maths are those of `mekf.Mekf._integrate_chunk`, `_accel_rows`, `_rest_update` and
-`_kalman_update` (the reference, in numpy/filterpy), written as small pure functions on plain arrays
-so that numba compiles them and a later EKF split can reuse them:
+The maths are those of the reference path (`filter.Mekf`, `imu_path`, in numpy/filterpy), written as
+small pure functions on plain arrays so that numba compiles them; the measurement models and the
+error reset are the very functions of `measurements` and `state`:
 - `propagate_chunk`: gyro integration over a chunk of samples and the error-state covariance
   prediction (closed-form transition and process noise, as in the reference);
 - `accel_measurement` / `zero_rate_measurement`: residual, variance (isotropic) and H of the
@@ -24,25 +24,19 @@ import math
 
 import numpy as np
 
-from .. import jit
+from ... import jit
+from .measurements import gravity_model, zero_rate_model
+from .state import orthonormal, reset_jacobian, skew3
 
 # Layout of the float64 state vector `s` that `integrate_batch` reads and updates in place.
 S_T_STATE, S_ACC_TIME, S_ACC_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
-S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE = range(7, 12)
-S_SIZE = 12
+S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE, S_NONFINITE = range(7, 13)
+S_SIZE = 13
 # Layout of the float64 parameter vector `p`.
 (P_Q_GYRO, P_Q_BIAS, P_Q_RATE, P_TRAPEZOID, P_PERIOD, P_DUE, P_DEFER, P_LP_TAU, P_INV_G, P_GRAVITY,
  P_ACC_NOISE, P_NORM_SCALE, P_INNOV_SCALE, P_FLAG_RATIO, P_REST_GYRO, P_REST_ACCEL, P_REST_MIN_S,
  P_REST_STD, P_MF_INIT, P_MF_YAW_RW, P_MF_TILT_RW, P_ORTHO_EVERY, P_RECORD, P_GAP_LIMIT) = range(24)
 P_SIZE = 24
-
-
-def skew3(v):
-    """(3, 3) cross-product matrix of v."""
-    out = np.zeros((3, 3))
-    out[0, 1], out[0, 2], out[1, 2] = -v[2], v[1], -v[0]
-    out[1, 0], out[2, 0], out[2, 1] = v[2], -v[1], v[0]
-    return out
 
 
 def inv3(A):
@@ -73,11 +67,6 @@ def exp3(phi):
         b = (1.0 - math.cos(theta)) / theta2
     K = skew3(phi)
     return np.eye(3) + a * K + b * (K @ K)
-
-
-def orthonormal3(R):
-    """One Newton step of the polar decomposition (as `mekf._orthonormal`)."""
-    return 0.5 * R @ (3.0 * np.eye(3) - R.T @ R)
 
 
 def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoid, q_gyro, q_bias, q_rate,
@@ -122,45 +111,20 @@ def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoi
 
 
 def accel_measurement(acc_c, T, R_wc, lp_J1, use_lp_J, p):
-    """Accelerometer direction as a tilt measurement (as `Mekf._accel_rows`): (ok, residual (3,),
-    variance, H (3, 12), downweighted). `ok` False near free fall (no direction)."""
-    norm = math.sqrt(acc_c[0] ** 2 + acc_c[1] ** 2 + acc_c[2] ** 2)
-    H = np.zeros((3, 12))
-    if not (T > 0 and norm > 0.1 * p[P_GRAVITY]):
-        return False, np.zeros(3), 0.0, H, False
-    norm_dev = abs(norm * p[P_INV_G] - 1.0)
-    z = acc_c / norm
-    h = R_wc[2].copy()  # R_wc^T @ (0, 0, 1)
-    angle = math.acos(min(1.0, max(-1.0, z[0] * h[0] + z[1] * h[1] + z[2] * h[2])))
-    var0 = p[P_ACC_NOISE] ** 2 / T
-    var = var0 * (1.0 + (norm_dev / p[P_NORM_SCALE]) ** 2) * (1.0 + (angle / p[P_INNOV_SCALE]) ** 2)
-    downweighted = var > (p[P_FLAG_RATIO] * math.sqrt(var0)) ** 2
-    H[:, 0:3] = skew3(h)
-    if use_lp_J:
-        H[:, 3:6] = -(np.eye(3) - np.outer(z, z)) @ lp_J1 / norm
-    return True, z - h, var, H, downweighted
+    """`measurements.gravity_model` with the parameters of `p`."""
+    return gravity_model(acc_c, T, R_wc, lp_J1, use_lp_J, p[P_GRAVITY], p[P_ACC_NOISE], p[P_NORM_SCALE],
+                         p[P_INNOV_SCALE], p[P_FLAG_RATIO])
 
 
 def zero_rate_measurement(rest_sums, rest_n, T, b_c, p):
-    """At rest the period's mean gyro reading measures the bias (as `Mekf._rest_update`):
-    (at_rest, residual (3,), variance, H (3, 12)); `at_rest` False when the period moved."""
-    H = np.zeros((3, 12))
-    g_mean, a_mean = rest_sums[0:3] / rest_n, rest_sums[4:7] / rest_n
-    g2 = g_mean[0] ** 2 + g_mean[1] ** 2 + g_mean[2] ** 2
-    g_dev2 = max(rest_sums[3] / rest_n - g2, 0.0)
-    a_dev2 = max(rest_sums[7] / rest_n - (a_mean[0] ** 2 + a_mean[1] ** 2 + a_mean[2] ** 2), 0.0)
-    limit2 = p[P_REST_GYRO] ** 2
-    if g2 >= limit2 or g_dev2 >= limit2 or a_dev2 >= p[P_REST_ACCEL] ** 2:
-        return False, np.zeros(3), 0.0, H
-    for i in range(3):
-        H[i, 3 + i] = 1.0
-    return True, g_mean - b_c, p[P_Q_GYRO] / T + p[P_REST_STD] ** 2, H
+    """`measurements.zero_rate_model` with the parameters of `p`."""
+    return zero_rate_model(rest_sums, rest_n, T, b_c, p[P_Q_GYRO], p[P_REST_GYRO], p[P_REST_ACCEL], p[P_REST_STD])
 
 
 def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
     """Joseph-form update with isotropic measurement noise `var`, then injection into the nominal
     state and the reset of the error (as `Mekf._kalman_update`). Updates the arrays in place and
-    returns the new (R_wc, R_wm); nothing changes when the result is not finite."""
+    returns the new (R_wc, R_wm); nothing changes but `s[S_NONFINITE]` when the result is not finite."""
     Rm = var * np.eye(3)
     PHt = P @ H.T
     K = PHt @ inv3(H @ PHt + Rm)
@@ -168,17 +132,16 @@ def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
     I_KH = np.eye(12) - K @ H
     P_new = I_KH @ P @ I_KH.T + K @ Rm @ K.T
     if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(P_new))):
+        s[S_NONFINITE] += 1
         return R_wc, R_wm
-    G = np.eye(12)
+    G = reset_jacobian(dx, p[P_MF_INIT] > 0)
     if p[P_MF_INIT] > 0:
         R_wm = R_wm @ exp3(dx[6:9])
-        G[6:9, 6:9] -= 0.5 * skew3(dx[6:9])
     R_wc = R_wc @ exp3(dx[0:3])
     s[S_PRODUCTS] += 1
     if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
-        R_wc, R_wm = orthonormal3(R_wc), orthonormal3(R_wm)
+        R_wc, R_wm = orthonormal(R_wc), orthonormal(R_wm)
         s[S_PRODUCTS] = 0
-    G[0:3, 0:3] -= 0.5 * skew3(dx[0:3])
     b_c += dx[3:6]
     if s[S_LP_VALID] > 0:
         lp[0] += lp_J[0] @ dx[3:6]
@@ -275,7 +238,7 @@ def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_su
         R_wc_cur = R_wc_cur @ C_N
         s[S_PRODUCTS] += 1
         if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
-            R_wc_cur, R_wm_cur = orthonormal3(R_wc_cur), orthonormal3(R_wm_cur)
+            R_wc_cur, R_wm_cur = orthonormal(R_wc_cur), orthonormal(R_wm_cur)
             s[S_PRODUCTS] = 0
         last_gyro[:] = gyro[b - 1]
         # Specific force, time-weighted, in the chunk's end frame.
@@ -327,8 +290,8 @@ ACCEL_UPDATE = None
 """`accel_update_in_place` compiled, or None."""
 if jit.available():
     try:
-        _pure = (skew3, inv3, exp3, orthonormal3, propagate_chunk, accel_measurement, zero_rate_measurement,
-                 kalman_update, accel_and_rest_update)
+        _pure = (skew3, reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3, propagate_chunk,
+                 accel_measurement, zero_rate_measurement, kalman_update, accel_and_rest_update)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = jit.compiled(integrate_batch, cache=True, error_model="numpy")

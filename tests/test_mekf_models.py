@@ -1,0 +1,221 @@
+"""The EKF's models against finite differences, through the package's own functions: every
+measurement model's H, the gyro and constant-rate transitions F, the reset Jacobian, the low-pass
+bias sensitivity; and stacking measurements into one update equals applying them in turn.
+
+Convention (`mekf.state`): a state `x (+) dx` has `R_wc Exp(dtheta_c)`, `b_c + db`, `R_wm Exp(dtheta_m)`,
+`omega_c + domega`; a model's H satisfies `residual(x) - residual(x (+) dx) = H dx` to first order
+for the same measurement (its prediction moved by `H dx`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from filterpy.kalman import update as kf_update
+
+from jacobians import fd_jacobian
+
+from uareme_fusion.backends.mekf.accel import AccelPeriod
+from uareme_fusion.backends.mekf.measurements import gravity_model, stack, vertical_model, visual_model
+from uareme_fusion.backends.mekf.measurements import zero_rate_model
+from uareme_fusion.backends.mekf.propagation import constant_rate_model, gyro_chunk, gyro_rates, gyro_transition
+from uareme_fusion.backends.mekf.propagation import prefix_products
+from uareme_fusion.backends.mekf.state import BG, MF, N_STATE, RATE, TH, ZERO_STATE, inject, reset_jacobian
+from uareme_fusion.rotations import WORLD_UP, angle_between, exp_so3, log_so3
+
+GRAVITY_ARGS = dict(gravity_m_s2=9.81, noise_rad_sqrt_s=0.02, norm_scale=0.05, innovation_scale_rad=0.05,
+                    flag_ratio=2.0)
+
+
+def perturbed(R_wc, R_wm, b_c, omega_c, dx):
+    """The state `x (+) dx` (right perturbations)."""
+    return R_wc @ exp_so3(dx[TH]), R_wm @ exp_so3(dx[MF]), b_c + dx[BG], omega_c + dx[RATE]
+
+
+def random_state(seed):
+    rng = np.random.default_rng(seed)
+    return exp_so3(rng.normal(size=3)), exp_so3(rng.normal(size=3)), 0.01 * rng.normal(size=3), rng.normal(size=3)
+
+
+def test_fd_jacobian_of_a_known_map():
+    A = np.arange(12.0).reshape(3, 4)
+    np.testing.assert_allclose(fd_jacobian(lambda d: A @ d + np.sin(d[0]) * np.array([1.0, 0, 0]), 4),
+                               A + np.array([[1.0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]]), atol=1e-8)
+
+
+def test_prefix_products_match_sequential_products():
+    rng = np.random.default_rng(0)
+    M = exp_so3(rng.normal(size=(11, 3)))
+    C = prefix_products(M)
+    acc = np.eye(3)
+    for k in range(11):
+        acc = acc @ M[k]
+        np.testing.assert_allclose(C[k], acc, atol=1e-12)
+
+
+def test_visual_model_H():
+    R_wc, R_wm, b, w = random_state(3)
+    R_cm_meas = R_wc.T @ R_wm
+    r0, _, H = visual_model(R_wc, R_wm, R_cm_meas, 1e-4 * np.eye(3))
+    assert np.abs(r0).max() < 1e-12
+    fd = fd_jacobian(lambda dx: r0 - visual_model(*perturbed(R_wc, R_wm, b, w, dx)[:2], R_cm_meas, np.eye(3))[0],
+                     N_STATE)
+    np.testing.assert_allclose(fd, H, atol=1e-8)
+
+
+def test_vertical_model_H():
+    R_wc, _, b, w = random_state(4)
+    R_wm = exp_so3([0.05, -0.03, 1.2])  # z within the gate of up
+    r0, R, H = vertical_model(R_wm, 0.02, 0.35)
+    np.testing.assert_allclose(R, 0.02**2 * np.eye(3))
+    fd = fd_jacobian(lambda dx: r0 - vertical_model(perturbed(R_wc, R_wm, b, w, dx)[1], 0.02, 0.35)[0], N_STATE)
+    np.testing.assert_allclose(fd, H, atol=1e-8)
+    assert vertical_model(exp_so3([0.5, 0.0, 0.0]), 0.02, 0.35) is None  # m's z 29 deg from up
+
+
+@pytest.mark.parametrize("use_lp_J", [False, True])
+def test_gravity_model_H(use_lp_J):
+    R_wc, R_wm, b, w = random_state(5)
+    rng = np.random.default_rng(6)
+    lp = R_wc.T @ (9.81 * WORLD_UP) + 0.3 * rng.normal(size=3)  # a low-passed specific force, m/s^2
+    J = rng.normal(size=(3, 3)) if use_lp_J else np.zeros((3, 3))
+    ok, r0, var, H, _ = gravity_model(lp, 0.04, R_wc, J, use_lp_J, **GRAVITY_ARGS)
+    assert ok and var > 0.02**2 / 0.04
+
+    def delta(dx):
+        Rc, _, _, _ = perturbed(R_wc, R_wm, b, w, dx)
+        # The low-passed reading follows the bias estimate: lp + J db (`AccelPeriod.reinject`).
+        return r0 - gravity_model(lp + J @ dx[BG], 0.04, Rc, J, use_lp_J, **GRAVITY_ARGS)[1]
+
+    np.testing.assert_allclose(fd_jacobian(delta, N_STATE), H, atol=1e-7)
+    if not use_lp_J:
+        assert np.all(H[:, BG] == 0)
+
+
+def test_gravity_model_skips_free_fall():
+    ok, _, _, H, _ = gravity_model(np.array([0.0, -0.5, 0.0]), 0.04, np.eye(3), np.zeros((3, 3)), False,
+                                   **GRAVITY_ARGS)
+    assert not ok and np.all(H == 0)
+
+
+def test_zero_rate_model_H():
+    R_wc, R_wm, b, w = random_state(7)
+    rng = np.random.default_rng(8)
+    gyro = b + 1e-4 * rng.normal(size=(50, 3))
+    accel = np.tile([0.0, -9.81, 0.0], (50, 1))
+    period = AccelPeriod()
+    period.add_rest(gyro, accel)
+    args = (period.rest_sums, period.rest_n, 0.25)
+    limits = (4e-6, 0.035, 0.5, 5e-4)
+    at_rest, r0, var, H = zero_rate_model(*args, b, *limits)
+    assert at_rest and var == pytest.approx(4e-6 / 0.25 + 5e-4**2)
+    np.testing.assert_allclose(r0, gyro.mean(axis=0) - b, atol=1e-12)
+    fd = fd_jacobian(lambda dx: r0 - zero_rate_model(*args, perturbed(R_wc, R_wm, b, w, dx)[2], *limits)[1],
+                     N_STATE)
+    np.testing.assert_allclose(fd, H, atol=1e-9)
+    moving = AccelPeriod()
+    moving.add_rest(gyro + [0.1, 0.0, 0.0], accel)
+    assert not zero_rate_model(moving.rest_sums, moving.rest_n, 0.25, b, *limits)[0]
+
+
+@pytest.mark.parametrize("trapezoid", [False, True])
+def test_gyro_transition_F(trapezoid):
+    """Attitude and bias columns of the chunk transition against re-integration of a perturbed state."""
+    rng = np.random.default_rng(1)
+    dt = np.full(9, 0.005)
+    gyro = rng.normal(size=(10, 3))  # the reading before the chunk, then its 9 samples
+    R0, _, b0, _ = random_state(9)
+
+    def end_attitude(dth, db):
+        C, _ = gyro_chunk(gyro_rates(gyro, b0 + db, trapezoid), dt)
+        return R0 @ exp_so3(dth) @ C[-1]
+
+    C, A_bias = gyro_chunk(gyro_rates(gyro, b0, trapezoid), dt)
+    F = gyro_transition(C[-1], A_bias)
+    R_N = end_attitude(np.zeros(3), np.zeros(3))
+    fd = fd_jacobian(lambda d: log_so3(R_N.T @ end_attitude(d[:3], d[3:])), 6)
+    np.testing.assert_allclose(fd[:, :3], F[TH, TH], atol=1e-8)
+    # The bias columns are first order in the chunk's rotation (|rate dt| ~ 0.01 per step here).
+    np.testing.assert_allclose(fd[:, 3:], F[TH, BG], atol=2e-4)
+    assert np.abs(F[TH, BG]).max() > 0.04
+    np.testing.assert_array_equal(F[3:, :], np.eye(N_STATE)[3:, :])
+
+
+def test_constant_rate_transition_F():
+    R0, _, _, omega = random_state(10)
+    M, F, Q = constant_rate_model(omega, 0.05, 3.0**2)
+
+    def end_attitude(d):
+        return R0 @ exp_so3(d[:3]) @ exp_so3((omega + d[3:]) * 0.05)
+
+    R_N = end_attitude(np.zeros(6))
+    np.testing.assert_allclose(R_N, R0 @ M, atol=1e-12)
+    fd = fd_jacobian(lambda d: log_so3(R_N.T @ end_attitude(d)), 6)
+    np.testing.assert_allclose(fd[:, :3], F[TH, TH], atol=1e-8)
+    # F keeps dt I: the right Jacobian of Exp(omega dt) is dropped, an error of |omega| dt^2 / 2.
+    np.testing.assert_allclose(fd[:, 3:], F[TH, RATE], atol=np.linalg.norm(omega) * 0.05**2 / 2)
+    np.testing.assert_allclose(Q, Q.T)
+
+
+def test_reset_jacobian_against_finite_differences():
+    """After injecting dtheta, an error e about the old nominal is `Log(Exp(-dtheta) Exp(e))` about the
+    new one: its derivative at e = dtheta is G to first order in |dtheta|."""
+    dx = np.zeros(N_STATE)
+    dx[TH], dx[MF] = [1e-3, -2e-3, 5e-4], [-1e-3, 1e-3, 2e-3]
+    G = reset_jacobian(dx, True)
+    for block in (TH, MF):
+        fd = fd_jacobian(lambda e: log_so3(exp_so3(-dx[block]) @ exp_so3(dx[block] + e)), 3)
+        np.testing.assert_allclose(fd, G[block, block], atol=1e-6)
+    np.testing.assert_array_equal(reset_jacobian(dx, False)[MF, MF], np.eye(3))
+
+
+def test_lowpass_bias_sensitivity_matches_finite_differences():
+    """`AccelPeriod.lp_J` (how the low-passed accelerometer, carried along by the gyro, depends on the
+    gyro bias) against re-running the same samples with a perturbed bias."""
+    rng = np.random.default_rng(4)
+    gyro = 0.5 * rng.normal(size=(401, 3))
+    accel = rng.normal(size=(400, 3)) + [0.0, -9.81, 0.0]
+    dt = np.full(400, 1.0 / 200.0)
+
+    def run(b):
+        period = AccelPeriod()
+        for a in range(0, 400, 4):  # 0.02 s periods, low-pass time constant 1 s
+            C, A_bias = gyro_chunk(gyro_rates(gyro[a:a + 5], b, trapezoid=True), dt[a:a + 4])
+            period.add_chunk(C, accel[a:a + 4], dt[a:a + 4], 0.02, 0.02)
+            period.carry_lowpass(C[-1], A_bias)
+            period.lowpass(*period.take_mean(), tau_s=1.0)
+        return period
+
+    b0 = 0.01 * rng.normal(size=3)
+    nominal = run(b0)
+    fd = fd_jacobian(lambda d: run(b0 + d).lp_c.ravel(), 3).reshape(2, 3, 3)
+    # The model takes each period's own mean as bias-free: short periods against long low-pass stages.
+    np.testing.assert_allclose(fd, nominal.lp_J, rtol=0.03, atol=0.02)
+
+
+def test_stacked_update_matches_sequential_updates():
+    """A visual and an accelerometer measurement in one stacked update equal the two applied in turn
+    (with injection and reset between) to first order."""
+    R_wc, R_wm, b, w = random_state(11)
+    rng = np.random.default_rng(12)
+    P = np.diag(np.r_[np.full(3, 1e-4), np.full(3, 1e-6), np.full(3, 1e-4), np.zeros(3)])
+    R_cm = R_wc.T @ R_wm @ exp_so3(0.003 * rng.normal(size=3))
+    acc = R_wc.T @ (9.81 * WORLD_UP) + [0.05, 0.0, 0.02]
+
+    def visual_rows(R_wc, R_wm):
+        return visual_model(R_wc, R_wm, R_cm, 1e-4 * np.eye(3))
+
+    def accel_rows(R_wc):
+        _, r, var, H, _ = gravity_model(acc, 0.1, R_wc, np.zeros((3, 3)), False, **GRAVITY_ARGS)
+        return r, var * np.eye(3), H
+
+    def update(state, P, rows):
+        dx, P = kf_update(ZERO_STATE, P, *rows)
+        G = reset_jacobian(dx, True)
+        return inject(*state, dx, True, False), G @ P @ G.T
+
+    x = (R_wc, R_wm, b, w)
+    stacked, P_stacked = update(x, P, stack([visual_rows(R_wc, R_wm), accel_rows(R_wc)]))
+    mid, P_mid = update(x, P, accel_rows(R_wc))
+    sequential, P_seq = update(mid, P_mid, visual_rows(mid[0], mid[1]))
+    assert np.degrees(angle_between(stacked[0], sequential[0])) < 1e-4
+    np.testing.assert_allclose(P_stacked, P_seq, rtol=1e-3, atol=1e-12)

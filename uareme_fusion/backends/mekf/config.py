@@ -1,0 +1,131 @@
+"""`MekfConfig`: noise model, robustness and input settings of `Mekf` (SI units, radians).
+
+Presets are YAML files in `uareme_fusion/configs/` (`load_config("vehicle", MekfConfig)`).
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+
+class MekfMode(str, enum.Enum):
+    """Which inputs the filter uses. `auto`: visual + IMU when IMU samples arrived before the first
+    frame, else visual only."""
+
+    AUTO = "auto"
+    VISUAL_IMU = "visual_imu"
+    IMU_ONLY = "imu_only"
+    VISUAL_ONLY = "visual_only"
+
+
+class GyroSampling(str, enum.Enum):
+    """What a gyro sample stamped t_k measures: the rate at t_k (`instant`, integrated with the
+    trapezoid rule) or the mean rate over (t_{k-1}, t_k] (`interval`, as many IMUs output)."""
+
+    INSTANT = "instant"
+    INTERVAL = "interval"
+
+
+class MekfConfig(BaseModel):
+    """Noise model and robustness settings of `Mekf`; SI units and radians, unit in every name."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    mode: MekfMode = MekfMode.AUTO
+    gyro_noise_rad_s_sqrt_hz: float = Field(2e-3, ge=1e-9, le=1.0)
+    """Gyro white-noise density (angle random walk), rad/s/sqrt(Hz)."""
+    gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-4, ge=0, le=1.0)
+    """Gyro bias random-walk density, rad/s^2/sqrt(Hz)."""
+    gyro_bias_initial_std_rad_s: float = Field(0.01, ge=0, le=10.0)
+    """Prior standard deviation of each gyro bias component, rad/s."""
+    gyro_rate_noise_sqrt_s: float = Field(0.0, ge=0, le=1.0)
+    """Relative gyro error (scale factor, axis misalignment, timing) as a white-noise density, sqrt(s):
+    the attitude variance grows by `(this * |omega|)^2` per second of rotation at `|omega|` (0 = off),
+    so the filter leans on the accelerometer more while the camera turns fast."""
+    gyro_sampling: GyroSampling = GyroSampling.INSTANT
+    gyro_range_rad_s: float = Field(34.9, ge=0.1, le=1000.0)
+    """Gyro full scale, rad/s (34.9 = 2000 deg/s); readings at or beyond it are flagged."""
+    unknown_rate_std_rad_s: float = Field(2.0, ge=1e-3, le=100.0)
+    """Angular-rate uncertainty assumed over IMU gaps and saturated samples, rad/s: the attitude
+    variance grows by (this * duration)^2 instead of integrating garbage."""
+    imu_gap_limit_s: float = Field(0.1, ge=1e-4, le=60.0)
+    """A step between IMU samples (or to a frame) longer than this is a gap, s."""
+    reorder_window_s: float = Field(0.02, ge=0, le=10.0)
+    """IMU samples arriving out of order by less than this are put back in place, s."""
+    accel_tilt_noise_rad_sqrt_s: float = Field(0.02, ge=1e-6, le=10.0)
+    """Accelerometer direction noise density, rad*sqrt(s): one update over T seconds of averaged
+    samples has std `this / sqrt(T)` per tilt axis before inflation."""
+    accel_update_period_s: float = Field(0.04, ge=1e-4, le=10.0)
+    """Accelerometer samples are averaged (in a common camera frame) over this long per update, s."""
+    accel_lowpass_tau_s: float = Field(0.0, ge=0, le=600.0)
+    """Time constant of each of two cascaded first-order low-pass stages (second-order roll-off)
+    applied to the accelerometer in an almost-inertial frame (the camera frame carried along by the
+    gyro), s; 0 = off (each update uses only its own period's mean). Translational accelerations
+    average out over it (velocity stays bounded), so seconds suit handheld IMU-only use; each update
+    then measures the filtered direction."""
+    accel_norm_scale: float = Field(0.05, ge=1e-4, le=100.0)
+    """Relative deviation of |mean a| from gravity (dimensionless) at which the update's variance
+    doubles: variance factor `1 + (dev / this)^2`."""
+    accel_innovation_scale_rad: float = Field(0.05, ge=1e-4, le=10.0)
+    """Angle between measured and predicted up at which the update's variance doubles, rad:
+    variance factor `1 + (angle / this)^2` (continuous, no timeouts)."""
+    accel_downweight_flag_ratio: float = Field(2.0, gt=1, le=1e6)
+    """ACCEL_DOWNWEIGHTED is set when the inflated std exceeds this many times the nominal one."""
+    rest_gyro_max_rad_s: float = Field(0.0, ge=0, le=10.0)
+    """Rest detection for the zero-rate bias update (0 = off): an accelerometer-update period is at
+    rest when its mean gyro reading and the rms deviation of its gyro samples from that mean are both
+    below this, rad/s (vqf uses 2 deg/s = 0.035)."""
+    rest_accel_max_m_s2: float = Field(0.5, gt=0, le=100.0)
+    """...and the rms deviation of its accelerometer samples from their mean is below this, m/s^2."""
+    rest_min_duration_s: float = Field(1.5, ge=0, le=3600.0)
+    """Rest must have lasted this long before the mean gyro reading measures the bias, s."""
+    rest_rate_std_rad_s: float = Field(5e-4, ge=1e-9, le=10.0)
+    """Residual angular rate allowed at rest (micro-motion), added to the gyro white noise of the
+    period's mean in the zero-rate update's std, rad/s."""
+    initial_tilt_std_rad: float = Field(0.03, ge=1e-6, le=10.0)
+    """Tilt std after initialisation from the first accelerometer samples, rad."""
+    init_accel_window_s: float = Field(0.05, ge=1e-4, le=60.0)
+    """Accelerometer samples averaged for the initial tilt, s."""
+    manhattan_yaw_rw_rad_sqrt_s: float = Field(0.0, ge=0, le=10.0)
+    """Random walk of the Manhattan frame's yaw about world up, rad/sqrt(s) (0 in a building; a
+    vehicle's turns need about 0.5)."""
+    manhattan_tilt_rw_rad_sqrt_s: float = Field(0.0, ge=0, le=10.0)
+    """Random walk of the Manhattan frame's tilt, rad/sqrt(s) (vehicle body sway)."""
+    manhattan_vertical_std_rad: float = Field(0.02, ge=1e-6, le=10.0)
+    """How far the Manhattan z axis may lean from world up (std, rad): a pseudo-measurement applied
+    with each visual update ("walls are vertical"); skipped when m's z is far from up."""
+    manhattan_vertical_max_rad: float = Field(0.35, gt=0, le=3.15)
+    """The vertical pseudo-measurement is skipped when m's z is farther than this from up, rad."""
+    rate_rw_rad_s2_sqrt_hz: float = Field(3.0, ge=1e-6, le=1000.0)
+    """Visual-only constant-rate model: angular-rate random walk, rad/s^2/sqrt(Hz)."""
+    rate_initial_std_rad_s: float = Field(1.0, ge=1e-6, le=100.0)
+    """Visual-only: prior std of the angular rate, rad/s."""
+    visual_gate_chi2: float = Field(16.27, gt=0, le=1e6)
+    """Mahalanobis gate on the 3-dof visual residual (16.27 = chi-square 99.9 %)."""
+    visual_huber_sigma: float = Field(2.0, ge=1e-3, le=1e6)
+    """Huber threshold on the Mahalanobis distance: beyond it the visual covariance is scaled by d/k."""
+    reinit_after_rejections: int = Field(8, ge=1, le=1000000)
+    """Consecutive gated-out frames after which the Manhattan frame is re-initialised."""
+    R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
+    """Camera-from-IMU rotation (`v_c = R_ci v_i`), 3x3 row-major."""
+    imu_time_offset_s: float = Field(0.0, ge=-3600.0, le=3600.0)
+    """The IMU clock runs this far ahead of the camera clock, s."""
+    gravity_m_s2: float = Field(9.81, ge=1.0, le=100.0)
+    """Magnitude of gravity, m/s^2."""
+    record_imu_estimates: bool = False
+    """Keep `R_wc` after every IMU sample (see `Mekf.imu_trajectory`)."""
+    compiled: bool = True
+    """Integrate gap-free IMU batches with the compiled kernels (`mekf.kernels`) when numba is
+    available; False (or no numba) runs the numpy/filterpy reference path."""
+
+    @field_validator("R_ci")
+    @classmethod
+    def _rotation(cls, value):
+        R = np.asarray(value, float)
+        if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) <= 0:
+            raise ValueError(f"must be a 3x3 rotation matrix, got {value}")
+        return value
+

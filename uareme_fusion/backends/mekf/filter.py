@@ -1,0 +1,344 @@
+"""`Mekf`: the multiplicative (error-state) EKF, scheduling its models.
+
+See DESIGN.md "Backends: mekf" and the package docstring for the conventions. The filter holds the
+nominal state and its covariance, and schedules: IMU samples and frames propagate through the motion
+strategy chosen once for its mode (`motion.py`); a frame's visual rotation, the vertical
+pseudo-measurement and a due accelerometer update are fused in one stacked filterpy update
+(`measurements.py`); every update is injected and reset through `state.py`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from filterpy.kalman import update as kf_update
+
+from ...config import load_config, preset_names
+from ...errors import InputError
+from ...types import Estimate, Status, VisualRotation
+from ..base import Backend
+from ..imu_stream import ImuBatch, ImuStream
+from .accel import AccelPeriod
+from .compiled import KERNEL, accel_update_compiled
+from .config import GyroSampling, MekfConfig, MekfMode
+from .measurements import gravity_model, stack, vertical_model, visual_model
+from .motion import ConstantRateMotion, GyroMotion
+from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
+
+
+def motion_for(mode: MekfMode):
+    """The motion strategy of a mode; `auto` starts gyro-driven and is resolved once (`Mekf.resolve_mode`)."""
+    return ConstantRateMotion() if mode == MekfMode.VISUAL_ONLY else GyroMotion(mode)
+
+
+class Mekf(Backend):
+    """The multiplicative EKF fusing visual Manhattan rotations with a gyro and accelerometer.
+
+    Feed IMU samples with `process_imu(t_s (N,) s, gyro_rad_s (N, 3), accel_m_s2 (N, 3))` (IMU frame
+    and clock) and frames with `process_frame(t_s, VisualRotation or None)`, which returns the
+    `Estimate` at `t_s`: `R_wc` (3, 3) camera to a z-up world, `cov` (3, 3) rad^2 of its right
+    perturbation, `gyro_bias_rad_s` (3,) in the IMU frame. Counters of what happened are in
+    `counters` (e.g. `nonfinite_updates`: updates dropped because their result was not finite,
+    flagged `Status.UPDATE_NONFINITE`).
+
+    The mode (`MekfConfig.mode`) fixes the motion strategy: `visual_imu` and `imu_only` integrate
+    the gyro, `visual_only` runs a constant-rate model. `auto` resolves once, to `visual_imu` when
+    IMU samples arrived before the first frame and to `visual_only` otherwise.
+
+    Example: a camera at rest, upright, seeing a Manhattan frame aligned with the world.
+
+    >>> import numpy as np
+    >>> from uareme_fusion.types import VisualRotation
+    >>> filt = Mekf(MekfConfig(mode="visual_imu"))
+    >>> t = np.arange(1, 201) / 200.0                    # 1 s of IMU at 200 Hz
+    >>> filt.process_imu(t, np.zeros((200, 3)), np.tile([0.0, -9.81, 0.0], (200, 1)))
+    >>> R_cm = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])   # camera y down = world -z
+    >>> visual = VisualRotation(R_cm, 1e-4 * np.eye(3), cost=0.0, iterations=1, n_valid=1000)
+    >>> est = filt.process_frame(1.0, visual)
+    >>> bool(np.allclose(est.R_wc @ [0, -1, 0], [0, 0, 1], atol=1e-6))   # image up is world up
+    True
+    >>> est.R_wm is not None, filt.counters["nonfinite_updates"]        # the scene frame is known
+    (True, 0)
+    """
+
+    name = "mekf"
+
+    def __init__(self, config: MekfConfig | str | None = None):
+        """`config`: a `MekfConfig`, a preset name or YAML path (`Mekf("vehicle")`), or None for the defaults."""
+        if isinstance(config, str):
+            config = load_config(config, MekfConfig)
+        elif config is not None and not isinstance(config, MekfConfig):
+            raise TypeError(f"Mekf(config): expected a MekfConfig, a preset name ({', '.join(preset_names())}) or a "
+                            f"YAML path, got {type(config).__name__}")
+        self.config = cfg = config or MekfConfig()
+        self.R_ci = np.asarray(cfg.R_ci, float)
+        self.imu_is_camera = bool(np.array_equal(self.R_ci, I3))
+        self.q_gyro = cfg.gyro_noise_rad_s_sqrt_hz**2
+        self.q_bias = cfg.gyro_bias_rw_rad_s2_sqrt_hz**2
+        self.q_rate = cfg.gyro_rate_noise_sqrt_s**2
+        self.manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_sqrt_s or cfg.manhattan_tilt_rw_rad_sqrt_s)
+        self.trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
+        self.compiled = cfg.compiled and KERNEL is not None
+        self.stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
+        self.motion = motion_for(cfg.mode)
+        self._mode_resolved = cfg.mode != MekfMode.AUTO
+        self.R_wc = np.eye(3)
+        self.R_wm = np.eye(3)
+        self.b_c = np.zeros(3)
+        self.omega_c = np.zeros(3)
+        self.P = np.zeros((N_STATE, N_STATE))
+        self.F_buffer = np.eye(N_STATE)  # gyro transition: only its TH rows change between chunks
+        self.products_unnormalised = 0
+        self.t_state: float | None = None
+        self.initialised = False
+        self.manhattan_initialised = False
+        self.counters = dict(visual_rejected=0, reinitialised=0, accel_downweighted=0, accel_skipped=0,
+                             imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0,
+                             rest_updates=0, nonfinite_updates=0)
+        self.flags = Status.OK  # flags gathered since the last estimate
+        self.last_gyro_c: np.ndarray | None = None
+        self.imu_t_s = -np.inf  # time of the newest integrated IMU sample (camera clock), s
+        self.in_imu_gap = False  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
+        self.pending: list[ImuBatch] = []
+        self.pending_span_s = 0.0
+        self.init_samples: list[ImuBatch] = []
+        self.rejections = 0
+        self._dropped_reported = 0
+        self.accel = AccelPeriod()
+        self.record_t: list[np.ndarray] = []
+        self.record_R: list[np.ndarray] = []
+        self.record_P: list[np.ndarray] = []
+
+    @property
+    def mode(self) -> MekfMode:
+        """The filter's mode (`auto` until resolved)."""
+        return self.motion.mode
+
+    def resolve_mode(self, mode: MekfMode) -> None:
+        """Fix an `auto` filter's mode (once: later calls and explicit modes are left alone)."""
+        if not self._mode_resolved:
+            self._mode_resolved = True
+            self.motion = motion_for(mode)
+
+    # ------------------------------------------------------------------ public API
+    def process_imu(self, t_s, gyro_rad_s, accel_m_s2) -> None:
+        """Feed IMU samples: `t_s` (N,) s on the IMU clock, `gyro_rad_s` (N, 3) rad/s and
+        `accel_m_s2` (N, 3) m/s^2 in the IMU frame; see `Backend.process_imu`. Non-finite, duplicate
+        and late samples are dropped and counted in `self.stream.counts`."""
+        if not self.motion.uses_imu:
+            self.counters["imu_ignored"] += int(np.size(t_s))
+            return
+        if self.config.imu_time_offset_s:
+            t_s = np.asarray(t_s, float) - self.config.imu_time_offset_s
+        stream = self.stream
+        stream.add(t_s, gyro_rad_s, accel_m_s2)
+        # Samples wait in the reorder buffer; a frame's `propagate_to` releases them, or, in an
+        # IMU-only stream, this does once an accelerometer period's worth is older than the window.
+        if stream.held_span_s + self.pending_span_s >= self.config.accel_update_period_s + stream.reorder_window_s:
+            self.queue(stream.release_until(stream.newest_s - stream.reorder_window_s, move_watermark=False))
+            if self.pending_span_s >= self.config.accel_update_period_s:
+                self.motion.integrate_pending(self)
+
+    def flush(self) -> None:
+        """Release and integrate every buffered IMU sample (end of an IMU-only stream)."""
+        if not self.motion.uses_imu:
+            return
+        self.queue(self.stream.flush())
+        self.motion.integrate_pending(self, force_init=True)
+        if self.accel.due:
+            self.accel_update()
+
+    def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
+        """Propagate to `t_s` (s, camera clock), fuse `visual` (None for a dropped frame) and return
+        the estimate. `Estimate.R_wc` maps camera to world (z up); `cov` (3, 3, rad^2) is that of
+        the right perturbation of `R_wc`; `gyro_bias_rad_s` is in the IMU frame; `R_wm` is None
+        until a Manhattan frame was seen."""
+        t_s = float(t_s)
+        if visual is not None and (np.shape(visual.R_cm) != (3, 3) or np.shape(visual.cov) != (3, 3)):
+            raise InputError(f"visual rotation at t = {t_s:g} s: expected R_cm and cov of shape (3, 3), got "
+                             f"{np.shape(visual.R_cm)} and {np.shape(visual.cov)}")
+        seen_imu = self.initialised or self.pending or self.stream.newest_s > -np.inf or self.init_samples
+        self.resolve_mode(MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY)
+        self.propagate_to(t_s)
+        fuses_visual = self.motion.fuses_visual
+        if visual is not None and self.manhattan_initialised and fuses_visual:
+            self._visual_update(visual)  # stacks a due accelerometer update into its own
+            return self._estimate(t_s)
+        if self.accel.due:
+            self.accel_update()
+        if visual is None or not fuses_visual:
+            if fuses_visual:
+                self.flags |= Status.VISUAL_MISSING
+        elif not self.initialised:
+            self.motion.start_from_visual(self, t_s, visual)
+        else:
+            self.initialise_manhattan(visual)
+        return self._estimate(t_s)
+
+    def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
+        """`R_cm = R_wc^T R_wm` (3, 3) predicted at `t_s` (s; propagates the filter there); None
+        before a Manhattan frame is known."""
+        if not self.manhattan_initialised:
+            return None
+        self.propagate_to(float(t_s))
+        return self.R_wc.T @ self.R_wm
+
+    def propagate_to(self, t_s: float) -> None:
+        """Propagate the state to `t_s` (s, camera clock) with the mode's motion strategy."""
+        if t_s == self.t_state and not self.pending:
+            return  # already there (a frame's prediction, then its update); later stamps are late
+        self.motion.propagate_to(self, t_s)
+
+    def imu_trajectory(self) -> tuple[np.ndarray, np.ndarray]:
+        """`(t_s (N,), R_wc (N, 3, 3))` after every integrated IMU sample (camera clock), before the
+        accelerometer update that may follow it; needs `record_imu_estimates`."""
+        if not self.record_t:
+            return np.zeros(0), np.zeros((0, 3, 3))
+        return np.concatenate(self.record_t), np.concatenate(self.record_R)
+
+    def imu_trajectory_cov(self) -> np.ndarray:
+        """(N, 3, 3) covariance (rad^2, right perturbation of `R_wc`) beside each `imu_trajectory`
+        rotation: the one predicted to the end of the chunk that sample was integrated in."""
+        return np.concatenate(self.record_P) if self.record_P else np.zeros((0, 3, 3))
+
+    def estimate(self, t_s: float | None = None) -> Estimate:
+        """Current estimate (at the state time, or stamped `t_s` s) without consuming status flags."""
+        return self._make_estimate(self.t_state if t_s is None else t_s, self.flags)
+
+    # ------------------------------------------------------------------ scheduling helpers
+    def queue(self, batch: ImuBatch) -> None:
+        """Hold released IMU samples until the motion strategy integrates them."""
+        rows = batch.rows
+        if rows.shape[0]:
+            self.pending.append(batch)
+            self.pending_span_s = float(rows[-1, 0] - self.pending[0].rows[0, 0]) + 1e-12
+
+    def count_product(self) -> None:
+        """One more product into R_wc / R_wm: re-orthonormalise them every `ORTHONORMALISE_EVERY`."""
+        self.products_unnormalised += 1
+        if self.products_unnormalised >= ORTHONORMALISE_EVERY:
+            self.R_wc = orthonormal(self.R_wc)
+            self.R_wm = orthonormal(self.R_wm)
+            self.products_unnormalised = 0
+
+    # ------------------------------------------------------------------ updates
+    def accel_update(self) -> None:
+        """Apply the accelerometer (and zero-rate) update of the period just completed."""
+        self.accel.due = False
+        if self.compiled:
+            accel_update_compiled(self)
+            return
+        rows = self._accel_rows()
+        if rows is not None:
+            self._kalman_update(*rows)
+
+    def _accel_rows(self):
+        """The period's zero-rate update (applied at once, with `rest_gyro_max_rad_s`), then the
+        gravity measurement of its mean (or low-passed) direction: `(residual, R, H)` or None (near
+        free fall). Consumes the period."""
+        cfg = self.config
+        acc_c, T = self.accel.take_mean()
+        if cfg.rest_gyro_max_rad_s > 0:
+            rows = self.accel.rest_measurement(T, self.t_state, self.b_c, cfg, self.q_gyro)
+            if rows is not None:
+                self._kalman_update(*rows)
+                self.counters["rest_updates"] += 1
+        acc_c = self.accel.lowpass(acc_c, T, cfg.accel_lowpass_tau_s)
+        lp_J = self.accel.lp_J
+        use_lp_J = lp_J is not None and cfg.accel_lowpass_tau_s > 0
+        ok, r, var, H, downweighted = gravity_model(
+            acc_c, T, self.R_wc, lp_J[1] if use_lp_J else np.zeros((3, 3)), use_lp_J, cfg.gravity_m_s2,
+            cfg.accel_tilt_noise_rad_sqrt_s, cfg.accel_norm_scale, cfg.accel_innovation_scale_rad,
+            cfg.accel_downweight_flag_ratio)
+        if not ok:
+            self.counters["accel_skipped"] += 1
+            return None
+        if downweighted:
+            self.flags |= Status.ACCEL_DOWNWEIGHTED
+            self.counters["accel_downweighted"] += 1
+        self.counters["accel_updates"] += 1
+        return r, var * I3, H
+
+    def _visual_update(self, visual: VisualRotation) -> None:
+        """The frame's rotation as a measurement of `R_cm`, gated and Huber-weighted, stacked with
+        the vertical pseudo-measurement and a due accelerometer update into one update."""
+        cfg = self.config
+        accel_rows = None
+        if self.accel.due:
+            self.accel.due = False
+            accel_rows = self._accel_rows()
+        r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
+        S = H @ self.P @ H.T + R_vis
+        d2 = float(r @ np.linalg.solve(S, r))
+        if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
+            self.flags |= Status.VISUAL_REJECTED
+            self.counters["visual_rejected"] += 1
+            self.rejections += 1
+            if accel_rows is not None:
+                self._kalman_update(*accel_rows)
+            if self.rejections >= cfg.reinit_after_rejections:
+                self.flags |= Status.REINITIALISED
+                self.counters["reinitialised"] += 1
+                self.motion.reinitialise(self, visual)
+            return
+        self.rejections = 0
+        d = np.sqrt(d2)
+        if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
+            R_vis = R_vis * (d / cfg.visual_huber_sigma)
+        # "m's z is up" only where the world is not the Manhattan frame itself (visual only).
+        vertical = (vertical_model(self.R_wm, cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad)
+                    if self.motion.uses_imu else None)
+        self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
+        self.counters["visual_updates"] += 1
+
+    def _kalman_update(self, residual: np.ndarray, R: np.ndarray, H: np.ndarray) -> None:
+        """filterpy update (Joseph form) of the zero-mean error state, then inject and reset. A
+        non-finite result changes nothing; it is counted and flagged."""
+        dx, P = kf_update(ZERO_STATE, self.P, residual, R, H)
+        if not (np.isfinite(dx).all() and np.isfinite(P).all()):
+            self.counters["nonfinite_updates"] += 1
+            self.flags |= Status.UPDATE_NONFINITE
+            return
+        G = reset_jacobian(dx, self.manhattan_initialised)
+        self.R_wc, self.R_wm, self.b_c, self.omega_c = inject(
+            self.R_wc, self.R_wm, self.b_c, self.omega_c, dx, self.manhattan_initialised, self.motion.estimates_rate)
+        self.count_product()
+        self.accel.reinject(dx[BG])
+        P = G @ P @ G.T
+        self.P = 0.5 * (P + P.T)
+
+    # ------------------------------------------------------------------ initialisation
+    def initialise_manhattan(self, visual: VisualRotation, R_wm_ref: np.ndarray | None = None) -> None:
+        """`R_wm = R_wc R_cm`, labelled nearest `R_wm_ref` (3, 3; identity: m's z nearest up), with
+        its covariance from the camera's and the measurement's: `dtheta_m = R_cm^T dtheta_c + delta`."""
+        R_wm_ref = np.eye(3) if R_wm_ref is None else R_wm_ref
+        visual = visual.symmetric_to(self.R_wc.T @ R_wm_ref)
+        self.R_wm = orthonormal(self.R_wc @ visual.R_cm)
+        T = np.eye(N_STATE)
+        T[MF, MF] = 0.0
+        T[MF, TH] = visual.R_cm.T
+        P = T @ self.P @ T.T
+        P[MF, MF] += visual.cov
+        self.P = 0.5 * (P + P.T)
+        self.manhattan_initialised = True
+        self.rejections = 0
+
+    # ------------------------------------------------------------------ output
+    def _estimate(self, t_s: float) -> Estimate:
+        dropped = self.stream.counts.dropped
+        if dropped > self._dropped_reported:
+            self.flags |= Status.IMU_DROPPED
+            self._dropped_reported = dropped
+        est = self._make_estimate(t_s, self.flags)
+        self.flags = Status.OK
+        return est
+
+    def _make_estimate(self, t_s, flags: Status) -> Estimate:
+        if not self.initialised:
+            return Estimate(t_s, np.eye(3), np.eye(3), flags | Status.NOT_INITIALISED)
+        cov = 0.5 * (self.P[TH, TH] + self.P[TH, TH].T)
+        bias_i = self.R_ci.T @ self.b_c if self.motion.uses_imu else None
+        return Estimate(
+            t_s, self.R_wc.copy(), cov, flags,
+            R_wm=self.R_wm.copy() if self.manhattan_initialised else None,
+            gyro_bias_rad_s=bias_i,
+        )

@@ -1,0 +1,114 @@
+"""Measurement models of `Mekf`: pure functions returning residual, noise and H.
+
+Each model compares a measurement with its prediction from the nominal state and returns
+`(residual (3,), noise, H (3, 12))` with `residual ~ H dx + noise` for the error state `dx` (right
+perturbations, `state.py`). The gravity and zero-rate models take plain arrays and scalars and
+return an isotropic variance, so the compiled kernels (`kernels.py`) call the same functions.
+- visual: the solver's `R_cm` measures `R_wc^T R_wm` (residual `Log(R_cm_pred^T R_cm)`);
+- vertical: "the Manhattan z axis is world up" (`e_z - R_wm^T up`);
+- gravity: the accelerometer direction measures up in the camera frame (`z - R_wc^T up`);
+- zero rate: at rest the mean gyro reading measures the bias (`g_mean - b_c`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ...rotations import WORLD_UP, nearest_symmetric, skew
+from .state import I3, MF, N_STATE, TH
+
+E_Z = np.array([0.0, 0.0, 1.0])
+
+
+def visual_model(R_wc: np.ndarray, R_wm: np.ndarray, R_cm: np.ndarray, cov_rad2: np.ndarray):
+    """The solver's rotation `R_cm` (3, 3) with covariance `cov_rad2` (3, 3, rad^2, right
+    perturbation) as a measurement of `R_cm = R_wc^T R_wm`, its Manhattan labelling resolved
+    against the prediction: `(residual (3,) rad, R (3, 3) rad^2, H (3, 12))`."""
+    R_cm_pred = R_wc.T @ R_wm
+    R_cm, P_sym = nearest_symmetric(R_cm, R_cm_pred)  # as VisualRotation.symmetric_to
+    # Log of a product of rotations: scipy may skip its orthogonalisation (assume_valid).
+    r = Rotation.from_matrix(R_cm_pred.T @ R_cm, assume_valid=True).as_rotvec()
+    H = np.zeros((3, N_STATE))
+    H[:, TH] = -R_cm_pred.T
+    H[:, MF] = I3
+    R_vis = P_sym.T @ (0.5 * (cov_rad2 + cov_rad2.T)) @ P_sym
+    return r, R_vis, H
+
+
+def vertical_model(R_wm: np.ndarray, std_rad: float, max_rad: float):
+    """Pseudo-measurement "the Manhattan z axis is (nearly) world up" (DESIGN.md "Conventions"),
+    std `std_rad`: `(residual (3,), R (3, 3) rad^2, H (3, 12))`, or None when m's z is farther than
+    `max_rad` from up."""
+    h = R_wm.T @ WORLD_UP
+    if math.acos(min(1.0, max(-1.0, float(h[2])))) > max_rad:
+        return None
+    H = np.zeros((3, N_STATE))
+    H[:, MF] = skew(h)  # d/d(dtheta) of Exp(-dtheta) h at 0
+    return E_Z - h, std_rad**2 * I3, H
+
+
+def gravity_model(acc_c, T_s, R_wc, lp_J1, use_lp_J, gravity_m_s2, noise_rad_sqrt_s, norm_scale,
+                  innovation_scale_rad, flag_ratio):
+    """Accelerometer direction as a tilt measurement: `acc_c` (3,) m/s^2 the mean (or low-passed)
+    specific force over `T_s` s in the camera frame measures up, `R_wc^T up`. Its variance
+    `noise_rad_sqrt_s^2 / T_s` grows by `1 + (dev / norm_scale)^2` (dev: relative deviation of |acc|
+    from `gravity_m_s2`) and `1 + (angle / innovation_scale_rad)^2` (angle between measured and
+    predicted up). With `use_lp_J` the low-passed direction also measures the gyro-bias error
+    through `lp_J1` (3, 3), its sensitivity to the bias. Returns `(ok, residual (3,), variance rad^2,
+    H (3, 12), downweighted)`: `ok` False near free fall (no direction); `downweighted` when the std
+    exceeds `flag_ratio` times the nominal one."""
+    norm = math.sqrt(acc_c[0] ** 2 + acc_c[1] ** 2 + acc_c[2] ** 2)
+    H = np.zeros((3, 12))
+    if not (T_s > 0 and norm > 0.1 * gravity_m_s2):
+        return False, np.zeros(3), 0.0, H, False
+    # |mean specific force| against gravity: the mean is taken in a common (rotating) camera frame,
+    # so it is the inertial-frame average and translational accelerations cancel in it.
+    norm_dev = abs(norm * (1.0 / gravity_m_s2) - 1.0)
+    z = acc_c / norm
+    h = R_wc[2].copy()  # R_wc^T @ (0, 0, 1)
+    angle = math.acos(min(1.0, max(-1.0, z[0] * h[0] + z[1] * h[1] + z[2] * h[2])))
+    var0 = noise_rad_sqrt_s**2 / T_s
+    var = var0 * (1.0 + (norm_dev / norm_scale) ** 2) * (1.0 + (angle / innovation_scale_rad) ** 2)
+    downweighted = var > (flag_ratio * math.sqrt(var0)) ** 2
+    # d/d(dtheta) of Exp(-dtheta) h at 0: skew(h)
+    H[0, 1], H[0, 2], H[1, 2] = -h[2], h[1], -h[0]
+    H[1, 0], H[2, 0], H[2, 1] = h[2], -h[1], h[0]
+    if use_lp_J:  # z = normalise(lp - J db)
+        H[:, 3:6] = -(np.eye(3) - np.outer(z, z)) @ lp_J1 / norm
+    return True, z - h, var, H, downweighted
+
+
+def zero_rate_model(rest_sums, rest_n, T_s, b_c, q_gyro, rest_gyro_max_rad_s, rest_accel_max_m_s2,
+                    rest_rate_std_rad_s):
+    """At rest the period's mean gyro reading measures the bias `b_c` (3,) rad/s (camera frame).
+    `rest_sums` (8,): sums over the period's `rest_n` samples of gyro (rad/s), |gyro|^2, accel (m/s^2)
+    and |accel|^2. At rest when the mean gyro and the rms deviations of gyro and accel from their
+    means are below the limits. The variance is the gyro white noise `q_gyro` ((rad/s)^2/Hz) of a
+    `T_s`-second mean plus `rest_rate_std_rad_s^2`. Returns `(at_rest, residual (3,), variance
+    (rad/s)^2, H (3, 12))`."""
+    H = np.zeros((3, 12))
+    g_mean, a_mean = rest_sums[0:3] / rest_n, rest_sums[4:7] / rest_n
+    g2 = g_mean[0] ** 2 + g_mean[1] ** 2 + g_mean[2] ** 2
+    g_dev2 = max(rest_sums[3] / rest_n - g2, 0.0)
+    a_dev2 = max(rest_sums[7] / rest_n - (a_mean[0] ** 2 + a_mean[1] ** 2 + a_mean[2] ** 2), 0.0)
+    limit2 = rest_gyro_max_rad_s**2
+    if g2 >= limit2 or g_dev2 >= limit2 or a_dev2 >= rest_accel_max_m_s2**2:
+        return False, np.zeros(3), 0.0, H
+    for i in range(3):
+        H[i, 3 + i] = 1.0
+    return True, g_mean - b_c, q_gyro / T_s + rest_rate_std_rad_s**2, H
+
+
+def stack(blocks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One measurement from several `(residual, R, H)` blocks (None entries skipped): residuals and
+    H stacked, R block-diagonal."""
+    blocks = [b for b in blocks if b is not None]
+    if len(blocks) == 1:
+        return blocks[0]
+    R_all = np.zeros((3 * len(blocks), 3 * len(blocks)))
+    for i, b in enumerate(blocks):
+        R_all[3 * i:3 * i + 3, 3 * i:3 * i + 3] = b[1]
+    return np.concatenate([b[0] for b in blocks]), R_all, np.vstack([b[2] for b in blocks])

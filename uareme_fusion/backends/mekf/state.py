@@ -1,0 +1,71 @@
+"""The error state of `Mekf`: block layout, injection into the nominal state, and the reset.
+
+Error state (12,): `[dtheta_c, db_c, dtheta_m, domega_c]` with RIGHT perturbations,
+`R_wc = R_wc_hat @ Exp(dtheta_c)`, `R_wm = R_wm_hat @ Exp(dtheta_m)`, `b_c = b_c_hat + db_c` (rad/s,
+camera frame), `omega_c = omega_c_hat + domega_c` (rad/s, visual-only constant-rate model).
+After an update the estimated error `dx` is injected into the nominal state and reset to zero; the
+covariance then takes the reset Jacobian `G = I - skew(dtheta)/2` on each rotation block.
+`skew3` and `reset_jacobian` are plain-array functions that the compiled kernels share.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...rotations import exp_so3
+
+TH, BG, MF, RATE = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
+"""Blocks of the 12-dimensional error state: camera attitude, gyro bias, Manhattan attitude, rate."""
+N_STATE = 12
+I3 = np.eye(3)
+ZERO_STATE = np.zeros(N_STATE)
+ZERO_STATE.setflags(write=False)
+_TH_AND_MF = np.array([[0, 1, 2], [6, 7, 8]])
+"""Indices that gather the two rotation blocks of the error state as a (2, 3) stack."""
+ORTHONORMALISE_EVERY = 16
+"""Products (integration chunks and update corrections) between re-orthonormalisations of R_wc and
+R_wm: rounding drift grows by ~1e-16 per product, far below anything that matters in 16."""
+
+
+def orthonormal(R: np.ndarray) -> np.ndarray:
+    """One Newton step of the polar decomposition, `R (3 I - R^T R) / 2`, of a (3, 3) near-rotation:
+    removes the rounding drift of a product of rotations (exact rotations are fixed points)."""
+    return 0.5 * R @ (3.0 * I3 - R.T @ R)
+
+
+def skew3(v):
+    """(3, 3) cross-product matrix of a (3,) vector: `skew3(a) @ b = a x b`."""
+    out = np.zeros((3, 3))
+    out[0, 1], out[0, 2], out[1, 2] = -v[2], v[1], -v[0]
+    out[1, 0], out[2, 0], out[2, 1] = v[2], -v[1], v[0]
+    return out
+
+
+def reset_jacobian(dx, with_manhattan):
+    """(12, 12) Jacobian of the error reset after injecting `dx` (12,): `I - skew(dtheta)/2` on the
+    camera attitude block and, when `with_manhattan`, on the Manhattan block; identity elsewhere."""
+    G = np.eye(12)
+    for offset in (0, 6):
+        if offset == 6 and not with_manhattan:
+            break
+        a, b, c = 0.5 * dx[offset], 0.5 * dx[offset + 1], 0.5 * dx[offset + 2]
+        G[offset, offset + 1] += c
+        G[offset, offset + 2] -= b
+        G[offset + 1, offset] -= c
+        G[offset + 1, offset + 2] += a
+        G[offset + 2, offset] += b
+        G[offset + 2, offset + 1] -= a
+    return G
+
+
+def inject(R_wc, R_wm, b_c, omega_c, dx: np.ndarray, with_manhattan: bool, with_rate: bool):
+    """The nominal state `(R_wc (3, 3), R_wm (3, 3), b_c (3,) rad/s, omega_c (3,) rad/s)` corrected by
+    the error estimate `dx` (12,) (right perturbations): the Manhattan block only `with_manhattan`
+    (once that frame is known), the rate only `with_rate` (constant-rate model)."""
+    if with_manhattan:
+        dR_c, dR_m = exp_so3(dx[_TH_AND_MF])
+        R_wm = R_wm @ dR_m
+    else:
+        dR_c = exp_so3(dx[TH])
+    omega_c = omega_c + dx[RATE] if with_rate else omega_c
+    return R_wc @ dR_c, R_wm, b_c + dx[BG], omega_c
