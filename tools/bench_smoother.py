@@ -15,7 +15,8 @@ import argparse
 
 import numpy as np
 
-from uareme_fusion.compare import make_backends, run_backend, summarise, synthetic_sequence
+from uareme_fusion.evaluation.compare import make_backends, run_backend, summarise
+from uareme_fusion.evaluation.sequence import synthetic_sequence
 
 
 def main() -> None:

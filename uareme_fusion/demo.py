@@ -18,6 +18,7 @@ from rich.table import Table
 
 from .benchmarks.peers import vqf_6d_R_wi
 from .drivers.base import ImuBatch, Source
+from .evaluation.statistics import error_stats
 from .rotations import angle_between, exp_so3, nees, tilt_error_deg, up_in_camera
 from .sim.normal_maps import manhattan_normal_map
 from .solver import solve_manhattan
@@ -106,17 +107,22 @@ class _Collector:
 
 
 DEMO_SCENES = {"room": ("handheld", 12.0), "bus": ("vehicle", 30.0)}
-"""Scenario: (EKF preset, seconds) of the rendered demo sequences, 15 fps at 320x240."""
+"""Scenario: (EKF preset, seconds) of the rendered demo sequences, 15 fps at `DEMO_SIZE`."""
+DEMO_SIZE = (320, 240)
+"""(width, height) in pixels of the rendered demo frames."""
 
 
 def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: str = "learned",
-                scale_seconds: float = 1.0, progress=None, threads: int | None = None) -> dict:
+                scale_seconds: float = 1.0, progress=None, threads: int | None = None,
+                size: tuple[int, int] = DEMO_SIZE) -> dict:
     """Rendered room and bus through the whole pipeline (normals -> solver -> EKF with IMU): tilt of
     vision only, IMU only (our filter, and vqf when installed) and fused; a table, a plot and the
-    horizon overlay video of the bus."""
+    horizon overlay video of the bus. `scale_seconds` scales the scenes' lengths and `size`
+    (width, height) is that of the rendered frames (a smaller configuration for tests)."""
     from .backends.mekf import Mekf, MekfConfig, MekfMode
     from .backends.single import SingleFrame
-    from .compare import BackendRun, VisualSequence, errors_over_time, run_backend
+    from .evaluation.compare import BackendRun, errors_over_time, run_backend
+    from .evaluation.sequence import VisualSequence
     from .config import load_config
     from .drivers.simulated import SimulatedSource
     from .pipeline import RunConfig
@@ -128,7 +134,8 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
     for col in ("scene", "estimator", "mean", "p95", "max", "ARE mean"):
         table.add_column(col)
     for scene, (preset, seconds) in DEMO_SCENES.items():
-        source = _TeeImu(SimulatedSource(scene, seconds=seconds * scale_seconds, fps=15.0, seed=seed))
+        source = _TeeImu(SimulatedSource(scene, seconds=seconds * scale_seconds, fps=15.0, width=size[0],
+                                          height=size[1], seed=seed))
         collector = _Collector()
         sinks = [collector]
         if out_dir is not None and scene == "bus":
@@ -147,7 +154,7 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
         for name, run in runs.items():
             err = errors_over_time(run, R_true)
             ok = err["initialised"]
-            rows[name] = (err["tilt_deg"][ok], float(np.mean(err["are_deg"][ok])))
+            rows[name] = (err["tilt_deg"][ok], error_stats(err["are_deg"][ok], ("mean",))["mean"])
         vqf_tilt = _vqf_tilt_deg(seq, R_true)
         if vqf_tilt is not None:
             rows["IMU only (vqf 6D)"] = (vqf_tilt, float("nan"))
@@ -155,8 +162,7 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
                           "timing_ms": stats.as_dict()["timing_ms"]}
         tilts[scene] = {}
         for name, (tilt, are) in rows.items():
-            figures[scene][name] = {"mean": float(tilt.mean()), "p95": float(np.percentile(tilt, 95)),
-                                    "max": float(tilt.max()), "are_mean": are}
+            figures[scene][name] = {**error_stats(tilt, ("mean", "p95", "max")), "are_mean": are}
             tilts[scene][name] = (t[-len(tilt):], tilt)
             table.add_row(scene, name, *(f"{figures[scene][name][k]:.2f}" for k in ("mean", "p95", "max")),
                           "" if np.isnan(are) else f"{are:.2f}")
@@ -176,14 +182,15 @@ TILT_PLOT_TICKS_DEG = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 20, 50, 100, 180)
 
 
 def _plot_tilt(tilts: dict, path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """The tilt plot, drawn on matplotlib's Agg canvas directly (no global backend is changed)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
     from matplotlib.ticker import FixedLocator, FormatStrFormatter
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(len(tilts), 1, figsize=(10, 3.2 * len(tilts)), squeeze=False)
+    fig = Figure(figsize=(10, 3.2 * len(tilts)))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(tilts), 1, squeeze=False)
     for ax, (scene, rows) in zip(axes[:, 0], tilts.items()):
         for name, (t, tilt) in rows.items():
             ax.plot(t, tilt, lw=1, label=name)
@@ -197,7 +204,6 @@ def _plot_tilt(tilts: dict, path: Path) -> Path:
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path
 
 

@@ -16,7 +16,8 @@ import numpy as np
 from ..drivers.base import GroundTruth, Source
 from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
 from ..errors import InputError
-from ..metrics import attitude_errors, error_summary
+from ..evaluation.backend_factory import knows_gravity
+from ..evaluation.metrics import attitude_errors, error_summary
 from ..rotations import align_constant
 from ..types import Status
 from .config import RunConfig
@@ -24,9 +25,6 @@ from .imu_rotation_check import ImuRotationCheck
 from .runner import Pipeline, RunStats
 from .sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
 from .stages import CappedNormals, make_backend, make_normal_estimator, mekf_preset_for
-
-GRAVITY_AWARE_BACKENDS = ("mekf", "smoother")
-"""With an IMU these know absolute up: NEES after a yaw-only alignment (compare.GRAVITY_AWARE)."""
 
 
 def make_output_folder(out_dir: str | Path) -> Path:
@@ -76,8 +74,7 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
         summary["imu_rotation_estimate"] = check.report()
         summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w]
     if log is not None:
-        summary.update(evaluation(log, truth, gravity_aware=source.info.has_imu and cfg.backend in
-                                  GRAVITY_AWARE_BACKENDS))
+        summary.update(evaluation(log, truth, gravity_aware=knows_gravity(cfg.backend, source.info.has_imu)))
     summary["outputs"] = sorted(p.name for p in out.iterdir() if p.name != "summary.json") + ["summary.json"]
     (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=False) + "\n")
     return summary
