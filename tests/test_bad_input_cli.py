@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from uareme_fusion.cli import app
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
-from test_bad_input_images import png_bytes  # pytest puts tests/ on sys.path
+from helpers import png_bytes  # pytest puts tests/ on sys.path
 
 runner = CliRunner()
 RNG = np.random.default_rng(3)
@@ -167,7 +167,7 @@ COMPARE_OPTION_CASES = [
     ("no_source", [], "give either a dataset folder SOURCE or --synthetic"),
     ("both_sources", ["SEQ", "--synthetic", "walk"], "not both"),
     ("missing_folder", ["MISSING"], "no such file or folder"),
-    ("file_as_source", ["FILE"], "OpenCV cannot open it"),  # any source 'run' accepts: not a video
+    ("file_as_source", ["FILE"], "FILE is not an EuRoC IMU file"),  # sniffed by content: not a video, not a table
     ("empty_folder", ["EMPTY"], "not a dataset .* holds no image files"),
     ("unknown_trajectory", ["--synthetic", "moon"], "unknown trajectory 'moon'"),
     ("negative_duration", ["--synthetic", "static", "--duration-s", "-1"], "Invalid value for '--duration-s'"),

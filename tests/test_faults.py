@@ -30,7 +30,7 @@ from uareme_fusion.pipeline.sinks import ESTIMATE_COLUMNS
 from uareme_fusion.rotations import tilt_error_deg, up_in_camera
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.types import NormalMap, Status
-from test_oak_driver import FakeImgFrame, packets  # pytest puts tests/ on sys.path
+from helpers import FakeImgFrame, packets  # pytest puts tests/ on sys.path
 
 SECONDS = 8.0
 FAULT = (3.0, 5.0)

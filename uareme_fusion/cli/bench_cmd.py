@@ -3,7 +3,9 @@
 - `solver`: the single-frame solver's stages (one core), medians and p90;
 - `pipeline`: end-to-end fps and per-stage ms at 640x480, and memory over a long stream (issue 7);
 - `soak`: one simulated hour through the full pipeline: RSS growth, state sizes, accuracy (issue 8);
-- `broad`: BROAD IMU trials with default options beside imu_only, vehicle and vqf 6D (issue 14).
+- `broad`: BROAD IMU trials with default options beside imu_only, vehicle and vqf 6D (issue 14);
+- `mekf`: the EKF on simulated bus and room scenarios, BROAD and EuRoC, beside IMU-only peers (issues 5, 17);
+- `smoother`: the GTSAM smoother (paper and gyro-aided) against `single` on walk and shake (issue 6).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import typer
 
 from .app import app, fail
 
-BENCHMARKS = ("solver", "pipeline", "soak", "broad")
+BENCHMARKS = ("solver", "pipeline", "soak", "broad", "mekf", "smoother")
 
 
 @app.command()
@@ -33,7 +35,10 @@ def bench(
                                             help="soak: angular noise on the simulator's normals, deg."),
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
     data: Path = typer.Option(Path("../shared/data/broad_subset"), "--data",
-                              help="broad: folder of BROAD .hdf5 trials (needs the bench extra for vqf)."),
+                              help="broad, mekf: folder of BROAD .hdf5 trials (needs the bench extra for vqf); "
+                                   "mekf reads EuRoC V1_02 from euroc_v1_02_first40s/ beside it."),
+    seeds: int = typer.Option(5, "--seeds", min=1, max=100, help="mekf, smoother: seeds per scenario."),
+    quick: bool = typer.Option(False, "--quick", help="mekf: shorter simulated runs (not the reported figures)."),
     threads: int = typer.Option(None, "--threads", min=1, max=256,
                                 help="pipeline: torch CPU threads of the learned normals (default 1)."),
     json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
@@ -55,6 +60,14 @@ def bench(
         from ..benchmarks import broad
 
         results = broad.run(data)
+    elif what == "mekf":
+        from ..benchmarks import mekf
+
+        results = mekf.run(seeds=seeds, quick=quick, broad_dir=data)
+    elif what == "smoother":
+        from ..benchmarks import smoother
+
+        results = smoother.run(seeds=seeds)
     else:
         from ..benchmarks import soak
 

@@ -70,75 +70,49 @@ def camera_imu(batches: list[ImuBatch], R_ci: np.ndarray, imu_time_offset_s: flo
 
 
 def load_sequence(source: str | Path) -> VisualSequence:
-    """A dataset folder with its normals saved: its normals are solved once per frame.
+    """A dataset folder with its normals saved (`uareme-fusion simulate` writes one): its normals are
+    solved once per frame.
 
-    A folder written by `uareme-fusion simulate` (a `normals/` folder of per-frame `.npz`) is read by
-    its driver (`drivers.tum.TumSource`, with the simulator's normals), as `run` reads it. Otherwise
-    `normals.npz` holds `normals` (N, H, W, 3), optional `kappa` (N, H, W) and `t_s` (N,) (else the
-    frame times of `rgb.txt`), beside the same driver's files: `groundtruth.txt` (TUM, camera to
-    world, slerped at the frame times), `imu0/data.csv` (EuRoC) and `scene.json` (IMU rotation and
-    time offset). Missing ground truth or IMU is allowed and noted; a missing folder or missing
-    normals is an `InputError`.
+    Normals: `normals.npz` with `normals` (N, H, W, 3), optional `kappa` (N, H, W) and `t_s` (N,),
+    or a folder `normals/` of per-frame `.npz` files (sorted by name) with frame times from `rgb.txt`.
+    The rest is read by the TUM driver's readers (`drivers.tum`): ground truth from `groundtruth.txt`
+    (camera to world, slerped at the frame times, `GroundTruth.at`; it must span them), IMU from `imu0/data.csv` (EuRoC)
+    with the rotation and time offset of `scene.json`. Missing ground truth or IMU is allowed and
+    noted; a missing folder or missing normals is an `InputError`.
     """
+    from ..drivers.euroc_imu import read_euroc_imu
+    from ..drivers.tum import ground_truth_from_tum, read_metadata
+    from ..drivers.tum_rgbd import read_tum_list, read_tum_trajectory
+
     root = Path(source)
     if not root.exists():
         raise InputError(f"{root}: no such dataset folder")
     if not root.is_dir():
         raise InputError(f"{root}: expected a dataset folder written by 'uareme-fusion simulate', got a file")
-    if (root / "normals.npz").is_file():
-        return _stacked_normals_sequence(root)
-    if not (root / "normals").is_dir():
-        raise InputError(f"{root}: no normals (expected normals.npz or a normals/ folder of .npz files)")
-    from ..drivers.tum import TumSource
-
-    with TumSource(root) as tum:
-        if tum.normal_files is None:
-            raise InputError(f"{root / 'normals'}: no .npz normal maps for the frames of rgb.txt")
-        seq = source_sequence(tum, RunConfig(normals="source"))
-    return VisualSequence(root.name, seq.t_frame_s, seq.visuals, seq.imu_t_s, seq.imu_gyro_rad_s,
-                          seq.imu_accel_m_s2, seq.R_wc_true, seq.notes + tum.notes)
-
-
-def _stacked_normals_sequence(root: Path) -> VisualSequence:
-    """`normals.npz` with the TUM/EuRoC files of `drivers.tum` beside it (see `load_sequence`)."""
-    from ..drivers.imu_csv import read_imu_log
-    from ..drivers.tum import ground_truth_from_tum, read_metadata
-    from ..drivers.tum_rgbd import read_tum_list, read_tum_trajectory
-    from ..types import NormalMap
-
-    stacked, notes = root / "normals.npz", []
-    try:
-        with np.load(stacked) as data:
-            if "normals" not in data:
-                raise InputError(f"{stacked}: no array named 'normals' (found {', '.join(data.files)})")
-            normals = data["normals"]
-            kappa = data["kappa"] if "kappa" in data else np.ones(normals.shape[:-1], np.float32)
-            t_frame = data["t_s"] if "t_s" in data else None
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{stacked}: not a readable .npz file ({exc})") from None
-    if normals.ndim != 4 or normals.shape[-1] != 3:
-        raise InputError(f"{stacked}: expected normals of shape (N, H, W, 3), got {normals.shape}")
+    maps, t_frame, notes = _saved_normal_maps(root)
     if t_frame is None:
         if not (root / "rgb.txt").is_file():
             raise InputError(f"{root / 'rgb.txt'}: missing (needed for the frame times of the normal maps)")
         t_frame, _ = read_tum_list(root / "rgb.txt")
     t_frame = np.asarray(t_frame, dtype=float)
-    if len(t_frame) != len(normals):
-        raise InputError(f"{root}: {len(normals)} normal maps but {len(t_frame)} frame times")
-    visuals, invalid = solve_frames([NormalMap(n, k) for n, k in zip(normals, kappa)])
+    if len(t_frame) != len(maps):
+        raise InputError(f"{root}: {len(maps)} normal maps but {len(t_frame)} frame times")
+    visuals, invalid = solve_frames(maps)
     if invalid:
         notes.append(f"{invalid} normal maps had no valid normals and gave no visual rotation")
     R_wc_true, gt_path = None, root / "groundtruth.txt"
     if gt_path.is_file():
-        R_wc_true, in_span = ground_truth_from_tum(read_tum_trajectory(gt_path), gravity_aligned=True).at(t_frame)
-        if not in_span.all():
-            raise InputError(f"{gt_path}: ground truth covers {int(in_span.sum())} of the {len(t_frame)} frame "
-                             f"times ({t_frame[0]:.3f}-{t_frame[-1]:.3f} s)")
+        truth = ground_truth_from_tum(read_tum_trajectory(gt_path), gravity_aligned=True)
+        if len(truth.t_s) == 0 or t_frame[0] < truth.t_s[0] or t_frame[-1] > truth.t_s[-1]:
+            span = f"{truth.t_s[0]:.3f}-{truth.t_s[-1]:.3f} s" if len(truth.t_s) else "no time"
+            raise InputError(f"{gt_path}: ground truth covers {span} but frames span "
+                             f"{t_frame[0]:.3f}-{t_frame[-1]:.3f} s")
+        R_wc_true, _ = truth.at(t_frame)
     else:
         notes.append("no groundtruth.txt: ARE, tilt and NEES not computed")
     imu_arrays = (None, None, None)
     if (root / "imu0" / "data.csv").is_file():
-        imu, _ = read_imu_log(root / "imu0" / "data.csv")
+        imu = read_euroc_imu(root / "imu0" / "data.csv")
         meta = read_metadata(root)
         R_ci = meta["R_ci"] if meta.get("R_ci") is not None else np.eye(3)
         imu_arrays = camera_imu([ImuBatch(imu.t_s, imu.gyro_rad_s, imu.accel_m_s2)], R_ci,
@@ -146,3 +120,30 @@ def _stacked_normals_sequence(root: Path) -> VisualSequence:
     else:
         notes.append("no imu0/data.csv: IMU backends run without IMU or are skipped")
     return VisualSequence(root.name, t_frame, visuals, *imu_arrays, R_wc_true, notes)
+
+
+def _saved_normal_maps(root: Path) -> tuple[list, np.ndarray | None, list]:
+    """(normal maps, their times or None, notes) from `normals.npz` or `normals/*.npz` in `root`."""
+    from ..io.normal_maps import load_normal_map
+    from ..types import NormalMap
+
+    stacked = root / "normals.npz"
+    if stacked.is_file():
+        try:
+            with np.load(stacked) as data:
+                if "normals" not in data:
+                    raise InputError(f"{stacked}: no array named 'normals' (found {', '.join(data.files)})")
+                normals = data["normals"]
+                kappa = data["kappa"] if "kappa" in data else np.ones(normals.shape[:-1], np.float32)
+                t_frame = data["t_s"] if "t_s" in data else None
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{stacked}: not a readable .npz file ({exc})") from None
+        if normals.ndim != 4 or normals.shape[-1] != 3:
+            raise InputError(f"{stacked}: expected normals of shape (N, H, W, 3), got {normals.shape}")
+        return [NormalMap(n, k) for n, k in zip(normals, kappa)], t_frame, []
+    if (root / "normals").is_dir():
+        files = sorted((root / "normals").glob("*.npz"))
+        if not files:
+            raise InputError(f"{root / 'normals'}: no .npz normal maps")
+        return [load_normal_map(f) for f in files], None, []
+    raise InputError(f"{root}: no normals (expected normals.npz or a normals/ folder of .npz files)")
