@@ -20,12 +20,12 @@ def test_solver_demo_figures():
 
 def test_rendered_fusion_demo_figures(tmp_path):
     """Room and bus rendered and run through the pipeline (the simulator's normals, half the scenes'
-    length and a quarter of the pixels, to stay fast)."""
+    length, half the frame rate and a ninth of the pixels, to stay fast)."""
     from uareme_fusion.demo import fusion_demo
 
     out = io.StringIO()
     figures = fusion_demo(Console(file=out, width=120), tmp_path, normals="source", scale_seconds=0.5,
-                          size=(160, 120))
+                          size=(120, 90), fps=7.5)
     bus = figures["bus"]
     fused = bus["fused (mekf, vehicle)"]
     assert fused["p95"] <= 1.0 and fused["max"] <= 2.0

@@ -107,18 +107,19 @@ class _Collector:
 
 
 DEMO_SCENES = {"room": ("handheld", 12.0), "bus": ("vehicle", 30.0)}
-"""Scenario: (EKF preset, seconds) of the rendered demo sequences, 15 fps at `DEMO_SIZE`."""
+"""Scenario: (EKF preset, seconds) of the rendered demo sequences, at `DEMO_FPS` and `DEMO_SIZE`."""
 DEMO_SIZE = (320, 240)
 """(width, height) in pixels of the rendered demo frames."""
+DEMO_FPS = 15.0
 
 
 def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: str = "learned",
                 scale_seconds: float = 1.0, progress=None, threads: int | None = None,
-                size: tuple[int, int] = DEMO_SIZE) -> dict:
+                size: tuple[int, int] = DEMO_SIZE, fps: float = DEMO_FPS) -> dict:
     """Rendered room and bus through the whole pipeline (normals -> solver -> EKF with IMU): tilt of
     vision only, IMU only (our filter, and vqf when installed) and fused; a table, a plot and the
-    horizon overlay video of the bus. `scale_seconds` scales the scenes' lengths and `size`
-    (width, height) is that of the rendered frames (a smaller configuration for tests)."""
+    horizon overlay video of the bus. `scale_seconds` scales the scenes' lengths, `size` (width,
+    height) and `fps` are those of the rendered frames (a smaller configuration for tests)."""
     from .backends.mekf import Mekf, MekfConfig, MekfMode
     from .backends.single import SingleFrame
     from .evaluation.compare import BackendRun, errors_over_time, run_backend
@@ -130,16 +131,16 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
     from .pipeline.session import build_pipeline
 
     figures, tilts = {}, {}
-    table = Table(title=f"Tilt error (deg), rendered scenes, {normals} normals, 15 fps")
+    table = Table(title=f"Tilt error (deg), rendered scenes, {normals} normals, {fps:g} fps")
     for col in ("scene", "estimator", "mean", "p95", "max", "ARE mean"):
         table.add_column(col)
     for scene, (preset, seconds) in DEMO_SCENES.items():
-        source = _TeeImu(SimulatedSource(scene, seconds=seconds * scale_seconds, fps=15.0, width=size[0],
+        source = _TeeImu(SimulatedSource(scene, seconds=seconds * scale_seconds, fps=fps, width=size[0],
                                           height=size[1], seed=seed))
         collector = _Collector()
         sinks = [collector]
         if out_dir is not None and scene == "bus":
-            sinks.append(HorizonVideoSink(out_dir / "demo_bus_horizon.mp4", 15.0, panes=True))
+            sinks.append(HorizonVideoSink(out_dir / "demo_bus_horizon.mp4", fps, panes=True))
         pipeline = build_pipeline(source, RunConfig(normals=normals, mekf_preset=preset,
                                                      **({} if threads is None else {"threads": threads})), sinks)
         stats = pipeline.run(source, on_result=None if progress is None else progress(scene, source.info.n_frames))
