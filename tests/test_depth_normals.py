@@ -1,6 +1,5 @@
 """DepthNormals: exact normals on rendered planes, calibrated kappa, missing depth, bad input, real data."""
 
-from pathlib import Path
 
 import cv2
 import numpy as np

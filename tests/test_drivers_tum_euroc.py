@@ -1,6 +1,5 @@
 """TUM RGB-D and EuRoC readers: the simulator's files round-trip, and the real data sets load."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest

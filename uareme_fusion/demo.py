@@ -120,11 +120,10 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
     vision only, IMU only (our filter, and vqf when installed) and fused; a table, a plot and the
     horizon overlay video of the bus. `scale_seconds` scales the scenes' lengths, `size` (width,
     height) and `fps` are those of the rendered frames (a smaller configuration for tests)."""
-    from .backends.mekf import Mekf, MekfConfig, MekfMode
-    from .backends.single import SingleFrame
+    from .backends.mekf import MekfMode
+    from .evaluation.backend_factory import make_backend
     from .evaluation.compare import BackendRun, errors_over_time, run_backend
     from .evaluation.sequence import VisualSequence
-    from .config import load_config
     from .drivers.simulated import SimulatedSource
     from .pipeline import RunConfig
     from .pipeline.drawing_sinks import HorizonVideoSink
@@ -147,9 +146,9 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
         t = np.array([r.t_s for r in collector.results])
         R_true, _ = source.ground_truth().at(t)
         seq = VisualSequence(scene, t, [r.visual for r in collector.results], *source.imu_arrays(), R_true)
-        cfg = load_config(preset, MekfConfig)
-        runs = {"vision only (single frame)": run_backend(SingleFrame(), seq),
-                "IMU only (our filter)": run_backend(Mekf(cfg.model_copy(update={"mode": MekfMode.IMU_ONLY})), seq),
+        imu_only = make_backend("mekf", mekf_preset=preset, overrides={"mode": MekfMode.IMU_ONLY})
+        runs = {"vision only (single frame)": run_backend(make_backend("single"), seq),
+                "IMU only (our filter)": run_backend(imu_only, seq),
                 f"fused (mekf, {preset})": BackendRun("mekf", [r.estimate for r in collector.results])}
         rows = {}
         for name, run in runs.items():

@@ -14,13 +14,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..backends.mekf import Mekf, MekfConfig
-from ..config import load_config
 from ..rotations import align_yaw, are_deg, nees, tilt_error_deg, up_in_camera
 from ..sim.imu import simulate_imu
 from ..sim.normal_maps import manhattan_normal_map
 from ..sim.trajectory import make_trajectory
 from ..solver import solve_manhattan
+from .backend_factory import make_backend
 
 VISUAL_NOISE_DEG = 8.0
 VISUAL_CORRELATION_PX = 4.0
@@ -110,5 +109,5 @@ def run_scenario(
 
 
 def mekf_factory(preset: str, **overrides):
-    config = load_config(preset, MekfConfig).model_copy(update=overrides)
-    return lambda: Mekf(config)
+    """A `backend_factory` for `run_scenario`: the EKF with `preset` and `overrides`."""
+    return lambda: make_backend("mekf", mekf_preset=preset, overrides=overrides)
