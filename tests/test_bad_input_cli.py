@@ -160,7 +160,7 @@ def test_compare_corrupt_normal_map_names_it(tmp_path):
     root = dataset(tmp_path / "seq")
     (root / "normals" / "000001.npz").write_bytes(b"PK\x03\x04 truncated")
     result = runner.invoke(app, ["compare", str(root), "--out", str(tmp_path / "out")])
-    assert_one_error_line(result, r"000001.npz: not a readable .npz archive")
+    assert_one_error_line(result, r"000001.npz: not a readable normals file")
 
 
 COMPARE_OPTION_CASES = [

@@ -74,7 +74,8 @@ def load_sequence(source: str | Path) -> VisualSequence:
     solved once per frame.
 
     Normals: `normals.npz` with `normals` (N, H, W, 3), optional `kappa` (N, H, W) and `t_s` (N,),
-    or a folder `normals/` of per-frame `.npz` files (sorted by name) with frame times from `rgb.txt`.
+    or a folder `normals/` of per-frame `.npz` files (sorted by name; `drivers.tum.read_frame_normals`,
+    so a frame the simulator dropped has no usable pixel, as in `run`) with frame times from `rgb.txt`.
     The rest is read by the TUM driver's readers (`drivers.tum`): ground truth from `groundtruth.txt`
     (camera to world, slerped at the frame times, `GroundTruth.at`; it must span them), IMU from `imu0/data.csv` (EuRoC)
     with the rotation and time offset of `scene.json`. Missing ground truth or IMU is allowed and
@@ -124,7 +125,7 @@ def load_sequence(source: str | Path) -> VisualSequence:
 
 def _saved_normal_maps(root: Path) -> tuple[list, np.ndarray | None, list]:
     """(normal maps, their times or None, notes) from `normals.npz` or `normals/*.npz` in `root`."""
-    from ..io.normal_maps import load_normal_map
+    from ..drivers.tum import read_frame_normals
     from ..types import NormalMap
 
     stacked = root / "normals.npz"
@@ -145,5 +146,5 @@ def _saved_normal_maps(root: Path) -> tuple[list, np.ndarray | None, list]:
         files = sorted((root / "normals").glob("*.npz"))
         if not files:
             raise InputError(f"{root / 'normals'}: no .npz normal maps")
-        return [load_normal_map(f) for f in files], None, []
+        return [read_frame_normals(f) for f in files], None, []
     raise InputError(f"{root}: no normals (expected normals.npz or a normals/ folder of .npz files)")
