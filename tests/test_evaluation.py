@@ -54,3 +54,32 @@ def test_run_applies_the_source_imu_geometry_and_overrides_to_the_ekf():
     np.testing.assert_array_equal(mekf.config.R_ci, R_ci)
     assert mekf.config.imu_time_offset_s == -0.02  # the EKF's sign convention (`make_backend`)
     assert mekf.config.gyro_noise_rad_s_sqrt_hz == 0.005
+
+
+def test_compare_reads_a_simulated_folder_as_run_does(tmp_path):
+    """A frame the simulator marks dropped has no usable pixel for `compare` (no visual rotation),
+    and the IMU is rotated and shifted by scene.json, as by `run`'s TUM driver."""
+    from uareme_fusion.drivers.tum import TumSource
+    from uareme_fusion.evaluation.source_sequence import load_sequence, source_sequence
+    from uareme_fusion.sim.dataset import SequenceOptions, write_sequence
+
+    out = tmp_path / "sim"
+    R_ci = ((0.0, -1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))  # a phone's IMU axes, 13 ms late
+    write_sequence("room", out, SequenceOptions(frames=5, width=32, height=24, fps=10.0, seed=2, R_ci=R_ci,
+                                                time_offset_s=0.013))
+    path = out / "normals" / "000002.npz"
+    with np.load(path) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    np.savez(path, **{**arrays, "dropped": np.bool_(True)})
+    seq = load_sequence(out)
+    assert [v is None for v in seq.visuals] == [False, False, True, False, False]
+    assert any("1 normal maps had no valid normals" in n for n in seq.notes)
+    with TumSource(out) as tum:
+        from_run = source_sequence(tum, RunConfig(normals="source"))
+    assert [v is None for v in from_run.visuals] == [v is None for v in seq.visuals]
+    np.testing.assert_allclose(seq.t_frame_s, from_run.t_frame_s)
+    np.testing.assert_allclose(seq.R_wc_true, from_run.R_wc_true, atol=1e-12)
+    # the IMU on the camera clock and axes, from scene.json, as the driver puts it
+    for a, b in zip((seq.imu_t_s, seq.imu_gyro_rad_s, seq.imu_accel_m_s2),
+                    (from_run.imu_t_s, from_run.imu_gyro_rad_s, from_run.imu_accel_m_s2)):
+        np.testing.assert_allclose(a, b, atol=1e-9)
