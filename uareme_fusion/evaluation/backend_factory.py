@@ -38,9 +38,10 @@ def backend_kind(name: str, has_imu: bool = False) -> BackendKind:
     return BACKEND_KINDS["smoother-gyro" if name == "smoother" and has_imu else name]
 
 
-def knows_gravity(name: str, has_imu: bool) -> bool:
-    """Whether backend `name` fed this IMU (or none) estimates absolute tilt."""
-    return has_imu and backend_kind(name, has_imu).knows_gravity
+def knows_gravity(kind_name: str, has_imu: bool) -> bool:
+    """Whether the backend kind `kind_name` (a key of `BACKEND_KINDS`, e.g. from `backend_kind`), fed
+    this IMU (or none), estimates absolute tilt."""
+    return has_imu and backend_kind(kind_name).knows_gravity
 
 
 def make_backend(name: str, imu_geometry: dict | None = None, mekf_preset: str | None = None,

@@ -16,7 +16,7 @@ import numpy as np
 from ..drivers.base import GroundTruth, Source
 from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
 from ..errors import InputError
-from ..evaluation.backend_factory import knows_gravity
+from ..evaluation.backend_factory import backend_kind, knows_gravity
 from ..evaluation.metrics import attitude_errors, error_summary
 from ..rotations import align_constant
 from ..types import Status
@@ -74,7 +74,8 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
         summary["imu_rotation_estimate"] = check.report()
         summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w]
     if log is not None:
-        summary.update(evaluation(log, truth, gravity_aware=knows_gravity(cfg.backend, source.info.has_imu)))
+        summary.update(evaluation(log, truth, gravity_aware=knows_gravity(
+            backend_kind(cfg.backend, source.info.has_imu).name, source.info.has_imu)))
     summary["outputs"] = sorted(p.name for p in out.iterdir() if p.name != "summary.json") + ["summary.json"]
     (out / "summary.json").write_text(json.dumps(summary, indent=2, sort_keys=False) + "\n")
     return summary
