@@ -4,12 +4,10 @@ from pathlib import Path
 
 import pytest
 
-SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+from helpers import shared_data_or_skip
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def shared_data() -> Path:
     """`../shared/data` beside the repository; skips the test when it is absent."""
-    if not SHARED_DATA.is_dir():
-        pytest.skip(f"development data not found at {SHARED_DATA}")
-    return SHARED_DATA
+    return shared_data_or_skip()

@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from uareme_fusion.cli import app
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
-from test_bad_input_images import png_bytes  # pytest puts tests/ on sys.path
+from helpers import png_bytes  # pytest puts tests/ on sys.path
 
 runner = CliRunner()
 RNG = np.random.default_rng(3)
@@ -160,7 +160,7 @@ def test_compare_corrupt_normal_map_names_it(tmp_path):
     root = dataset(tmp_path / "seq")
     (root / "normals" / "000001.npz").write_bytes(b"PK\x03\x04 truncated")
     result = runner.invoke(app, ["compare", str(root), "--out", str(tmp_path / "out")])
-    assert_one_error_line(result, r"000001.npz: not a readable .npz archive")
+    assert_one_error_line(result, r"000001.npz: not a readable normals file")
 
 
 COMPARE_OPTION_CASES = [

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import re
 import struct
-import zlib
 
 import cv2
 import numpy as np
@@ -21,22 +20,13 @@ from uareme_fusion.io.images import MAX_IMAGE_PIXELS, image_size, read_image
 from uareme_fusion.io.normal_maps import load_normal_map
 from uareme_fusion.normals.depth import DepthNormals, DepthNormalsConfig, read_depth_png
 
+from helpers import png_bytes  # pytest puts tests/ on sys.path
+
 RNG = np.random.default_rng(0)
 NORMALS = RNG.normal(size=(12, 16, 3)).astype(np.float32)
 RGB8 = RNG.integers(0, 256, size=(12, 16, 3), dtype=np.uint8)
 DEPTH16 = RNG.integers(500, 5000, size=(12, 16), dtype=np.uint16)
 K = np.array([[20.0, 0.0, 8.0], [0.0, 20.0, 6.0], [0.0, 0.0, 1.0]])
-
-
-def png_bytes(width: int, height: int, colour_type: int = 2, bit_depth: int = 8, rows: int = 2) -> bytes:
-    """A PNG whose IHDR declares width x height but whose data holds only `rows` rows."""
-
-    def chunk(tag: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
-
-    ihdr = struct.pack(">IIBBBBB", width, height, bit_depth, colour_type, 0, 0, 0)
-    idat = zlib.compress(b"\x00" * ((min(width, 64) * 3 + 1) * rows))
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
 
 
 def jpeg_with_size(width: int, height: int) -> bytes:

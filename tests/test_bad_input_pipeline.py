@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 
 from uareme_fusion.cli import app
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
-from test_bad_input_images import png_bytes  # pytest puts tests/ on sys.path
+from helpers import png_bytes  # pytest puts tests/ on sys.path
 
 runner = CliRunner()
 N_FRAMES = 5

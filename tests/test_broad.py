@@ -2,27 +2,23 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from uareme_fusion.drivers.broad import read_broad
 from uareme_fusion.errors import InputError
 
-BROAD_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "broad_subset"
 
 
-def trials():
-    if not BROAD_DIR.is_dir():
-        pytest.skip(f"BROAD data not found at {BROAD_DIR}")
-    return sorted(BROAD_DIR.glob("*.hdf5"))
+def trials(shared_data):
+    broad_dir = shared_data / "broad_subset"
+    if not broad_dir.is_dir():
+        pytest.skip(f"BROAD data not found at {broad_dir}")
+    return sorted(broad_dir.glob("*.hdf5"))
 
 
-def test_reader_gives_units_and_reference():
-    trial = read_broad(trials()[0])
+def test_reader_gives_units_and_reference(shared_data):
+    trial = read_broad(trials(shared_data)[0])
     assert trial.sampling_rate_hz == pytest.approx(285.714, abs=1e-3)
     n = trial.t_s.size
     assert trial.gyro_rad_s.shape == (n, 3) and trial.accel_m_s2.shape == (n, 3) and trial.movement.shape == (n,)
@@ -44,19 +40,16 @@ def test_reader_names_a_bad_file(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("prefix", ["02_", "07_", "15_", "24_"])
-def test_imu_only_inclination_within_1_2x_of_vqf(prefix):
+def test_imu_only_inclination_within_1_2x_of_vqf(prefix, shared_data):
     """IMU-only MEKF (`imu_only` preset, the same on every trial) inclination RMSE on the movement
     samples within 1.2x of vqf's 6D filter (issue 5; measured 0.97 / 1.00 / 1.05 / 1.01), and the
     offline forward-backward run better than the online one (issue 17; 0.83 / 0.96 / 0.99 / 0.90 x vqf)."""
     pytest.importorskip("vqf")
-    paths = [p for p in trials() if p.stem.startswith(prefix)]
+    paths = [p for p in trials(shared_data) if p.stem.startswith(prefix)]
     if not paths:
-        pytest.skip(f"BROAD trial {prefix}* not in {BROAD_DIR}")
-    spec = importlib.util.spec_from_file_location("bench_mekf", Path(__file__).resolve().parents[1] / "tools" / "bench_mekf.py")
-    bench = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = bench  # dataclasses look their module up
-    spec.loader.exec_module(bench)
+        pytest.skip(f"BROAD trial {prefix}* not in {shared_data / 'broad_subset'}")
     from uareme_fusion.backends.mekf import MekfConfig
+    from uareme_fusion.benchmarks import mekf as bench
     from uareme_fusion.config import load_config
 
     config = load_config(bench.BROAD_PRESET, MekfConfig)

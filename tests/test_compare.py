@@ -10,7 +10,9 @@ import pytest
 from typer.testing import CliRunner
 
 from uareme_fusion.cli import app
-from uareme_fusion.compare import compare, load_sequence, synthetic_sequence
+from uareme_fusion.evaluation.compare import compare
+from uareme_fusion.evaluation.sequence import synthetic_sequence
+from uareme_fusion.evaluation.source_sequence import load_sequence
 from uareme_fusion.errors import InputError
 from uareme_fusion.rotations import quat_xyzw
 from uareme_fusion.sim.normal_maps import manhattan_normal_map

@@ -1,6 +1,5 @@
 """DepthNormals: exact normals on rendered planes, calibrated kappa, missing depth, bad input, real data."""
 
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -23,7 +22,6 @@ from uareme_fusion.normals.depth import (
 from uareme_fusion.rotations import align_constant, angle_between, are_deg, matrix_from_quat_xyzw, nearest_symmetric, nees
 from uareme_fusion.types import Frame
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 K = np.array([[500.0, 0.0, 79.5], [0.0, 510.0, 59.5], [0.0, 0.0, 1.0]])
 H, W = 120, 160
 
@@ -230,8 +228,8 @@ def test_read_depth_png_scales_and_names_the_file(tmp_path):
         read_depth_png(colour, 1e-3)
 
 
-def icl_sequence():
-    root = DATA / "icl_nuim_office_kt3"
+def icl_sequence(shared_data):
+    root = shared_data / "icl_nuim_office_kt3"
     if not (root / "groundtruth.txt").is_file():
         pytest.skip(f"ICL-NUIM office kt3 not found under {root}")
     gt = np.loadtxt(root / "groundtruth.txt")
@@ -239,10 +237,10 @@ def icl_sequence():
     return root, gt[:, 0].astype(int), matrix_from_quat_xyzw(gt[:, 4:8])
 
 
-def icl_depth_rotations():
+def icl_depth_rotations(shared_data):
     """Single-frame rotations from depth normals on ICL-NUIM kt3 (each solve initialised from the
     previous frame), with the ground truth converted to the OpenCV camera frame."""
-    root, index, R_wc_published = icl_sequence()
+    root, index, R_wc_published = icl_sequence(shared_data)
     est = DepthNormals()
     backend = SingleFrame()
     estimates = []
@@ -255,8 +253,8 @@ def icl_depth_rotations():
 
 
 @pytest.fixture(scope="module")
-def icl_rotations():
-    return icl_depth_rotations()
+def icl_rotations(shared_data):
+    return icl_depth_rotations(shared_data)
 
 
 def test_icl_nuim_rotation_from_depth_normals(icl_rotations):
@@ -288,10 +286,10 @@ def test_icl_nuim_negative_fy_convention(icl_rotations):
     assert np.degrees(angle_between(naive[0], naive)).max() > 5.0
 
 
-def test_icsl_corridor_millimetre_depth():
-    files = sorted((DATA / "icsl_corridor" / "depth").glob("*.png"))[:10]
+def test_icsl_corridor_millimetre_depth(shared_data):
+    files = sorted((shared_data / "icsl_corridor" / "depth").glob("*.png"))[:10]
     if not files:
-        pytest.skip(f"ICSL corridor not found under {DATA / 'icsl_corridor'}")
+        pytest.skip(f"ICSL corridor not found under {shared_data / 'icsl_corridor'}")
     est = DepthNormals()
     backend = SingleFrame()
     for k, f in enumerate(files):

@@ -1,6 +1,5 @@
 """TUM RGB-D and EuRoC readers: the simulator's files round-trip, and the real data sets load."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +12,6 @@ from uareme_fusion.sim.dataset import DEPTH_SCALE, SequenceOptions, write_sequen
 from uareme_fusion.sim.imu import simulate_imu
 from uareme_fusion.sim.scenarios import build_scenario
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 @pytest.fixture(scope="module")
@@ -81,8 +79,8 @@ def test_bad_files_raise_input_error(tmp_path):
         read_euroc_imu(bad)
 
 
-def test_reads_icl_nuim_office():
-    root = DATA / "icl_nuim_office_kt3"
+def test_reads_icl_nuim_office(shared_data):
+    root = shared_data / "icl_nuim_office_kt3"
     if not root.is_dir():
         pytest.skip(f"development data not found at {root}")
     seq = load_tum_rgbd(root)
@@ -95,8 +93,8 @@ def test_reads_icl_nuim_office():
     np.testing.assert_allclose(np.linalg.norm(q_gt, axis=1), 1.0, atol=1e-4)
 
 
-def test_reads_euroc_imu():
-    path = DATA / "euroc_v1_02_first40s" / "mav0" / "imu0" / "data.csv"
+def test_reads_euroc_imu(shared_data):
+    path = shared_data / "euroc_v1_02_first40s" / "mav0" / "imu0" / "data.csv"
     if not path.is_file():
         pytest.skip(f"development data not found at {path}")
     imu = read_euroc_imu(path)

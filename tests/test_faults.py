@@ -30,7 +30,7 @@ from uareme_fusion.pipeline.sinks import ESTIMATE_COLUMNS
 from uareme_fusion.rotations import tilt_error_deg, up_in_camera
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.types import NormalMap, Status
-from test_oak_driver import FakeImgFrame, packets  # pytest puts tests/ on sys.path
+from helpers import FakeImgFrame, packets  # pytest puts tests/ on sys.path
 
 SECONDS = 8.0
 FAULT = (3.0, 5.0)
@@ -288,12 +288,19 @@ def test_truncated_video_exits_1_naming_the_frame_with_outputs_kept(tmp_path):
     assert_outputs_complete(tmp_path / "out", 18, "source_error")
 
 
+def default_sigint() -> None:
+    """In the child before it starts: SIGINT back to its default, so that Python turns it into
+    KeyboardInterrupt even when the test runner was started with SIGINT ignored (nohup, CI)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_on_a_real_run_exits_130_with_complete_outputs(tmp_path):
     """SIGINT to `uareme-fusion run sim:room` (rendered, about 300 frames) once it has written a few
     estimates: exit status 130, and every output complete and parseable."""
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "uareme_fusion", "run", "sim:room", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=default_sigint)
     trajectory = out / "trajectory.tum"
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:

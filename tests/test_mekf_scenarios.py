@@ -1,29 +1,15 @@
 """MEKF on the project's simulator with the real Manhattan solver (short versions of
-tools/bench_mekf.py): bus tilt, handheld room with dropped frames, consistency."""
+`uareme-fusion bench mekf`, on `evaluation.scenarios`): bus tilt, handheld room with dropped frames, consistency."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
-import pytest
 
 from uareme_fusion.backends.single import SingleFrame
+from uareme_fusion.evaluation import scenarios as bench
 
 
-@pytest.fixture(scope="module")
-def bench():
-    path = Path(__file__).resolve().parents[1] / "tools" / "bench_mekf.py"
-    spec = importlib.util.spec_from_file_location("bench_mekf", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_bus_tilt_error_stays_within_goal(bench):
+def test_bus_tilt_error_stays_within_goal():
     """Camera fixed in an accelerating, braking, turning bus: fused tilt p95 <= 1 deg, max <= 2."""
     res = bench.run_scenario("bus", seed=3, duration_s=45.0, backend_factory=bench.mekf_factory("vehicle"), fps=15.0)
     tilt = res.tilt_deg
@@ -31,7 +17,7 @@ def test_bus_tilt_error_stays_within_goal(bench):
     assert tilt.max() <= 2.0
 
 
-def test_handheld_room_with_dropped_frames_beats_single_frame(bench):
+def test_handheld_room_with_dropped_frames_beats_single_frame():
     """20 % of frames dropped: no frame above 10 deg ARE, mean ARE no worse than `single`."""
     fused = bench.run_scenario("walk", seed=4, duration_s=15.0, backend_factory=bench.mekf_factory("handheld"),
                                drop_fraction=0.2)
@@ -42,7 +28,7 @@ def test_handheld_room_with_dropped_frames_beats_single_frame(bench):
     assert 1.5 <= fused.nees().mean() <= 6.0
 
 
-def test_visual_only_mode_tracks_a_pan(bench):
+def test_visual_only_mode_tracks_a_pan():
     """No IMU at all: the constant-rate model with the solver's rotations, no 90-degree flips."""
     res = bench.run_scenario("pan", seed=5, duration_s=10.0, backend_factory=bench.mekf_factory("handheld"),
                              use_imu=False)

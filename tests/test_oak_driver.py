@@ -2,7 +2,6 @@
 messages; the hardware test runs only with a device attached (`-m hardware`)."""
 
 import sys
-from datetime import timedelta
 
 import numpy as np
 import pytest
@@ -13,46 +12,12 @@ from uareme_fusion.drivers.oak import (FrameImuSync, ImuConversionCounts, batch_
 from uareme_fusion.drivers.tum import TumSource
 from uareme_fusion.errors import InputError, SourceError
 
-
-class FakeImgFrame:
-    """What the driver uses of depthai.ImgFrame."""
-
-    def __init__(self, image, t_s):
-        self.image, self.t_s = image, t_s
-
-    def getCvFrame(self):
-        return self.image
-
-    def getFrame(self):
-        return self.image
-
-    def getTimestampDevice(self):
-        return timedelta(seconds=self.t_s)
-
-
-class FakeReport:
-    def __init__(self, xyz, t_s):
-        self.x, self.y, self.z = xyz
-        self.t_s = t_s
-
-    def getTimestampDevice(self):
-        return timedelta(seconds=self.t_s)
-
-
-class FakePacket:
-    def __init__(self, t_s, gyro, accel, accel_t_s=None):
-        self.gyroscope = FakeReport(gyro, t_s)
-        self.acceleroMeter = FakeReport(accel, t_s if accel_t_s is None else accel_t_s)
+from helpers import FakeImgFrame, packets  # pytest puts tests/ on sys.path
 
 
 def fake_rgb(t_s, seed, size=(8, 12)):
     bgr = np.random.default_rng(seed).integers(0, 256, (*size, 3), dtype=np.uint8)
     return FakeImgFrame(bgr, t_s)
-
-
-def packets(t_s, seed=0):
-    rng = np.random.default_rng(seed)
-    return [FakePacket(t, rng.normal(size=3), rng.normal(size=3) + [0, 0, 9.81]) for t in t_s]
 
 
 def test_frame_conversion_rgb_order_depth_units_and_device_time():

@@ -8,53 +8,13 @@ import json
 import numpy as np
 import pytest
 
-from uareme_fusion.drivers.base import GroundTruth, ImuBatch, Source, SourceInfo
-from uareme_fusion.errors import InputError, SourceError
+from uareme_fusion.drivers.base import ImuBatch, SourceInfo
+from uareme_fusion.errors import InputError
 from uareme_fusion.pipeline import RunConfig
 from uareme_fusion.pipeline.session import run_source
 from uareme_fusion.rotations import matrix_from_quat_xyzw
-from uareme_fusion.sim.imu import simulate_imu
-from uareme_fusion.sim.normal_maps import manhattan_normal_map
-from uareme_fusion.sim.trajectory import make_trajectory
-from uareme_fusion.types import Frame
 
-
-class WalkSource(Source):
-    """A simulated walk: exact-ish normals (10 deg noise) per frame, 200 Hz IMU, ground truth."""
-
-    def __init__(self, seconds=6.0, fps=15.0, seed=0, imu=True, fail_at=None, interrupt_at=None, blank=()):
-        self.traj = make_trajectory("walk", seconds, seed=seed)
-        self.t_frame = np.arange(0.0, seconds, 1.0 / fps)
-        self.imu = simulate_imu(self.traj, rate_hz=200.0, seed=seed) if imu else None
-        self.seed, self.fail_at, self.interrupt_at, self.blank = seed, fail_at, interrupt_at, set(blank)
-        self.info = SourceInfo(name="walk-test", n_frames=len(self.t_frame), fps=fps, has_imu=imu)
-        self.closed = False
-
-    def events(self):
-        rng = np.random.default_rng(self.seed)
-        R_cm = self.traj.R_cm(self.t_frame)
-        start = 0
-        for k, t in enumerate(self.t_frame):
-            if k == self.fail_at:
-                raise SourceError(f"walk-test: camera disconnected at frame {k}")
-            if k == self.interrupt_at:
-                raise KeyboardInterrupt
-            if self.imu is not None:
-                t_imu, gyro, accel = self.imu
-                end = int(np.searchsorted(t_imu, t, side="right"))
-                if end > start:
-                    yield ImuBatch(t_imu[start:end], gyro[start:end], accel[start:end])
-                start = end
-            nm = manhattan_normal_map(R_cm[k], rng, 60, 80, noise_deg=10.0, correlation_px=3.0)
-            if k in self.blank:
-                nm = type(nm)(nm.normals, np.zeros_like(nm.kappa))
-            yield Frame(float(t), index=k, normals=nm)
-
-    def ground_truth(self):
-        return GroundTruth(self.t_frame, self.traj.sample(self.t_frame).R_wc, gravity_aligned=True)
-
-    def close(self):
-        self.closed = True
+from helpers import WalkSource  # pytest puts tests/ on sys.path
 
 
 def read_tum(path):

@@ -14,7 +14,7 @@ from uareme_fusion.pipeline.drawing_sinks import GroundSink, HorizonVideoSink, V
 from uareme_fusion.pipeline.session import run_source
 from uareme_fusion.types import Frame
 
-from test_pipeline import WalkSource
+from helpers import WalkSource  # pytest puts tests/ on sys.path
 
 
 class PaintedWalk(WalkSource):

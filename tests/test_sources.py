@@ -19,7 +19,6 @@ from uareme_fusion.sim.dataset import SequenceOptions, write_sequence
 from uareme_fusion.sim.imu import ImuNoise, simulate_imu
 from uareme_fusion.sim.scenarios import build_scenario
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def frames_of(events):
@@ -357,12 +356,12 @@ def need(path: Path):
     return path
 
 
-def test_icl_nuim_opencv_axes_keep_the_manhattan_frame_fixed():
+def test_icl_nuim_opencv_axes_keep_the_manhattan_frame_fixed(shared_data):
     from uareme_fusion.normals.depth import ICL_NUIM_K_OPENCV, DepthNormals
     from uareme_fusion.rotations import nearest_symmetric
     from uareme_fusion.solver import solve_manhattan
 
-    src = open_source(str(need(DATA / "icl_nuim_office_kt3")))
+    src = open_source(str(need(shared_data / "icl_nuim_office_kt3")))
     assert type(src).__name__ == "IclNuimSource" and src.info.n_frames == 100
     np.testing.assert_array_equal(src.info.K, ICL_NUIM_K_OPENCV)
     truth = src.ground_truth()
@@ -378,8 +377,8 @@ def test_icl_nuim_opencv_axes_keep_the_manhattan_frame_fixed():
     assert np.degrees(Rotation.from_matrix(R_aligned.T @ R_wm[0]).magnitude()) < 1.0
 
 
-def test_euroc_imu_only_and_gravity_aligned_truth():
-    src = open_source(str(need(DATA / "euroc_v1_02_first40s")))
+def test_euroc_imu_only_and_gravity_aligned_truth(shared_data):
+    src = open_source(str(need(shared_data / "euroc_v1_02_first40s")))
     assert not src.info.has_frames and src.info.has_imu
     t, _, accel = imu_of(list(src.events()))
     truth = src.ground_truth()
@@ -391,8 +390,8 @@ def test_euroc_imu_only_and_gravity_aligned_truth():
     np.testing.assert_allclose(up, [0, 0, 9.81], atol=0.4)
 
 
-def test_euroc_camera_calibration_and_ground_truth(tmp_path):
-    gt = need(DATA / "euroc_v1_02_first40s" / "mav0" / "gt0" / "data.csv")
+def test_euroc_camera_calibration_and_ground_truth(tmp_path, shared_data):
+    gt = need(shared_data / "euroc_v1_02_first40s" / "mav0" / "gt0" / "data.csv")
     mav0 = tmp_path / "mav0"
     (mav0 / "cam0" / "data").mkdir(parents=True)
     (mav0 / "gt0").mkdir()
@@ -420,8 +419,8 @@ def test_euroc_camera_calibration_and_ground_truth(tmp_path):
                                atol=1e-12)
 
 
-def test_broad_is_imu_only_with_optical_truth():
-    files = sorted(need(DATA / "broad_subset").glob("*.hdf5"))
+def test_broad_is_imu_only_with_optical_truth(shared_data):
+    files = sorted(need(shared_data / "broad_subset").glob("*.hdf5"))
     src = open_source(str(files[0]))
     assert not src.info.has_frames and src.info.has_imu
     batches = list(src.events())

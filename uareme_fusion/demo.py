@@ -18,6 +18,7 @@ from rich.table import Table
 
 from .benchmarks.peers import vqf_6d_R_wi
 from .drivers.base import ImuBatch, Source
+from .evaluation.statistics import error_stats
 from .rotations import angle_between, exp_so3, nees, tilt_error_deg, up_in_camera
 from .sim.normal_maps import manhattan_normal_map
 from .solver import solve_manhattan
@@ -106,48 +107,54 @@ class _Collector:
 
 
 DEMO_SCENES = {"room": ("handheld", 12.0), "bus": ("vehicle", 30.0)}
-"""Scenario: (EKF preset, seconds) of the rendered demo sequences, 15 fps at 320x240."""
+"""Scenario: (EKF preset, seconds) of the rendered demo sequences, at `DEMO_FPS` and `DEMO_SIZE`."""
+DEMO_SIZE = (320, 240)
+"""(width, height) in pixels of the rendered demo frames."""
+DEMO_FPS = 15.0
 
 
 def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: str = "learned",
-                scale_seconds: float = 1.0, progress=None, threads: int | None = None) -> dict:
+                scale_seconds: float = 1.0, progress=None, threads: int | None = None,
+                size: tuple[int, int] = DEMO_SIZE, fps: float = DEMO_FPS) -> dict:
     """Rendered room and bus through the whole pipeline (normals -> solver -> EKF with IMU): tilt of
     vision only, IMU only (our filter, and vqf when installed) and fused; a table, a plot and the
-    horizon overlay video of the bus."""
-    from .backends.mekf import Mekf, MekfConfig, MekfMode
-    from .backends.single import SingleFrame
-    from .compare import BackendRun, VisualSequence, errors_over_time, run_backend
-    from .config import load_config
+    horizon overlay video of the bus. `scale_seconds` scales the scenes' lengths, `size` (width,
+    height) and `fps` are those of the rendered frames (a smaller configuration for tests)."""
+    from .backends.mekf import MekfMode
+    from .evaluation.backend_factory import make_backend
+    from .evaluation.compare import BackendRun, errors_over_time, run_backend
+    from .evaluation.sequence import VisualSequence
     from .drivers.simulated import SimulatedSource
     from .pipeline import RunConfig
     from .pipeline.drawing_sinks import HorizonVideoSink
     from .pipeline.session import build_pipeline
 
     figures, tilts = {}, {}
-    table = Table(title=f"Tilt error (deg), rendered scenes, {normals} normals, 15 fps")
+    table = Table(title=f"Tilt error (deg), rendered scenes, {normals} normals, {fps:g} fps")
     for col in ("scene", "estimator", "mean", "p95", "max", "ARE mean"):
         table.add_column(col)
     for scene, (preset, seconds) in DEMO_SCENES.items():
-        source = _TeeImu(SimulatedSource(scene, seconds=seconds * scale_seconds, fps=15.0, seed=seed))
+        source = _TeeImu(SimulatedSource(scene, seconds=seconds * scale_seconds, fps=fps, width=size[0],
+                                          height=size[1], seed=seed))
         collector = _Collector()
         sinks = [collector]
         if out_dir is not None and scene == "bus":
-            sinks.append(HorizonVideoSink(out_dir / "demo_bus_horizon.mp4", 15.0, panes=True))
+            sinks.append(HorizonVideoSink(out_dir / "demo_bus_horizon.mp4", fps, panes=True))
         pipeline = build_pipeline(source, RunConfig(normals=normals, mekf_preset=preset,
                                                      **({} if threads is None else {"threads": threads})), sinks)
         stats = pipeline.run(source, on_result=None if progress is None else progress(scene, source.info.n_frames))
         t = np.array([r.t_s for r in collector.results])
         R_true, _ = source.ground_truth().at(t)
         seq = VisualSequence(scene, t, [r.visual for r in collector.results], *source.imu_arrays(), R_true)
-        cfg = load_config(preset, MekfConfig)
-        runs = {"vision only (single frame)": run_backend(SingleFrame(), seq),
-                "IMU only (our filter)": run_backend(Mekf(cfg.model_copy(update={"mode": MekfMode.IMU_ONLY})), seq),
+        imu_only = make_backend("mekf", mekf_preset=preset, overrides={"mode": MekfMode.IMU_ONLY})
+        runs = {"vision only (single frame)": run_backend(make_backend("single"), seq),
+                "IMU only (our filter)": run_backend(imu_only, seq),
                 f"fused (mekf, {preset})": BackendRun("mekf", [r.estimate for r in collector.results])}
         rows = {}
         for name, run in runs.items():
             err = errors_over_time(run, R_true)
             ok = err["initialised"]
-            rows[name] = (err["tilt_deg"][ok], float(np.mean(err["are_deg"][ok])))
+            rows[name] = (err["tilt_deg"][ok], error_stats(err["are_deg"][ok], ("mean",))["mean"])
         vqf_tilt = _vqf_tilt_deg(seq, R_true)
         if vqf_tilt is not None:
             rows["IMU only (vqf 6D)"] = (vqf_tilt, float("nan"))
@@ -155,8 +162,7 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
                           "timing_ms": stats.as_dict()["timing_ms"]}
         tilts[scene] = {}
         for name, (tilt, are) in rows.items():
-            figures[scene][name] = {"mean": float(tilt.mean()), "p95": float(np.percentile(tilt, 95)),
-                                    "max": float(tilt.max()), "are_mean": are}
+            figures[scene][name] = {**error_stats(tilt, ("mean", "p95", "max")), "are_mean": are}
             tilts[scene][name] = (t[-len(tilt):], tilt)
             table.add_row(scene, name, *(f"{figures[scene][name][k]:.2f}" for k in ("mean", "p95", "max")),
                           "" if np.isnan(are) else f"{are:.2f}")
@@ -176,14 +182,15 @@ TILT_PLOT_TICKS_DEG = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 20, 50, 100, 180)
 
 
 def _plot_tilt(tilts: dict, path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """The tilt plot, drawn on matplotlib's Agg canvas directly (no global backend is changed)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
     from matplotlib.ticker import FixedLocator, FormatStrFormatter
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(len(tilts), 1, figsize=(10, 3.2 * len(tilts)), squeeze=False)
+    fig = Figure(figsize=(10, 3.2 * len(tilts)))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(tilts), 1, squeeze=False)
     for ax, (scene, rows) in zip(axes[:, 0], tilts.items()):
         for name, (t, tilt) in rows.items():
             ax.plot(t, tilt, lw=1, label=name)
@@ -197,7 +204,6 @@ def _plot_tilt(tilts: dict, path: Path) -> Path:
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path
 
 

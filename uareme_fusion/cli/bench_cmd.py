@@ -5,7 +5,9 @@
 - `soak`: one simulated hour through the full pipeline: RSS growth, state sizes, accuracy (issue 8);
 - `broad`: BROAD IMU trials with default options beside imu_only, vehicle and vqf 6D (issue 14);
 - `horizon`: RGB-only accuracy on real data (ECD horizon AUC, ICSL and ICL-NUIM rotations and focal
-  lengths) beside goals and baselines (issue 12).
+  lengths) beside goals and baselines (issue 12);
+- `mekf`: the EKF on simulated bus and room scenarios, BROAD and EuRoC, beside IMU-only peers (issues 5, 17);
+- `smoother`: the GTSAM smoother (paper and gyro-aided) against `single` on walk and shake (issue 6).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import typer
 
 from .app import app, fail
 
-BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon")
+BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon", "mekf", "smoother")
 
 
 @app.command()
@@ -34,9 +36,12 @@ def bench(
     normals_noise_deg: float = typer.Option(2.0, "--normals-noise-deg", min=0.0, max=90.0,
                                             help="soak: angular noise on the simulator's normals, deg."),
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
-    data: Path = typer.Option(None, "--data", help="broad: folder of BROAD .hdf5 trials (default "
-                              "../shared/data/broad_subset; needs the bench extra for vqf); horizon: the "
-                              "development data folder (default ../shared/data)."),
+    data: Path = typer.Option(None, "--data", help="broad, mekf: folder of BROAD .hdf5 trials (default "
+                              "../shared/data/broad_subset; needs the bench extra for vqf; mekf reads EuRoC "
+                              "V1_02 from euroc_v1_02_first40s/ beside it); horizon: the development data "
+                              "folder (default ../shared/data)."),
+    seeds: int = typer.Option(5, "--seeds", min=1, max=100, help="mekf, smoother: seeds per scenario."),
+    quick: bool = typer.Option(False, "--quick", help="mekf: shorter simulated runs (not the reported figures)."),
     threads: int = typer.Option(None, "--threads", min=1, max=256,
                                 help="pipeline: torch CPU threads of the learned normals (default 1)."),
     cues: str = typer.Option("normals,lines", "--cues", help="horizon: visual cues (normals, lines or both)."),
@@ -67,6 +72,14 @@ def bench(
         if not (data / "eurasian_cities").is_dir():
             raise fail(f"--data {data}: no eurasian_cities/ folder there (see shared/data/README.md)")
         results = horizon.run(data, cues, ecd_limit)
+    elif what == "mekf":
+        from ..benchmarks import mekf
+
+        results = mekf.run(seeds=seeds, quick=quick, broad_dir=data or Path("../shared/data/broad_subset"))
+    elif what == "smoother":
+        from ..benchmarks import smoother
+
+        results = smoother.run(seeds=seeds)
     else:
         from ..benchmarks import soak
 

@@ -8,7 +8,9 @@ from typing import Optional
 
 import typer
 
-from ..compare import compare, load_sequence, synthetic_sequence
+from ..evaluation.compare import compare
+from ..evaluation.sequence import synthetic_sequence
+from ..evaluation.source_sequence import load_sequence
 from .app import app, fail
 from .run_cmd import _o, run_config
 
@@ -59,8 +61,8 @@ def _has_saved_normals(folder: Path) -> bool:
 
 
 def _source_sequence(spec: str, imu: Optional[Path], fps: Optional[float], cfg):
-    """The visual rotations of any source, computed once (`compare_source.source_sequence`)."""
-    from ..compare_source import source_sequence
+    """The visual rotations of any source, computed once (`evaluation.source_sequence`)."""
+    from ..evaluation.source_sequence import source_sequence
     from ..drivers import open_source
     from ..pipeline.session import configure_imu
     from .progress import frame_progress

@@ -27,6 +27,7 @@ is "IMU clock minus camera clock", so `imu_time_offset_s = -time_offset_s`.
 from __future__ import annotations
 
 import dataclasses
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -103,6 +104,24 @@ def ground_truth_from_tum(trajectory: tuple[np.ndarray, np.ndarray, np.ndarray],
         R_wc = R_fix(R_wc)
     order = np.argsort(t, kind="stable")
     return GroundTruth(np.asarray(t, float)[order] * time_scale, R_wc[order], gravity_aligned)
+
+
+def read_frame_normals(path: Path, t: float | None = None) -> NormalMap:
+    """One `normals/<index>.npz` of a simulated folder: `normals` (H, W, 3) and `kappa` (H, W), kappa
+    0 everywhere when `dropped` (the camera failed on that frame: no pixel is usable); an
+    `InputError` naming the file otherwise."""
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            normals = np.asarray(npz["normals"], np.float32)
+            kappa = np.asarray(npz["kappa"], np.float32)
+            dropped = bool(npz["dropped"]) if "dropped" in npz else False
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+        raise InputError(f"{path}: not a readable normals file with arrays 'normals' and 'kappa' ({exc})") from None
+    if normals.ndim != 3 or normals.shape[2] != 3 or kappa.shape != normals.shape[:2]:
+        raise InputError(f"{path}: expected normals (H, W, 3) and kappa (H, W), got {normals.shape}, {kappa.shape}")
+    if dropped:
+        kappa = np.zeros_like(kappa)
+    return NormalMap(normals, kappa, t=t)
 
 
 class TumSource(Source):
@@ -182,19 +201,10 @@ class TumSource(Source):
     def _normals(self, i: int, t: float) -> NormalMap | None:
         if self.normal_files is None or self.normal_files[i] is None:
             return None
-        path = self.normal_files[i]
         try:
-            with np.load(path, allow_pickle=False) as npz:
-                normals = np.asarray(npz["normals"], np.float32)
-                kappa = np.asarray(npz["kappa"], np.float32)
-                dropped = bool(npz["dropped"]) if "dropped" in npz else False
-        except (OSError, ValueError, KeyError) as exc:
-            raise SourceError(f"{path}: not a readable normals file with arrays 'normals' and 'kappa' ({exc})") from None
-        if normals.ndim != 3 or normals.shape[2] != 3 or kappa.shape != normals.shape[:2]:
-            raise SourceError(f"{path}: expected normals (H, W, 3) and kappa (H, W), got {normals.shape}, {kappa.shape}")
-        if dropped:  # the camera failed on this frame: no pixel is usable
-            kappa = np.zeros_like(kappa)
-        return NormalMap(normals, kappa, t=t)
+            return read_frame_normals(self.normal_files[i], t)
+        except InputError as exc:  # met mid-stream: the source fails there
+            raise SourceError(str(exc)) from None
 
     def read_frame(self, i: int) -> Frame:
         """Frame i with depth, K and normals; `SourceError` naming the file that cannot be read."""

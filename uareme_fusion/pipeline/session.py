@@ -19,8 +19,9 @@ import numpy as np
 from ..drivers.base import GroundTruth, Source
 from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
 from ..errors import InputError, OutputError
+from ..evaluation.backend_factory import backend_kind, knows_gravity
+from ..evaluation.metrics import attitude_errors, error_summary
 from ..io.safe_files import ReservedFile
-from ..metrics import attitude_errors, error_summary
 from ..rotations import align_constant
 from ..types import Status
 from .config import RunConfig
@@ -30,9 +31,6 @@ from .runner import Pipeline, RunStats
 from . import stop_signals
 from .sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
 from .stages import CappedNormals, make_backend, make_normal_estimator, mekf_preset_for
-
-GRAVITY_AWARE_BACKENDS = ("mekf", "smoother")
-"""With an IMU these know absolute up: NEES after a yaw-only alignment (compare.GRAVITY_AWARE)."""
 
 
 OUTPUT_NAMES = ("trajectory.tum", "estimates.csv", "summary.json", "masks", "overlay", "ground.mp4")
@@ -111,8 +109,8 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
             summary["imu_rotation_estimate"] = check.report()
             summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w]
         if log is not None:
-            summary.update(evaluation(log, truth, gravity_aware=source.info.has_imu and cfg.backend in
-                                      GRAVITY_AWARE_BACKENDS))
+            summary.update(evaluation(log, truth, gravity_aware=knows_gravity(
+                backend_kind(cfg.backend, source.info.has_imu).name, source.info.has_imu)))
         summary["outputs"] = sorted(p.name for p in out.iterdir()
                                     if p.name != "summary.json" and not p.name.startswith(".")) + ["summary.json"]
         try:

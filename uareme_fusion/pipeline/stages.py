@@ -7,8 +7,6 @@ from pathlib import Path
 import numpy as np
 
 from ..backends.base import Backend
-from ..backends.single import SingleFrame
-from ..config import load_config, validate_config
 from ..drivers.base import SourceInfo
 from ..errors import InputError
 from ..io.normal_maps import load_normal_map
@@ -161,20 +159,13 @@ def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str |
 
 
 def make_backend(cfg: RunConfig, info: SourceInfo) -> Backend:
-    """The backend of `cfg`, given the source's IMU-to-camera rotation and time offset."""
+    """The backend of `cfg` (`evaluation.backend_factory`), given the source's IMU-to-camera rotation
+    and time offset."""
+    from ..evaluation.backend_factory import backend_kind, make_backend as make_named_backend
+
     # SourceInfo adds its offset to IMU stamps to reach camera time; the EKF subtracts its own.
     imu_geometry = {"R_ci": np.asarray(info.R_ci, float).tolist(), "imu_time_offset_s": -info.imu_time_offset_s}
-    if cfg.backend == "single":
-        return SingleFrame()
-    if cfg.backend == "smoother":
-        from ..backends.smoother import Smoother, SmootherConfig, SmootherMode
-
-        base = load_config("paper", SmootherConfig, section="smoother").model_dump()
-        if info.has_imu:
-            base.update(mode=SmootherMode.GYRO, **imu_geometry)
-        return Smoother(validate_config({**base, **cfg.smoother}, SmootherConfig, "run config [smoother]"))
-    from ..backends.mekf import Mekf, MekfConfig
-
-    base = load_config(mekf_preset_for(cfg.mekf_preset, info)[0], MekfConfig).model_dump()
-    base.update(imu_geometry)
-    return Mekf(validate_config({**base, **cfg.mekf}, MekfConfig, "run config [mekf]"))
+    kind = backend_kind(cfg.backend, info.has_imu)
+    overrides = cfg.mekf if kind.name == "mekf" else cfg.smoother
+    preset = mekf_preset_for(cfg.mekf_preset, info)[0] if kind.name == "mekf" else None
+    return make_named_backend(kind.name, imu_geometry, preset, overrides)

@@ -5,33 +5,31 @@
 2. Latency: ms per frame at window 30 (median and p95) for both modes, measured on the same runs
    (IMU preintegration + graph update + marginal covariance).
 
-Usage: python tools/bench_smoother.py [--seeds 5] [--duration-s 20] [--scenarios walk shake]
+Usage: uareme-fusion bench smoother [--seeds 5]
 Timings are wall clock on a shared machine: report the median.
 """
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 
-from uareme_fusion.compare import make_backends, run_backend, summarise, synthetic_sequence
+from ..evaluation.compare import make_backends, run_backend, summarise
+from ..evaluation.sequence import synthetic_sequence
+from ..evaluation.statistics import error_stats
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--duration-s", type=float, default=20.0)
-    parser.add_argument("--scenarios", nargs="+", default=["walk", "shake"])
-    args = parser.parse_args()
+def run(seeds: int = 5, duration_s: float = 20.0, scenarios=("walk", "shake")) -> dict:
+    """Print the table and the latencies; returns mean ARE (deg) per scenario and backend and the
+    latency statistics (ms) per backend."""
     names = ("single", "smoother", "smoother-gyro")
     latency = {n: [] for n in names}
+    figures = {"are_deg_mean": {}, "latency_ms": {}}
     print("per backend: mean ARE deg (max ARE deg, frames with ARE > 10 deg)")
     print(f"{'scenario':8s} {'seed':>4s} " + " ".join(f"{n:>22s}" for n in names) + "   gyro/paper")
-    for scenario in args.scenarios:
+    for scenario in scenarios:
         means = {n: [] for n in names}
-        for seed in range(args.seeds):
-            seq = synthetic_sequence(scenario, seed=seed, duration_s=args.duration_s)
+        for seed in range(seeds):
+            seq = synthetic_sequence(scenario, seed=seed, duration_s=duration_s)
             backends, _ = make_backends(names)
             rows = {}
             for n in names:
@@ -44,16 +42,14 @@ def main() -> None:
                 f"{rows[n]['are_deg_mean']:8.2f} ({rows[n]['are_deg_max']:5.1f}, {rows[n]['frames_are_over_10deg']:3d})"
                 for n in names)
                 + f"   {ratio:.2f}")
+        figures["are_deg_mean"][scenario] = {n: float(np.mean(means[n])) for n in names}
         wins = sum(g < p for g, p in zip(means["smoother-gyro"], means["smoother"]))
         print(f"{scenario:8s} mean " + " ".join(f"{np.mean(means[n]):22.2f}" for n in names)
-              + f"   gyro beats paper on {wins}/{args.seeds} seeds")
+              + f"   gyro beats paper on {wins}/{seeds} seeds")
     print("\nlatency per frame (ms, window 30; IMU + update + marginal covariance):")
     for n in names:
-        lat = np.asarray(latency[n])
-        print(f"  {n:14s} median {np.median(lat):6.2f}  p95 {np.percentile(lat, 95):6.2f}  "
-              f"max {lat.max():6.2f}  ({lat.size} frames; goal <= 5 ms: "
-              f"{'met' if np.median(lat) <= 5.0 else 'NOT met'} at the median)")
-
-
-if __name__ == "__main__":
-    main()
+        lat = figures["latency_ms"][n] = error_stats(latency[n], ("median", "p95", "max"))
+        print(f"  {n:14s} median {lat['median']:6.2f}  p95 {lat['p95']:6.2f}  "
+              f"max {lat['max']:6.2f}  ({len(latency[n])} frames; goal <= 5 ms: "
+              f"{'met' if lat['median'] <= 5.0 else 'NOT met'} at the median)")
+    return figures

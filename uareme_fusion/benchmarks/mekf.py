@@ -1,6 +1,6 @@
 """Benchmark of the multiplicative EKF (issue 5): accuracy, consistency and cost, peers in the same run.
 
-    python tools/bench_mekf.py [--seeds 5] [--quick]
+    uareme-fusion bench mekf [--seeds 5] [--quick] [--data ../shared/data/broad_subset]
 
 Prints, per scenario, absolute figures:
 - bus (camera fixed in a city bus): fused tilt error p95 / max (deg) over 5 seeds, beside vqf 6D,
@@ -20,130 +20,35 @@ Prints, per scenario, absolute figures:
   in CPU time of the filter's thread (`time.thread_time`: what the filter itself costs, whatever else
   the machine runs) with wall-clock time beside it (equal on an idle machine, inflated when shared).
 
-Visual rotations come from the real solver on synthetic normal maps:
-`solve_manhattan(manhattan_normal_map(R_cm_true, rng, 120, 160, noise_deg, correlation_px), R_init=
-backend.predicted_R_cm(t))`, so their covariance is the solver's own.
+Scenarios (trajectory, IMU, the real solver's rotations) come from `evaluation.scenarios`; BROAD
+trials from `--data`, EuRoC V1_02's first 40 s from `euroc_v1_02_first40s/mav0` beside that folder.
 """
 
 from __future__ import annotations
 
-import argparse
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from uareme_fusion.benchmarks.peers import vqf_6d_R_wi
-from uareme_fusion.backends.mekf import Mekf, MekfConfig
-from uareme_fusion.backends.mekf.offline import forward_backward_imu
-from uareme_fusion.backends.single import SingleFrame
-from uareme_fusion.config import load_config
-from uareme_fusion.rotations import align_yaw, are_deg, nees, tilt_error_deg, up_in_camera
-from uareme_fusion.sim.imu import simulate_imu
-from uareme_fusion.sim.normal_maps import manhattan_normal_map
-from uareme_fusion.sim.trajectory import make_trajectory
-from uareme_fusion.solver import solve_manhattan
+from ..backends.mekf import Mekf, MekfConfig
+from ..backends.mekf.offline import forward_backward_imu
+from ..backends.single import SingleFrame
+from ..config import load_config
+from ..drivers.broad import read_broad
+from ..evaluation.scenarios import RunResult, mekf_factory, run_scenario
+from ..evaluation.statistics import error_stats, rmse
+from ..rotations import tilt_error_deg, up_in_camera
+from .peers import vqf_6d_R_wi
 
-DATA_DIR = Path(__file__).resolve().parents[2] / "shared" / "data"
-BROAD_DIR = DATA_DIR / "broad_subset"
-EUROC_DIR = DATA_DIR / "euroc_v1_02_first40s" / "mav0"
+EUROC_BESIDE_BROAD = Path("euroc_v1_02_first40s") / "mav0"
+"""EuRoC V1_02's first 40 s, in the folder holding the BROAD folder (`../shared/data`)."""
 GOALS = {"online": 0.95, "offline": 0.85, "euroc": 1.0, "batch_us": 1.0, "run_us": 2.0, "fused_us": 3.0}
 """Issue 17: ratios to vqf 6D (accuracy) and us per IMU sample (cost)."""
 # Same settings on every BROAD trial: the `imu_only` preset (accelerometer low-passed in the
 # gyro-carried frame, zero-rate bias updates at rest, rate-proportional gyro noise).
 BROAD_PRESET = "imu_only"
-VISUAL_NOISE_DEG = 8.0
-VISUAL_CORRELATION_PX = 4.0
-
-
-@dataclass
-class RunResult:
-    """Per-frame arrays of one simulated run: `R_wc_est`/`R_wc_true` (N, 3, 3), `cov` (N, 3, 3)."""
-
-    t_s: np.ndarray
-    R_wc_est: np.ndarray
-    R_wc_true: np.ndarray
-    cov: np.ndarray
-    status: list = field(default_factory=list)
-    imu: tuple = ()
-    imu_time_s: float = 0.0
-    visual_time_s: float = 0.0
-    imu_cpu_s: float = 0.0
-    visual_cpu_s: float = 0.0
-    n_visual: int = 0
-
-    @property
-    def tilt_deg(self) -> np.ndarray:
-        return tilt_error_deg(up_in_camera(self.R_wc_est), up_in_camera(self.R_wc_true))
-
-    @property
-    def are_deg(self) -> np.ndarray:
-        return are_deg(self.R_wc_est, self.R_wc_true)
-
-    def nees(self, yaw_fit_s: float | None = None) -> np.ndarray:
-        """NEES after aligning the estimate's world to the truth with one rotation about up (the
-        filter's world yaw is a gauge; its tilt is absolute), fitted over the whole run, or over the
-        first `yaw_fit_s` seconds where yaw is unobservable and drifts (a turning vehicle: the
-        gauge is the heading at initialisation, where its variance is 0)."""
-        fit = slice(None) if yaw_fit_s is None else self.t_s < self.t_s[0] + yaw_fit_s
-        A_yaw = align_yaw(self.R_wc_est[fit], self.R_wc_true[fit])
-        return nees(A_yaw @ self.R_wc_est, self.R_wc_true, self.cov)
-
-
-def run_scenario(
-    trajectory: str,
-    seed: int,
-    duration_s: float,
-    backend_factory,
-    fps: float = 30.0,
-    imu_rate_hz: float = 200.0,
-    drop_fraction: float = 0.0,
-    use_imu: bool = True,
-) -> RunResult:
-    """Simulate a trajectory, its IMU and per-frame solver outputs, and run one backend on it."""
-    traj = make_trajectory(trajectory, duration_s=duration_s, seed=seed)
-    t_imu, gyro, accel = simulate_imu(traj, rate_hz=imu_rate_hz, seed=seed + 1000)
-    rng = np.random.default_rng(seed + 2000)
-    t_frames = np.arange(0.1, duration_s - 1e-6, 1.0 / fps)
-    R_wc_true = traj.sample(t_frames).R_wc
-    R_cm_true = np.swapaxes(R_wc_true, -1, -2) @ traj.R_wm(t_frames)
-    dropped = rng.random(t_frames.size) < drop_fraction
-    backend = backend_factory()
-    est_R, est_cov, status = [], [], []
-    imu_time = visual_time = imu_cpu = visual_cpu = 0.0
-    n_visual = 0
-    k = 0
-    for i, t in enumerate(t_frames):
-        k_next = int(np.searchsorted(t_imu, t, side="right"))
-        if use_imu and k_next > k:
-            t0, c0 = time.perf_counter(), time.thread_time()
-            backend.process_imu(t_imu[k:k_next], gyro[k:k_next], accel[k:k_next])
-            backend.propagate_to(t) if hasattr(backend, "propagate_to") else None
-            imu_time += time.perf_counter() - t0
-            imu_cpu += time.thread_time() - c0
-        k = k_next
-        visual = None
-        if not dropped[i]:
-            normal_map = manhattan_normal_map(R_cm_true[i], rng, 120, 160, noise_deg=VISUAL_NOISE_DEG,
-                                              correlation_px=VISUAL_CORRELATION_PX)
-            visual = solve_manhattan(normal_map.normals, normal_map.kappa, R_init=backend.predicted_R_cm(t))
-            n_visual += 1
-        t0, c0 = time.perf_counter(), time.thread_time()
-        est = backend.process_frame(t, visual)
-        visual_time += time.perf_counter() - t0
-        visual_cpu += time.thread_time() - c0
-        est_R.append(est.R_wc)
-        est_cov.append(est.cov)
-        status.append(est.status)
-    return RunResult(t_frames, np.array(est_R), R_wc_true, np.array(est_cov), status,
-                     (t_imu, gyro, accel, traj), imu_time, visual_time, imu_cpu, visual_cpu, n_visual)
-
-
-def mekf_factory(preset: str, **overrides):
-    config = load_config(preset, MekfConfig).model_copy(update=overrides)
-    return lambda: Mekf(config)
 
 
 def peer_tilt_errors(t_imu, gyro, accel, traj, rate_hz: float) -> dict[str, np.ndarray]:
@@ -174,16 +79,6 @@ def peer_tilt_errors(t_imu, gyro, accel, traj, rate_hz: float) -> dict[str, np.n
         R_wi = Rotation.from_quat(q, scalar_first=True).as_matrix()
         errors[name] = tilt_error_deg(up_in_camera(R_wi), up_true)
     return errors
-
-
-def read_broad_trial(path: Path):
-    from uareme_fusion.drivers.broad import read_broad
-
-    return read_broad(path)
-
-
-def rmse(e: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(e**2)))
 
 
 def imu_only_run(config: MekfConfig, t_s, gyro, accel, offline: bool = False):
@@ -217,13 +112,13 @@ def broad_inclination(trial, config: MekfConfig) -> tuple[float, float, float, f
             tilt_rmse_on(t, t, R_vqf, R_ref, keep), us)
 
 
-def euroc_tilt(config: MekfConfig) -> tuple[float, float, float]:
+def euroc_tilt(config: MekfConfig, euroc_dir: Path) -> tuple[float, float, float]:
     """(mekf online, mekf offline, vqf 6D) tilt RMSE deg on EuRoC V1_02's first 40 s, at the ground
     truth's times (its body frame is the IMU frame)."""
-    from uareme_fusion.drivers.euroc_imu import read_euroc_imu
+    from ..drivers.euroc_imu import read_euroc_imu
 
-    imu = read_euroc_imu(EUROC_DIR / "imu0" / "data.csv")
-    gt = np.loadtxt(EUROC_DIR / "gt0" / "data.csv", delimiter=",", comments="#")
+    imu = read_euroc_imu(euroc_dir / "imu0" / "data.csv")
+    gt = np.loadtxt(euroc_dir / "gt0" / "data.csv", delimiter=",", comments="#")
     t = imu.t_s
     idx = np.searchsorted(t, gt[:, 0] * 1e-9)
     inside = idx < t.size
@@ -260,11 +155,10 @@ def run_command_cost_us(path: Path) -> float:
     in this process."""
     import tempfile
 
-    from uareme_fusion.drivers.broad import read_broad
-    from uareme_fusion.pipeline import RunConfig
-    from uareme_fusion.pipeline.session import build_pipeline
-    from uareme_fusion.pipeline.sinks import EstimatesCsvWriter, TumTrajectoryWriter
-    from uareme_fusion.drivers.registry import open_source
+    from ..drivers.registry import open_source
+    from ..pipeline import RunConfig
+    from ..pipeline.session import build_pipeline
+    from ..pipeline.sinks import EstimatesCsvWriter, TumTrajectoryWriter
 
     n = read_broad(path).t_s.size
     with tempfile.TemporaryDirectory() as tmp, open_source(str(path)) as source:
@@ -276,18 +170,17 @@ def run_command_cost_us(path: Path) -> float:
         return 1e6 * (time.perf_counter() - t0) / n
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--quick", action="store_true", help="shorter runs (not the reported figures)")
-    args = parser.parse_args()
+def run(seeds: int = 5, quick: bool = False, broad_dir: Path = Path("../shared/data/broad_subset")) -> dict:
+    """Print the figures (see the module docstring) and return the headline ones; `quick`: shorter
+    simulated runs (not the reported figures)."""
+    euroc_dir = Path(broad_dir).parent / EUROC_BESIDE_BROAD
     # Load the compiled kernels (from numba's disk cache, or compile them) before anything is timed.
     warm = Mekf(MekfConfig(mode="imu_only"))
     t_warm = np.arange(0.0, 1.0, 0.005)
     warm.process_imu(t_warm, np.zeros((t_warm.size, 3)), np.tile([0.0, 0.0, 9.81], (t_warm.size, 1)))
     warm.flush()
-    seeds = range(args.seeds)
-    bus_s, room_s = (40.0, 20.0) if args.quick else (90.0, 40.0)
+    seeds = range(seeds)
+    bus_s, room_s = (40.0, 20.0) if quick else (90.0, 40.0)
     nees_all = []
     imu_us: dict[str, list[float]] = {"handheld": [], "bus": [], "broad": []}  # CPU time
     wall_us: dict[str, list[float]] = {"handheld": [], "bus": []}
@@ -307,15 +200,16 @@ def main() -> None:
         fused.append(res.tilt_deg)
         nees_all.append(res.nees(yaw_fit_s=1.0))
         record_cost("bus", res)
-        e = res.tilt_deg
-        print(f"  seed {seed}: mekf p95 {np.percentile(e, 95):.2f} max {e.max():.2f} mean NEES {nees_all[-1].mean():.2f}")
+        e = error_stats(res.tilt_deg, ("p95", "max"))
+        print(f"  seed {seed}: mekf p95 {e['p95']:.2f} max {e['max']:.2f} mean NEES {nees_all[-1].mean():.2f}")
         for name, err in peer_tilt_errors(*res.imu[:3], res.imu[3], 200.0).items():
             peers.setdefault(name, []).append(err)
-    e = np.concatenate(fused)
-    print(f"  mekf (fused)  p95 {np.percentile(e, 95):6.2f}  max {e.max():6.2f}   [goal p95 <= 1.0, max <= 2.0]")
-    for name, errs in peers.items():
-        e = np.concatenate(errs)
-        print(f"  {name:13s} p95 {np.percentile(e, 95):6.2f}  max {e.max():6.2f}")
+    figures = {"bus_tilt_deg": {"mekf (fused)": error_stats(np.concatenate(fused), ("p95", "max"))}}
+    figures["bus_tilt_deg"].update({name: error_stats(np.concatenate(errs), ("p95", "max"))
+                                    for name, errs in peers.items()})
+    for name, e in figures["bus_tilt_deg"].items():
+        goal = "   [goal p95 <= 1.0, max <= 2.0]" if name == "mekf (fused)" else ""
+        print(f"  {name:13s} p95 {e['p95']:6.2f}  max {e['max']:6.2f}{goal}")
 
     print(f"== handheld walk in a room ({room_s:.0f} s, 30 fps, 20 % frames dropped), ARE deg ==")
     for seed in seeds:
@@ -328,34 +222,39 @@ def main() -> None:
               f"mean {b.mean():5.3f} | NEES {res.nees().mean():.2f}   [goal max <= 10, mean <= single]")
 
     n = np.concatenate(nees_all)
-    print(f"== consistency: mean NEES {n.mean():.2f} over {n.size} frames [goal 1.5 .. 6]")
+    figures["mean_nees"] = error_stats(n, ("mean",))["mean"]
+    print(f"== consistency: mean NEES {figures['mean_nees']:.2f} over {n.size} frames [goal 1.5 .. 6]")
 
     peer_us: dict[str, list[float]] = {"vqf": [], "imufusion": []}
     run_us = float("nan")
     config = load_config(BROAD_PRESET, MekfConfig)
-    if BROAD_DIR.is_dir():
+    broad_dir = Path(broad_dir)
+    if broad_dir.is_dir():
         print("== BROAD IMU-only, inclination RMSE deg over movement samples, ratio to vqf 6D "
               f"[goal online <= {GOALS['online']}, offline <= {GOALS['offline']}] ==")
         print(f"  settings (all trials): configs/{BROAD_PRESET}.yaml")
-        for path in sorted(BROAD_DIR.glob("*.hdf5")):
-            trial = read_broad_trial(path)
+        for path in sorted(broad_dir.glob("*.hdf5")):
+            trial = read_broad(path)
             online, offline, vqf_rmse, us = broad_inclination(trial, config)
+            figures.setdefault("broad_tilt_rmse_deg", {})[path.stem] = {"online": online, "offline": offline,
+                                                                         "vqf_6d": vqf_rmse}
             imu_us["broad"].append(us)
             for name, value in peer_cost_us(trial.gyro_rad_s, trial.accel_m_s2, trial.sampling_rate_hz).items():
                 peer_us[name].append(value)
             print(f"  {path.stem:34s} vqf6D {vqf_rmse:5.2f} | online {online:5.2f} ratio {online / vqf_rmse:4.2f} "
                   f"[<= {GOALS['online']}] | offline {offline:5.2f} ratio {offline / vqf_rmse:4.2f} "
                   f"[<= {GOALS['offline']}]  ({us:.2f} us/sample)")
-        run_us = run_command_cost_us(sorted(BROAD_DIR.glob("07_*.hdf5"))[0])
+        run_us = run_command_cost_us(sorted(broad_dir.glob("07_*.hdf5"))[0])
     else:
-        print(f"== BROAD skipped: {BROAD_DIR} not found ==")
-    if EUROC_DIR.is_dir():
-        online, offline, vqf_rmse = euroc_tilt(config)
+        print(f"== BROAD skipped: {broad_dir} not found ==")
+    if euroc_dir.is_dir():
+        online, offline, vqf_rmse = euroc_tilt(config, euroc_dir)
+        figures["euroc_tilt_rmse_deg"] = {"online": online, "offline": offline, "vqf_6d": vqf_rmse}
         print(f"== EuRoC V1_02 first 40 s, IMU-only, tilt RMSE deg: vqf6D {vqf_rmse:.2f} | online {online:.2f} "
               f"ratio {online / vqf_rmse:.2f} [<= {GOALS['euroc']}] | offline {offline:.2f} ratio "
               f"{offline / vqf_rmse:.2f} ==")
     else:
-        print(f"== EuRoC skipped: {EUROC_DIR} not found ==")
+        print(f"== EuRoC skipped: {euroc_dir} not found ==")
     med = {k: f"{np.median(v):.1f}" if v else "-" for k, v in imu_us.items()}
     wall = {k: f"{np.median(v):.1f}" if v else "-" for k, v in wall_us.items()}
     print("== cost, CPU time of the filter (wall clock on this shared machine), medians over runs ==")
@@ -371,7 +270,4 @@ def main() -> None:
           f"[goal <= {GOALS['run_us']:g}]")
     print(f"  visual update incl. propagation to the frame: {np.median(vis_ms):.3f} ms "
           f"({np.median(vis_wall_ms):.3f})   [goal <= 0.3]")
-
-
-if __name__ == "__main__":
-    main()
+    return figures
