@@ -193,5 +193,5 @@ class Estimates:
 
     def without(self, flags: Status) -> "Estimates":
         """The same estimates with `flags` cleared from every status."""
-        return dataclasses.replace(self, status=self.status & ~int(flags))
+        return Estimates(self.t_s, self.R_wc, self.cov, self.status & ~int(flags), self.R_wm, self.gyro_bias_rad_s)
 

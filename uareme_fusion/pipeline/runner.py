@@ -4,6 +4,11 @@ Memory is bounded: nothing per frame is kept here (sinks write and forget; timin
 sums). A source that fails mid-stream, input found bad mid-stream (an `InputError`: e.g. fewer normal
 maps than frames) or Ctrl-C ends the run cleanly: the sinks are closed, so everything written so far
 stays complete and valid, and `RunStats.stopped` says why it ended.
+
+An IMU-only source (no frames: one estimate per IMU batch) goes in bulk: `IMU_ONLY_BULK_BATCHES`
+batches at a time to `Backend.process_imu_segments`, their estimates (`types.Estimates`) to the
+sinks' `write_many` together (signals wait until all are written and counted); a sink without
+`write_many` gets them one `FrameResult` at a time, as with frames.
 """
 
 from __future__ import annotations
