@@ -131,16 +131,32 @@ def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoi
         T += dt
         rate_var += (r0 * r0 + r1 * r1 + r2 * r2) * dt
     A_bias = C.T @ S
-    F = np.eye(12)
-    F[0:3, 0:3] = C.T
-    F[0:3, 3:6] = -A_bias
-    Q = np.zeros((12, 12))
+    P_pred = P.copy()
+    gyro_predict_in_place(P_pred, C, A_bias)
     q_th = q_gyro * T + q_bias * T**3 / 3.0 + q_rate * rate_var
     for i in range(3):
-        Q[i, i] = q_th
-        Q[i, 3 + i] = Q[3 + i, i] = -q_bias * T**2 / 2.0
-        Q[3 + i, 3 + i] = q_bias * T
-    return C, A_bias, T, F @ P @ F.T + Q
+        P_pred[i, i] += q_th
+        P_pred[i, 3 + i] += -q_bias * T**2 / 2.0
+        P_pred[3 + i, i] += -q_bias * T**2 / 2.0
+        P_pred[3 + i, 3 + i] += q_bias * T
+    return C, A_bias, T, P_pred
+
+
+def gyro_predict_in_place(P, C, A_bias):
+    """`P <- F P F^T` for the gyro transition `F` (identity but `F[TH, TH] = C^T`, `F[TH, BG] =
+    -A_bias`, as `propagation.gyro_transition`), in place: only the attitude rows and columns change."""
+    rows = np.empty((3, 12))  # (F P)[TH, :]
+    for i in range(3):
+        for j in range(12):
+            rows[i, j] = (C[0, i] * P[0, j] + C[1, i] * P[1, j] + C[2, i] * P[2, j]
+                          - A_bias[i, 0] * P[3, j] - A_bias[i, 1] * P[4, j] - A_bias[i, 2] * P[5, j])
+    P[0:3, :] = rows
+    cols = np.empty((12, 3))  # (F P F^T)[:, TH]
+    for i in range(12):
+        for j in range(3):
+            cols[i, j] = (P[i, 0] * C[0, j] + P[i, 1] * C[1, j] + P[i, 2] * C[2, j]
+                          - P[i, 3] * A_bias[j, 0] - P[i, 4] * A_bias[j, 1] - P[i, 5] * A_bias[j, 2])
+    P[:, 0:3] = cols
 
 
 def accel_measurement(acc_c, T, R_wc, lp_J1, use_lp_J, p):
@@ -282,7 +298,7 @@ def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_s
             for k in range(b - a):
                 matmul3_into(R_wc_cur, C_k[k], record_R[a + k])
                 record_P[a + k] = P_pred[0:3, 0:3]
-        R_wc_cur = R_wc_cur @ C_N
+        R_wc_cur = matmul3_into(R_wc_cur, C_N, np.empty((3, 3)))
         s[S_PRODUCTS] += 1
         if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
             R_wc_cur, R_wm_cur = orthonormal(R_wc_cur), orthonormal(R_wm_cur)
@@ -297,13 +313,12 @@ def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_s
             for i in range(3):
                 acc[i] += dt * (C_k[k, i, 0] * f0 + C_k[k, i, 1] * f1 + C_k[k, i, 2] * f2)
             t_prev = t[a + k]
-        acc_sum[:] = C_N.T @ acc
+        for i in range(3):
+            acc_sum[i] = C_N[0, i] * acc[0] + C_N[1, i] * acc[1] + C_N[2, i] * acc[2]
         s[S_ACC_TIME] += T - extra
         s[S_ACC_ELAPSED] += T
         if s[S_LP_VALID] > 0:
-            lp[0], lp[1] = C_N.T @ lp[0], C_N.T @ lp[1]
-            lp_J[0] = C_N.T @ lp_J[0] - skew3(lp[0]) @ A_bias
-            lp_J[1] = C_N.T @ lp_J[1] - skew3(lp[1]) @ A_bias
+            carry_lowpass_in_place(lp, lp_J, C_N, A_bias)
         if p[P_REST_GYRO] > 0:
             for k in range(a, b):
                 g0, g1, g2, f0, f1, f2 = gyro[k, 0], gyro[k, 1], gyro[k, 2], accel[k, 0], accel[k, 1], accel[k, 2]
@@ -327,6 +342,25 @@ def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_s
     R_wc[:, :] = R_wc_cur
     R_wm[:, :] = R_wm_cur
     return 1 if downweighted_any else 0
+
+
+def carry_lowpass_in_place(lp, lp_J, C_N, A_bias):
+    """`accel.AccelPeriod.carry_lowpass` on the kernels' arrays, without allocating per stage:
+    `lp[s] <- C_N^T lp[s]`, `lp_J[s] <- C_N^T lp_J[s] - skew(lp[s]) A_bias` (the new lp[s])."""
+    v = np.empty(3)
+    J = np.empty((3, 3))
+    for st in range(2):
+        for i in range(3):
+            v[i] = C_N[0, i] * lp[st, 0] + C_N[1, i] * lp[st, 1] + C_N[2, i] * lp[st, 2]
+            for j in range(3):
+                J[i, j] = C_N[0, i] * lp_J[st, 0, j] + C_N[1, i] * lp_J[st, 1, j] + C_N[2, i] * lp_J[st, 2, j]
+        for j in range(3):  # skew(v) @ A_bias, column j
+            a0, a1, a2 = A_bias[0, j], A_bias[1, j], A_bias[2, j]
+            J[0, j] -= v[1] * a2 - v[2] * a1
+            J[1, j] -= v[2] * a0 - v[0] * a2
+            J[2, j] -= v[0] * a1 - v[1] * a0
+        lp[st, :] = v
+        lp_J[st, :, :] = J
 
 
 def integrate_segments(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, ends, p,
@@ -374,8 +408,8 @@ SEGMENTS = None
 if jit.available():
     try:
         _pure = (skew3, reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into, exp3,
-                 matmul3_into, propagate_chunk, accel_measurement, zero_rate_measurement, kalman_update, accel_and_rest_update, has_gap,
-                 chunk_bounds, integrate_chunks)
+                 matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
+                 zero_rate_measurement, kalman_update, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = jit.compiled(integrate_batch, cache=True, error_model="numpy")
