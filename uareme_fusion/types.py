@@ -139,3 +139,59 @@ class Estimate:
     def up_c(self) -> np.ndarray:
         return up_in_camera(self.R_wc)
 
+
+@dataclass(frozen=True)
+class Estimates:
+    """Many `Estimate`s as arrays (an IMU-only run handled in bulk): `t_s` (M,), `R_wc` (M, 3, 3),
+    `cov` (M, 3, 3) rad^2, `status` (M,) int (`Status` bits); `R_wm` and `gyro_bias_rad_s` (M, 3, 3)
+    and (M, 3), or None when the backend has none (NaN rows where one estimate has none)."""
+
+    t_s: np.ndarray
+    R_wc: np.ndarray
+    cov: np.ndarray
+    status: np.ndarray
+    R_wm: np.ndarray | None = None
+    gyro_bias_rad_s: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return self.t_s.shape[0]
+
+    def __getitem__(self, k: int) -> Estimate:
+        def row(a):
+            return None if a is None or not np.isfinite(a[k]).all() else a[k].copy()
+        return Estimate(float(self.t_s[k]), self.R_wc[k].copy(), self.cov[k].copy(), Status(int(self.status[k])),
+                        row(self.R_wm), row(self.gyro_bias_rad_s))
+
+    @classmethod
+    def of(cls, estimates: list[Estimate]) -> "Estimates":
+        """The arrays of a list of estimates."""
+        def column(values, shape):
+            if all(v is None for v in values):
+                return None
+            return np.array([np.full(shape, np.nan) if v is None else v for v in values], float).reshape(-1, *shape)
+        n = len(estimates)
+        return cls(np.array([e.t for e in estimates], float), np.array([e.R_wc for e in estimates], float).reshape(n, 3, 3),
+                   np.array([e.cov for e in estimates], float).reshape(n, 3, 3),
+                   np.array([int(e.status) for e in estimates], np.int64),
+                   column([e.R_wm for e in estimates], (3, 3)), column([e.gyro_bias_rad_s for e in estimates], (3,)))
+
+    @classmethod
+    def concatenate(cls, parts: list["Estimates"]) -> "Estimates":
+        if len(parts) == 1:
+            return parts[0]
+        n = [len(p) for p in parts]
+
+        def column(name, shape):
+            values = [getattr(p, name) for p in parts]
+            if all(v is None for v in values):
+                return None
+            return np.concatenate([np.full((k, *shape), np.nan) if v is None else v for v, k in zip(values, n)])
+        return cls(np.concatenate([p.t_s for p in parts]), np.concatenate([p.R_wc for p in parts]).reshape(-1, 3, 3),
+                   np.concatenate([p.cov for p in parts]).reshape(-1, 3, 3),
+                   np.concatenate([p.status for p in parts]).astype(np.int64),
+                   column("R_wm", (3, 3)), column("gyro_bias_rad_s", (3,)))
+
+    def without(self, flags: Status) -> "Estimates":
+        """The same estimates with `flags` cleared from every status."""
+        return Estimates(self.t_s, self.R_wc, self.cov, self.status & ~int(flags), self.R_wm, self.gyro_bias_rad_s)
+

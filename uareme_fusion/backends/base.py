@@ -13,7 +13,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from ..types import Estimate, VisualRotation
+from ..types import Estimate, Estimates, VisualRotation
 
 
 class Backend(ABC):
@@ -35,3 +35,16 @@ class Backend(ABC):
     @abstractmethod
     def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
         """Best guess of `R_cm` at `t_s` to initialise the solver; None before any estimate."""
+
+    def process_imu_segments(self, t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray,
+                             ends: np.ndarray) -> Estimates:
+        """An IMU-only stream in bulk: samples as in `process_imu`, cut into segments (segment i is
+        samples ends[i-1]:ends[i], the first from 0), each fed and followed by a frame without visual
+        rotation at its last sample's time; returns those estimates. This is what feeding the
+        segments one by one gives; backends may override it with a faster path to the same result."""
+        estimates, start = [], 0
+        for end in np.asarray(ends, int).tolist():
+            self.process_imu(t_s[start:end], gyro_rad_s[start:end], accel_m_s2[start:end])
+            estimates.append(self.process_frame(float(t_s[end - 1]), None))
+            start = end
+        return Estimates.of(estimates)

@@ -119,6 +119,11 @@ class ImuStream:
         return float(held[-1, 0] - held[0, 0]) if held.shape[0] > 1 else 0.0
 
     @property
+    def held_count(self) -> int:
+        """Samples held (not yet released)."""
+        return self._held.shape[0]
+
+    @property
     def newest_s(self) -> float:
         """Stamp of the newest sample held or released, s (-inf before any)."""
         return float(self._held[-1, 0]) if self._held.shape[0] else self.watermark_s

@@ -42,6 +42,8 @@ def bench(
                               "folder (default ../shared/data)."),
     seeds: int = typer.Option(5, "--seeds", min=1, max=100, help="mekf, smoother: seeds per scenario."),
     quick: bool = typer.Option(False, "--quick", help="mekf: shorter simulated runs (not the reported figures)."),
+    run_cost: bool = typer.Option(False, "--run-cost", help="mekf: only the whole-`run` cost per IMU sample on "
+                                  "every IMU-only file, beside vqf and imufusion."),
     threads: int = typer.Option(None, "--threads", min=1, max=256,
                                 help="pipeline: torch CPU threads of the learned normals (default 1)."),
     cues: str = typer.Option("normals,lines", "--cues", help="horizon: visual cues (normals, lines or both)."),
@@ -75,7 +77,8 @@ def bench(
     elif what == "mekf":
         from ..benchmarks import mekf
 
-        results = mekf.run(seeds=seeds, quick=quick, broad_dir=data or Path("../shared/data/broad_subset"))
+        results = mekf.run(seeds=seeds, quick=quick, broad_dir=data or Path("../shared/data/broad_subset"),
+                           run_cost=run_cost)
     elif what == "smoother":
         from ..benchmarks import smoother
 

@@ -156,7 +156,7 @@ class RowFile:
     def __init__(self, path: Path):
         self.path = Path(path)
         self.rows = 0
-        self._complete = self._last = 0
+        self._complete = self._last = self._last_rows = 0
         self._fd: int | None = None
         self.failed: InputError | OutputError | None = None
         try:
@@ -172,8 +172,9 @@ class RowFile:
             self._fd = None
             raise InputError(f"{self.path}: exists and is not a regular file; refusing to write to it")
 
-    def write_row(self, text: str, counts: bool = True) -> None:
-        """Append `text` (one or more whole lines); `counts` False for a header."""
+    def write_row(self, text: str, counts: bool | int = True) -> None:
+        """Append `text` (one or more whole lines); `counts` False for a header, or how many rows
+        `text` holds when it holds several (written, and taken back, together)."""
         if self.failed is not None:
             raise self.failed
         encoded = text.encode("utf-8")
@@ -187,13 +188,14 @@ class RowFile:
             raise self.failed from None
         self._last = self._complete
         self._complete += len(encoded)
-        self.rows += counts
+        self._last_rows = int(counts)
+        self.rows += self._last_rows
 
     def drop_last_row(self) -> None:
-        """Remove the row written last (another file of the same result could not be written)."""
+        """Remove the row(s) written last (another file of the same results could not be written)."""
         if self._fd is not None and self._complete > self._last and self.rows > 0:
             self._complete = self._last
-            self.rows -= 1
+            self.rows -= self._last_rows
             self._truncate_to_complete()
 
     def _truncate_to_complete(self) -> None:

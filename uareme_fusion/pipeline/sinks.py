@@ -20,7 +20,7 @@ import numpy as np
 
 from ..io.safe_files import RowFile
 from ..rotations import quat_xyzw
-from ..types import Status
+from ..types import Estimates, Status
 from .runner import FrameResult
 
 ESTIMATE_COLUMNS = (
@@ -38,6 +38,15 @@ def status_names(status: Status) -> str:
     return "|".join(f.name for f in Status if f and f in status)
 
 
+def _quats_xyzw(R_wc: np.ndarray) -> np.ndarray:
+    """(M, 4) quaternions x y z w of (M, 3, 3) rotations (one matrix without scipy's overhead)."""
+    return quat_xyzw(R_wc[0])[None] if R_wc.shape[0] == 1 else quat_xyzw(R_wc, assume_valid=True)
+
+
+TUM_ROW = "%.9f 0 0 0 %.9f %.9f %.9f %.9f\n"
+"""One trajectory.tum row: time, position zeros, quaternion x y z w of `R_wc`."""
+
+
 class TumTrajectoryWriter:
     def __init__(self, path: Path):
         self.path = Path(path)
@@ -46,8 +55,12 @@ class TumTrajectoryWriter:
                              "position not estimated)\n", counts=False)
 
     def write(self, result: FrameResult) -> None:
-        q = quat_xyzw(result.estimate.R_wc)
-        self._rows.write_row(f"{result.t_s:.9f} 0 0 0 {q[0]:.9f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f}\n")
+        self._rows.write_row(TUM_ROW % (result.t_s, *quat_xyzw(result.estimate.R_wc)))
+
+    def write_many(self, estimates: Estimates) -> None:
+        """The rows of many estimates, written (and, on a full disk, taken back) together."""
+        values = np.concatenate([estimates.t_s[:, None], _quats_xyzw(estimates.R_wc)], axis=1)
+        self._rows.write_row((TUM_ROW * len(estimates)) % tuple(values.ravel().tolist()), counts=len(estimates))
 
     def undo_last(self) -> None:
         self._rows.drop_last_row()
@@ -63,22 +76,50 @@ def csv_line(row: list) -> str:
     return buffer.getvalue()
 
 
+_CSV_NUMBERS = ",".join(["%.9f"] * 5 + ["%.6e"] * 9 + ["%.9f"] * 3)
+"""estimates.csv's numeric columns up to the up vector (`ESTIMATE_COLUMNS`); none needs csv quoting."""
+
+
 class EstimatesCsvWriter:
     def __init__(self, path: Path):
         self.path = Path(path)
         self._rows = RowFile(self.path)
         self._rows.write_row(csv_line(ESTIMATE_COLUMNS), counts=False)
+        self._names: dict[int, str] = {}
 
     def write(self, result: FrameResult) -> None:
         est = result.estimate
-        bias = [] if est.gyro_bias_rad_s is None else list(est.gyro_bias_rad_s)
-        row = ([f"{result.t_s:.9f}"] + [f"{v:.9f}" for v in quat_xyzw(est.R_wc)]
-               + [f"{v:.6e}" for v in np.asarray(est.cov).ravel()]
-               + [f"{v:.9f}" for v in est.up_c]
-               + ([f"{v:.6e}" for v in bias] if bias else ["", "", ""])
-               + ["" if result.visual is None else f"{result.visual.quality:.4f}",
-                  int(est.status), status_names(est.status)])
-        self._rows.write_row(csv_line(row))
+        bias = None if est.gyro_bias_rad_s is None else np.asarray(est.gyro_bias_rad_s, float)[None]
+        quality = "" if result.visual is None else f"{result.visual.quality:.4f}"
+        self._rows.write_row(self._lines(np.array([result.t_s]), np.asarray(est.R_wc, float)[None],
+                                         np.asarray(est.cov, float)[None], bias, [quality], [int(est.status)]))
+
+    def write_many(self, estimates: Estimates) -> None:
+        """The rows of many estimates (no visual rotation), written (and taken back) together."""
+        n = len(estimates)
+        self._rows.write_row(self._lines(estimates.t_s, estimates.R_wc, estimates.cov, estimates.gyro_bias_rad_s,
+                                         [""] * n, estimates.status.tolist()), counts=n)
+
+    def _lines(self, t_s, R_wc, cov, bias, quality: list[str], status: list[int]) -> str:
+        """csv rows (\\r\\n ends, as `csv_line`) of M estimates: `t_s` (M,), `R_wc` and `cov` (M, 3, 3),
+        `bias` (M, 3) or None (a NaN row: empty cells), visual quality cells and status ints."""
+        n = t_s.shape[0]
+        numbers = np.concatenate([t_s[:, None], _quats_xyzw(R_wc), cov.reshape(n, 9), R_wc[:, 2, :]], axis=1)
+        with_bias = bias is not None and bool(np.isfinite(bias).all())
+        row = _CSV_NUMBERS + (",%.6e,%.6e,%.6e" if with_bias else ",,,") + "\0"
+        values = np.concatenate([numbers, bias], axis=1) if with_bias else numbers
+        heads = ((row * n) % tuple(values.ravel().tolist())).split("\0")
+        if bias is not None and not with_bias:  # some estimates have a bias: theirs, empty cells for the others
+            heads = [head if not np.isfinite(b).all() else ("%s,%.6e,%.6e,%.6e" % (head[:-3], *b))
+                     for head, b in zip(heads, bias.tolist())]
+        names = self._status_names
+        return "".join([f"{head},{q},{s},{names(s)}\r\n" for head, q, s in zip(heads, quality, status)])
+
+    def _status_names(self, status: int) -> str:
+        names = self._names.get(status)
+        if names is None:
+            names = self._names[status] = status_names(Status(status))
+        return names
 
     def undo_last(self) -> None:
         self._rows.drop_last_row()
@@ -98,6 +139,12 @@ class EstimateLog:
         self._R.append(np.asarray(result.estimate.R_wc, np.float64))
         self._cov.append(np.asarray(result.estimate.cov, np.float64))
         self._status.append(int(result.estimate.status))
+
+    def write_many(self, estimates: Estimates) -> None:
+        self._t.extend(estimates.t_s.tolist())
+        self._R.extend(estimates.R_wc)
+        self._cov.extend(estimates.cov)
+        self._status.extend(estimates.status.tolist())
 
     def close(self) -> None:
         pass

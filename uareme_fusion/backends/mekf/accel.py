@@ -23,13 +23,19 @@ def chunk_bounds(t: np.ndarray, t_state_s: float, elapsed_s: float, period_s: fl
     current accelerometer period gone (chunk k is samples bounds[k]:bounds[k+1]): one chunk for a
     short batch (a frame's worth), else a cut after each sample whose interval crosses a period
     boundary (a sample belongs to the chunk in which its interval starts)."""
-    if t.size < 2 or float(t[-1]) - t_state_s <= period_s:
-        return np.array([0, t.size])
-    elapsed_before = np.empty(t.size)
-    elapsed_before[0] = elapsed_s
-    elapsed_before[1:] = elapsed_s + (t[:-1] - t_state_s)
-    cuts = np.flatnonzero(np.diff(np.floor(elapsed_before / period_s))) + 1
-    return np.concatenate(([0], cuts, [t.size]))
+    n = t.shape[0]
+    if n < 2 or t[n - 1] - t_state_s <= period_s:
+        cuts = np.zeros(0, np.int64)
+    else:
+        elapsed_before = np.empty(n)
+        elapsed_before[0] = elapsed_s
+        elapsed_before[1:] = elapsed_s + (t[:-1] - t_state_s)
+        periods = np.floor(elapsed_before / period_s)
+        cuts = np.flatnonzero(periods[1:] != periods[:-1]) + 1
+    bounds = np.empty(cuts.shape[0] + 2, np.int64)  # plain array code: the compiled kernels share it
+    bounds[0], bounds[-1] = 0, n
+    bounds[1:-1] = cuts
+    return bounds
 
 
 class AccelPeriod:

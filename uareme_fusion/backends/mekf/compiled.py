@@ -119,7 +119,7 @@ def integrate_compiled(filt, t, gyro_c, accel_c, extra_s: float, defer: bool) ->
     record = filt.config.record_imu_estimates
     record_R = np.empty((t.size if record else 0, 3, 3))
     record_P = np.empty_like(record_R)
-    bounds = chunk_bounds(t, filt.t_state, filt.accel.elapsed_s, filt.config.accel_update_period_s).astype(np.int64)
+    bounds = chunk_bounds(t, filt.t_state, filt.accel.elapsed_s, filt.config.accel_update_period_s)
     done = KERNEL(*state, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
                   np.ascontiguousarray(accel_c, float), bounds, float(extra_s), _parameters(filt, defer),
                   record_R, record_P)
@@ -132,6 +132,34 @@ def integrate_compiled(filt, t, gyro_c, accel_c, extra_s: float, defer: bool) ->
     filt.imu_t_s = float(t[-1])
     _unpack(filt, state, done > 0)
     return True
+
+
+def integrate_segments_compiled(filt, t, gyro_c, accel_c, ends: np.ndarray):
+    """An IMU-only stream (camera frame, clean: see `kernels.integrate_segments`) integrated with an
+    estimate after each segment `ends` (M,) (exclusive sample ends); writes the state back into `filt`
+    and returns `(R_wc (M, 3, 3), attitude cov (M, 3, 3), b_c (M, 3), flags (M,) Status bits)`, or
+    None (nothing changed) when the stream holds an IMU gap. `filt.flags` is left to the caller: the
+    per-estimate flags already say what happened."""
+    state = _pack(filt)
+    m = ends.shape[0]
+    record = filt.config.record_imu_estimates
+    record_R = np.empty((t.size if record else 0, 3, 3))
+    record_P = np.empty_like(record_R)
+    out_R, out_cov, out_b, out_flags = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3)), np.empty(m, np.int64)
+    done = K.SEGMENTS(*state, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
+                      np.ascontiguousarray(accel_c, float), ends, _parameters(filt, False), record_R, record_P,
+                      out_R, out_cov, out_b, out_flags)
+    if done < 0:
+        return None
+    if record:
+        filt.record_t.append(np.array(t, float))
+        filt.record_R.append(record_R)
+        filt.record_P.append(record_P)
+    filt.imu_t_s = float(t[-1])
+    _unpack(filt, state, False)
+    flags = np.where(out_flags & 1, int(Status.ACCEL_DOWNWEIGHTED), 0) | np.where(
+        out_flags & 2, int(Status.UPDATE_NONFINITE), 0)
+    return out_R, out_cov, out_b, flags
 
 
 def accel_update_compiled(filt) -> None:

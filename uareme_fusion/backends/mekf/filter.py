@@ -14,7 +14,7 @@ from filterpy.kalman import update as kf_update
 
 from ...config import load_config, preset_names
 from ...errors import InputError
-from ...types import Estimate, Status, VisualRotation
+from ...types import Estimate, Estimates, Status, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuBatch, ImuStream
 from .accel import AccelPeriod
@@ -22,6 +22,7 @@ from .compiled import KERNEL, accel_update_compiled
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import gravity_model, stack, vertical_model, visual_model
 from .motion import ConstantRateMotion, GyroMotion
+from .segments import process_imu_segments
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
 
 
@@ -146,6 +147,11 @@ class Mekf(Backend):
         self.motion.integrate_pending(self, force_init=True)
         if self.accel.due:
             self.accel_update()
+
+    def process_imu_segments(self, t_s, gyro_rad_s, accel_m_s2, ends) -> Estimates:
+        """`Backend.process_imu_segments` (an IMU-only stream in bulk), with clean stretches of the
+        stream in one compiled call (`segments.py`)."""
+        return process_imu_segments(self, t_s, gyro_rad_s, accel_m_s2, ends)
 
     def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
         """Propagate to `t_s` (s, camera clock), fuse `visual` (None for a dropped frame) and return

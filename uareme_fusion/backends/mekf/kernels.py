@@ -25,6 +25,7 @@ import math
 import numpy as np
 
 from ... import jit
+from .accel import chunk_bounds
 from .measurements import gravity_model, zero_rate_model
 from .state import orthonormal, reset_jacobian, skew3
 
@@ -55,9 +56,10 @@ def inv3(A):
     return out / det
 
 
-def exp3(phi):
-    """Rodrigues' formula, with its Taylor series near 0 (the exponential map of SO(3))."""
-    theta2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+def exp3_into(p0, p1, p2, out):
+    """Rodrigues' formula for the rotation vector (p0, p1, p2), with its Taylor series near 0 (the
+    exponential map of SO(3)), written into `out` (3, 3): `I + a K + b K^2`, K = skew(p)."""
+    theta2 = p0 * p0 + p1 * p1 + p2 * p2
     if theta2 < 1e-8:
         a = 1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0
         b = 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0
@@ -65,8 +67,30 @@ def exp3(phi):
         theta = math.sqrt(theta2)
         a = math.sin(theta) / theta
         b = (1.0 - math.cos(theta)) / theta2
-    K = skew3(phi)
-    return np.eye(3) + a * K + b * (K @ K)
+    out[0, 0] = 1.0 + b * (-p2 * p2 - p1 * p1)
+    out[0, 1] = -a * p2 + b * (p1 * p0)
+    out[0, 2] = a * p1 + b * (p2 * p0)
+    out[1, 0] = a * p2 + b * (p0 * p1)
+    out[1, 1] = 1.0 + b * (-p2 * p2 - p0 * p0)
+    out[1, 2] = -a * p0 + b * (p2 * p1)
+    out[2, 0] = -a * p1 + b * (p0 * p2)
+    out[2, 1] = a * p0 + b * (p1 * p2)
+    out[2, 2] = 1.0 + b * (-p1 * p1 - p0 * p0)
+    return out
+
+
+def exp3(phi):
+    """`exp3_into` of a (3,) rotation vector, as a new (3, 3) array."""
+    return exp3_into(phi[0], phi[1], phi[2], np.empty((3, 3)))
+
+
+def matmul3_into(A, B, out):
+    """`out = A @ B` for (3, 3) arrays (`out` distinct from both), without allocating."""
+    for i in range(3):
+        a0, a1, a2 = A[i, 0], A[i, 1], A[i, 2]
+        for j in range(3):
+            out[i, j] = a0 * B[0, j] + a1 * B[1, j] + a2 * B[2, j]
+    return out
 
 
 def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoid, q_gyro, q_bias, q_rate,
@@ -77,37 +101,62 @@ def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoi
     T the time covered, P the covariance predicted with the closed-form transition and noise."""
     n = t.shape[0]
     C = np.eye(3)
+    C_prev = np.empty((3, 3))
+    M = np.empty((3, 3))
     S = np.zeros((3, 3))  # sum_k dt_k C_k
     T = 0.0
     rate_var = 0.0
     t_prev = t_state
-    g_prev = last_gyro
+    h0, h1, h2 = last_gyro[0], last_gyro[1], last_gyro[2]  # the previous reading
+    b0, b1, b2 = b_c[0], b_c[1], b_c[2]
     m = n + 1 if extra_s > 0.0 else n
-    for k in range(m):
+    for k in range(m):  # scalar code: no array is allocated per sample
         if k < n:
-            dt, g = t[k] - t_prev, gyro[k]
+            dt, g0, g1, g2 = t[k] - t_prev, gyro[k, 0], gyro[k, 1], gyro[k, 2]
             t_prev = t[k]
         else:
-            dt, g = extra_s, gyro[n - 1]
-        rate = 0.5 * (g + g_prev) - b_c if trapezoid else g - b_c
-        g_prev = g
-        C = C @ exp3(rate * dt)
+            dt, g0, g1, g2 = extra_s, gyro[n - 1, 0], gyro[n - 1, 1], gyro[n - 1, 2]
+        if trapezoid:
+            r0, r1, r2 = 0.5 * (g0 + h0) - b0, 0.5 * (g1 + h1) - b1, 0.5 * (g2 + h2) - b2
+        else:
+            r0, r1, r2 = g0 - b0, g1 - b1, g2 - b2
+        h0, h1, h2 = g0, g1, g2
+        C_prev[:, :] = C
+        matmul3_into(C_prev, exp3_into(r0 * dt, r1 * dt, r2 * dt, M), C)
         if k < n:
             C_out[k] = C
-        S += dt * C
+        for i in range(3):
+            for j in range(3):
+                S[i, j] += dt * C[i, j]
         T += dt
-        rate_var += (rate[0] * rate[0] + rate[1] * rate[1] + rate[2] * rate[2]) * dt
+        rate_var += (r0 * r0 + r1 * r1 + r2 * r2) * dt
     A_bias = C.T @ S
-    F = np.eye(12)
-    F[0:3, 0:3] = C.T
-    F[0:3, 3:6] = -A_bias
-    Q = np.zeros((12, 12))
+    P_pred = P.copy()
+    gyro_predict_in_place(P_pred, C, A_bias)
     q_th = q_gyro * T + q_bias * T**3 / 3.0 + q_rate * rate_var
     for i in range(3):
-        Q[i, i] = q_th
-        Q[i, 3 + i] = Q[3 + i, i] = -q_bias * T**2 / 2.0
-        Q[3 + i, 3 + i] = q_bias * T
-    return C, A_bias, T, F @ P @ F.T + Q
+        P_pred[i, i] += q_th
+        P_pred[i, 3 + i] += -q_bias * T**2 / 2.0
+        P_pred[3 + i, i] += -q_bias * T**2 / 2.0
+        P_pred[3 + i, 3 + i] += q_bias * T
+    return C, A_bias, T, P_pred
+
+
+def gyro_predict_in_place(P, C, A_bias):
+    """`P <- F P F^T` for the gyro transition `F` (identity but `F[TH, TH] = C^T`, `F[TH, BG] =
+    -A_bias`, as `propagation.gyro_transition`), in place: only the attitude rows and columns change."""
+    rows = np.empty((3, 12))  # (F P)[TH, :]
+    for i in range(3):
+        for j in range(12):
+            rows[i, j] = (C[0, i] * P[0, j] + C[1, i] * P[1, j] + C[2, i] * P[2, j]
+                          - A_bias[i, 0] * P[3, j] - A_bias[i, 1] * P[4, j] - A_bias[i, 2] * P[5, j])
+    P[0:3, :] = rows
+    cols = np.empty((12, 3))  # (F P F^T)[:, TH]
+    for i in range(12):
+        for j in range(3):
+            cols[i, j] = (P[i, 0] * C[0, j] + P[i, 1] * C[1, j] + P[i, 2] * C[2, j]
+                          - P[i, 3] * A_bias[j, 0] - P[i, 4] * A_bias[j, 1] - P[i, 5] * A_bias[j, 2])
+    P[:, 0:3] = cols
 
 
 def accel_measurement(acc_c, T, R_wc, lp_J1, use_lp_J, p):
@@ -208,11 +257,25 @@ def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_su
     predicted to the end of its chunk. Returns 1 when an update was down-weighted, 0 otherwise, and
     -1, changing nothing, when a step (from `s[S_T_STATE]` on) exceeds `P_GAP_LIMIT` (an IMU gap).
     """
-    t_prev = s[S_T_STATE]
+    if has_gap(t, s[S_T_STATE], p[P_GAP_LIMIT]):
+        return -1
+    return integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
+                            extra_s, p, record_R, record_P)
+
+
+def has_gap(t, t_state, gap_limit_s):
+    """Whether a step between samples `t` (from `t_state` on) exceeds `gap_limit_s` (an IMU gap)."""
+    t_prev = t_state
     for k in range(t.shape[0]):
-        if t[k] - t_prev > p[P_GAP_LIMIT]:
-            return -1
+        if t[k] - t_prev > gap_limit_s:
+            return True
         t_prev = t[k]
+    return False
+
+
+def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
+                     extra_s, p, record_R, record_P):
+    """`integrate_batch` on a batch known to hold no gap: 1 when an update was down-weighted, else 0."""
     n_chunks = bounds.shape[0] - 1
     downweighted_any = False
     C_buf = np.empty((t.shape[0], 3, 3))
@@ -233,9 +296,9 @@ def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_su
         P[:, :] = P_pred
         if p[P_RECORD] > 0:
             for k in range(b - a):
-                record_R[a + k] = R_wc_cur @ C_k[k]
+                matmul3_into(R_wc_cur, C_k[k], record_R[a + k])
                 record_P[a + k] = P_pred[0:3, 0:3]
-        R_wc_cur = R_wc_cur @ C_N
+        R_wc_cur = matmul3_into(R_wc_cur, C_N, np.empty((3, 3)))
         s[S_PRODUCTS] += 1
         if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
             R_wc_cur, R_wm_cur = orthonormal(R_wc_cur), orthonormal(R_wm_cur)
@@ -245,22 +308,28 @@ def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_su
         acc = acc_sum.copy()
         t_prev = s[S_T_STATE]
         for k in range(b - a):
-            acc += (t[a + k] - t_prev) * (C_k[k] @ accel[a + k])
+            dt = t[a + k] - t_prev
+            f0, f1, f2 = accel[a + k, 0], accel[a + k, 1], accel[a + k, 2]
+            for i in range(3):
+                acc[i] += dt * (C_k[k, i, 0] * f0 + C_k[k, i, 1] * f1 + C_k[k, i, 2] * f2)
             t_prev = t[a + k]
-        acc_sum[:] = C_N.T @ acc
+        for i in range(3):
+            acc_sum[i] = C_N[0, i] * acc[0] + C_N[1, i] * acc[1] + C_N[2, i] * acc[2]
         s[S_ACC_TIME] += T - extra
         s[S_ACC_ELAPSED] += T
         if s[S_LP_VALID] > 0:
-            lp[0], lp[1] = C_N.T @ lp[0], C_N.T @ lp[1]
-            lp_J[0] = C_N.T @ lp_J[0] - skew3(lp[0]) @ A_bias
-            lp_J[1] = C_N.T @ lp_J[1] - skew3(lp[1]) @ A_bias
+            carry_lowpass_in_place(lp, lp_J, C_N, A_bias)
         if p[P_REST_GYRO] > 0:
             for k in range(a, b):
-                g, f = gyro[k], accel[k]
-                rest_sums[0:3] += g
-                rest_sums[3] += g[0] * g[0] + g[1] * g[1] + g[2] * g[2]
-                rest_sums[4:7] += f
-                rest_sums[7] += f[0] * f[0] + f[1] * f[1] + f[2] * f[2]
+                g0, g1, g2, f0, f1, f2 = gyro[k, 0], gyro[k, 1], gyro[k, 2], accel[k, 0], accel[k, 1], accel[k, 2]
+                rest_sums[0] += g0
+                rest_sums[1] += g1
+                rest_sums[2] += g2
+                rest_sums[3] += g0 * g0 + g1 * g1 + g2 * g2
+                rest_sums[4] += f0
+                rest_sums[5] += f1
+                rest_sums[6] += f2
+                rest_sums[7] += f0 * f0 + f1 * f1 + f2 * f2
             s[S_REST_N] += b - a
         s[S_T_STATE] = t[b - 1] + extra
         if not last or s[S_ACC_ELAPSED] >= p[P_DUE]:
@@ -273,6 +342,52 @@ def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_su
     R_wc[:, :] = R_wc_cur
     R_wm[:, :] = R_wm_cur
     return 1 if downweighted_any else 0
+
+
+def carry_lowpass_in_place(lp, lp_J, C_N, A_bias):
+    """`accel.AccelPeriod.carry_lowpass` on the kernels' arrays, without allocating per stage:
+    `lp[s] <- C_N^T lp[s]`, `lp_J[s] <- C_N^T lp_J[s] - skew(lp[s]) A_bias` (the new lp[s])."""
+    v = np.empty(3)
+    J = np.empty((3, 3))
+    for st in range(2):
+        for i in range(3):
+            v[i] = C_N[0, i] * lp[st, 0] + C_N[1, i] * lp[st, 1] + C_N[2, i] * lp[st, 2]
+            for j in range(3):
+                J[i, j] = C_N[0, i] * lp_J[st, 0, j] + C_N[1, i] * lp_J[st, 1, j] + C_N[2, i] * lp_J[st, 2, j]
+        for j in range(3):  # skew(v) @ A_bias, column j
+            a0, a1, a2 = A_bias[0, j], A_bias[1, j], A_bias[2, j]
+            J[0, j] -= v[1] * a2 - v[2] * a1
+            J[1, j] -= v[2] * a0 - v[0] * a2
+            J[2, j] -= v[0] * a1 - v[1] * a0
+        lp[st, :] = v
+        lp_J[st, :, :] = J
+
+
+def integrate_segments(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, ends, p,
+                       record_R, record_P, out_R, out_cov, out_b, out_flags):
+    """An IMU-only stream (camera frame, no gaps or saturated samples) in segments, segment i being
+    samples ends[i-1]:ends[i] (from 0): each is integrated as `integrate_batch` integrates one
+    released batch (chunks cut by `accel.chunk_bounds`, updates falling due applied, none deferred),
+    and the estimate after it written out: `out_R[i]` R_wc, `out_cov[i]` the attitude covariance
+    (symmetrised), `out_b[i]` b_c, `out_flags[i]` 1 when an update was down-weighted + 2 when one was
+    not finite. Returns -1, changing nothing, when a step exceeds `P_GAP_LIMIT`, else 0."""
+    if has_gap(t, s[S_T_STATE], p[P_GAP_LIMIT]):
+        return -1
+    start = 0
+    for i in range(ends.shape[0]):
+        end = ends[i]
+        seg_t = t[start:end]
+        bounds = chunk_bounds(seg_t, s[S_T_STATE], s[S_ACC_ELAPSED], p[P_PERIOD])
+        nonfinite_before = s[S_NONFINITE]
+        downweighted = integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, seg_t,
+                                        gyro[start:end], accel[start:end], bounds, 0.0, p, record_R[start:end],
+                                        record_P[start:end])
+        out_R[i] = R_wc
+        out_cov[i] = 0.5 * (P[0:3, 0:3] + P[0:3, 0:3].T)
+        out_b[i] = b_c
+        out_flags[i] = downweighted + (2 if s[S_NONFINITE] > nonfinite_before else 0)
+        start = end
+    return 0
 
 
 def accel_update_in_place(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
@@ -288,14 +403,18 @@ KERNEL = None
 """`integrate_batch` compiled, with the functions it calls, or None (numba missing or broken)."""
 ACCEL_UPDATE = None
 """`accel_update_in_place` compiled, or None."""
+SEGMENTS = None
+"""`integrate_segments` compiled, or None."""
 if jit.available():
     try:
-        _pure = (skew3, reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3, propagate_chunk,
-                 accel_measurement, zero_rate_measurement, kalman_update, accel_and_rest_update)
+        _pure = (skew3, reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into, exp3,
+                 matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
+                 zero_rate_measurement, kalman_update, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = jit.compiled(integrate_batch, cache=True, error_model="numpy")
         ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
+        SEGMENTS = jit.compiled(integrate_segments, cache=True, error_model="numpy")
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)
-        KERNEL = ACCEL_UPDATE = None
+        KERNEL = ACCEL_UPDATE = SEGMENTS = None

@@ -16,7 +16,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...rotations import WORLD_UP, exp_so3
-from ...types import Estimate, Status, VisualRotation
+from ...types import Estimate, Estimates, Status, VisualRotation
 from ..base import Backend
 from ..imu_stream import check_imu_arrays
 from .config import GyroSampling, MekfConfig, MekfMode
@@ -97,10 +97,21 @@ class OfflineImu(Backend):
             config.model_copy(update={"imu_time_offset_s": 0.0}), t, gyro_rad_s, accel_m_s2, with_cov=True)
 
     def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
-        k = int(np.searchsorted(self.t_s, t_s, side="right")) - 1
-        if k < 0:
-            return Estimate(t_s, np.eye(3), np.eye(3), Status.NOT_INITIALISED)
-        return Estimate(t_s, self.R_wc[k].copy(), 0.5 * (self.cov[k] + self.cov[k].T))
+        return self._at(np.array([float(t_s)]))[0]
+
+    def process_imu_segments(self, t_s, gyro_rad_s, accel_m_s2, ends) -> Estimates:
+        """The estimates at the segments' last samples, all at once (`Backend.process_imu_segments`)."""
+        return self._at(np.asarray(t_s, float)[np.asarray(ends, int) - 1])
+
+    def _at(self, t_s: np.ndarray) -> Estimates:
+        """The smoothed estimates at times `t_s` (M,) s: identity, NOT_INITIALISED before the first sample."""
+        k = np.searchsorted(self.t_s, t_s, side="right") - 1
+        before = k < 0
+        k = np.maximum(k, 0)
+        R_wc, cov = self.R_wc[k], 0.5 * (self.cov[k] + np.swapaxes(self.cov[k], 1, 2))
+        R_wc[before] = cov[before] = np.eye(3)
+        status = np.where(before, int(Status.NOT_INITIALISED), 0).astype(np.int64)
+        return Estimates(t_s.copy(), R_wc, cov, status)
 
     def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
         return None
