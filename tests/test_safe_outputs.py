@@ -308,3 +308,40 @@ def test_a_full_disk_during_ground_keeps_masks_and_overlays_in_step(small_disk):
     masks, overlays = sorted((out / "masks").iterdir()), sorted((out / "overlay").iterdir())
     assert len(masks) == len(overlays) == summary["ground_masks"] == summary["estimates"]
     assert all(cv2.imread(str(p)) is not None for p in masks + overlays)
+
+
+def test_a_full_disk_during_record_leaves_a_replayable_prefix(small_disk, tmp_path):
+    (small_disk / "filler").unlink()  # 200 KiB: the IMU, the ground truth and about one frame fit
+    rec = small_disk / "r"
+    proc = cli("run", "sim:room", "--max-frames", "40", "--out", tmp_path / "out", "--record", rec)
+    assert proc.returncode == 1
+    (line,) = error_lines(proc)
+    assert line.startswith(f"error: {rec}/") and "could not be written (No space left on device)" in line
+    meta = json.loads((rec / "source.json").read_text())  # the counts of close, not the placeholder
+    listed = [ln.split() for ln in (rec / "rgb.txt").read_text().splitlines()
+              if not ln.startswith("#")] if (rec / "rgb.txt").exists() else []
+    assert meta["frames"] == len(listed) and all(cv2.imread(str(rec / name)) is not None for _, name in listed)
+    imu_rows = (rec / "imu0" / "data.csv").read_text().splitlines()[1:]
+    assert meta["imu_samples"] == len(imu_rows) > 0 and all(row.count(",") == 6 for row in imu_rows)
+    truth = [ln.split() for ln in (rec / "groundtruth.txt").read_text().splitlines() if not ln.startswith("#")]
+    assert len(truth) == 300 and all(len(row) == 8 for row in truth)
+    assert [p.name for p in rec.rglob(".*")] == []  # no temporary file left
+    replay = cli("run", rec, "--out", tmp_path / "replay")
+    assert replay.returncode == 0, replay.stderr
+    assert json.loads((tmp_path / "replay" / "summary.json").read_text())["imu_samples"] == len(imu_rows)
+
+
+def test_bench_json_is_written_whole(tmp_path, monkeypatch):
+    """`bench --json FILE` goes through a temporary file: a failing write leaves the older file as it was."""
+    from uareme_fusion.benchmarks import solver
+
+    monkeypatch.setattr(solver, "run", lambda repeats: {"median_ms": 1.5})
+    out = tmp_path / "b.json"
+    assert cli("bench", "solver", "--repeats", "5", "--json", out).returncode == 0
+    assert json.loads(out.read_text()) == {"median_ms": 1.5}
+    monkeypatch.setattr(solver, "run", lambda repeats: {"median_ms": 2.5})
+    monkeypatch.setattr(os, "fsync", lambda fd: (_ for _ in ()).throw(OSError(28, "No space left on device")))
+    proc = cli("bench", "solver", "--repeats", "5", "--json", out)
+    assert proc.returncode == 1
+    assert error_lines(proc) == [f"error: {out}: could not be written (No space left on device)"]
+    assert json.loads(out.read_text()) == {"median_ms": 1.5} and sorted(p.name for p in tmp_path.iterdir()) == ["b.json"]
