@@ -345,3 +345,36 @@ def test_bench_json_is_written_whole(tmp_path, monkeypatch):
     assert proc.returncode == 1
     assert error_lines(proc) == [f"error: {out}: could not be written (No space left on device)"]
     assert json.loads(out.read_text()) == {"median_ms": 1.5} and sorted(p.name for p in tmp_path.iterdir()) == ["b.json"]
+
+
+def test_image_overlays_of_images_sharing_a_stem_get_distinct_names(tmp_path):
+    """`image a.png a.jpg --out DIR` names the overlays as `normals` does; a non-empty DIR, an existing
+    overlay file or two inputs with one name are refused, and nothing is overwritten without --force."""
+    assert cli("simulate", "room", "--frames", "2", "--size", "160x120", "--out", tmp_path / "s").returncode == 0
+    images = tmp_path / "images"
+    images.mkdir()
+    rgb = sorted((tmp_path / "s" / "rgb").iterdir())
+    cv2.imwrite(str(images / "a.png"), cv2.imread(str(rgb[0])))
+    cv2.imwrite(str(images / "a.jpg"), cv2.imread(str(rgb[1])))
+    out = tmp_path / "o"
+    proc = cli("image", images, "--cues", "lines", "--json", "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert [Path(json.loads(ln)["image"]).name for ln in proc.stdout.splitlines()] == ["a.jpg", "a.png"]
+    assert sorted(p.name for p in out.iterdir()) == ["a_jpg.png", "a_png.png"]
+    written = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert written["a_jpg.png"] != written["a_png.png"]  # two images, two overlays
+    assert all(cv2.imread(str(p)).shape == (120, 160, 3) for p in out.iterdir())
+    proc = cli("image", images, "--cues", "lines", "--out", out)
+    assert proc.returncode == 2
+    assert error_lines(proc) == [f"error: --out {out} is not empty (holds a_jpg.png, a_png.png); "
+                                 "pass --force to replace the results in it"]
+    proc = cli("image", images / "a.png", "--cues", "lines", "--out", out / "a_png.png")
+    assert proc.returncode == 2
+    assert error_lines(proc) == [f"error: --out {out / 'a_png.png'} exists; pass --force to replace it"]
+    proc = cli("image", images / "a.png", images / "a.png", "--cues", "lines", "--out", tmp_path / "o2")
+    assert proc.returncode == 2
+    assert error_lines(proc) == [f"error: {images / 'a.png'}, {images / 'a.png'}: these images would write the "
+                                 "same outputs (a_png); rename them"]
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == written and not (tmp_path / "o2").exists()
+    proc = cli("image", images, "--cues", "lines", "--out", out, "--force")
+    assert proc.returncode == 0 and sorted(p.name for p in out.iterdir()) == ["a_jpg.png", "a_png.png"]
