@@ -29,7 +29,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from .backends.base import Backend
-from .io.safe_files import write_text_atomic
+from .io.safe_files import save_figure_atomic, write_text_atomic
 from .backends.single import SingleFrame
 from .backends.smoother import Smoother, SmootherConfig, SmootherMode
 from .config import load_config
@@ -297,11 +297,9 @@ def compare(seq: VisualSequence, out_dir: str | Path, names=BACKEND_NAMES) -> di
     Returns the JSON document: sequence name, notes, and one row per backend (see `summarise`);
     a backend that could not run has only a `note`.
     """
-    out = Path(out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"{out}: cannot create the output folder ({exc.strerror or exc})") from None
+    from .pipeline.session import make_output_folder
+
+    out = make_output_folder(out_dir)
     backends, skipped = make_backends(names)
     rows, runs = {}, {}
     for name in names:
@@ -378,4 +376,4 @@ def plot_errors(runs: dict, seq: VisualSequence, path: Path) -> None:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure_atomic(path, fig)
