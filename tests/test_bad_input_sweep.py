@@ -1,5 +1,5 @@
 """The whole-CLI sweep of issue 15: every command given a missing file, a folder for a file, an empty
-file, an unreadable folder (chmod 000; skipped as root) and an output on a read-only file system (a
+file (an empty --config is all defaults, by design: tests/test_config.py), an unreadable folder (chmod 000; skipped as root) and an output on a read-only file system (a
 tmpfs mounted read-only; skipped where it cannot be mounted). Each gives one error line naming the
 path, exit 2 for the user's mistake or 1 for a failing environment, and no traceback."""
 
@@ -67,9 +67,6 @@ def test_source_paths(paths, command, kind, name, pattern):
     (["run", "sim:room", "--out", "P/o", "--imu", "P/empty.csv"], r"empty.csv holds no IMU samples"),
     (["run", "sim:room", "--out", "P/o", "--config", "P/nothing.yaml"], r"nothing.yaml: No such file"),
     (["run", "sim:room", "--out", "P/o", "--config", "P/folder"], r"folder: it is a folder"),
-    (["run", "sim:room", "--out", "P/o", "--config", "P/empty.yaml"],
-     r"^error: Cannot read config file .*empty.yaml: it is empty; give at least one key, or leave it out$"),
-    (["run", "sim:room", "--out", "P/o", "--preset", "P/empty.yaml"], r"empty.yaml: it is empty"),
     (["run", "sim:room", "--out", "P/o", "--normals", "P/nothing.pt"], r"nothing.pt: model file not found"),
     (["run", "sim:room", "--out", "P/o", "--normals", "P/folder"], r"folder: no normal maps"),
     (["run", "sim:room", "--out", "P/o", "--intrinsics", "P/nothing.yaml"], r"nothing.yaml'?: expected fx,fy,cx,cy"),

@@ -89,8 +89,6 @@ def read_yaml(name_or_path: str | Path) -> tuple[dict, str]:
             raise ConfigError(f"Cannot read config file {path}: not UTF-8 text (byte {exc.object[exc.start]:#04x} "
                               f"at offset {exc.start})") from None
         where = str(path)
-        if not text.strip():
-            raise ConfigError(f"Cannot read config file {path}: it is empty; give at least one key, or leave it out")
     try:
         data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as exc:
