@@ -196,7 +196,7 @@ def test_compare_output_path_that_is_a_file(tmp_path):
     (tmp_path / "taken").write_text("x")
     args = ["compare", "--synthetic", "static", "--duration-s", "1", "--out", str(tmp_path / "taken")]
     result = runner.invoke(app, args)
-    assert_one_error_line(result, "taken: cannot create the output folder")
+    assert_one_error_line(result, "taken: exists and is not a folder")
 
 
 @pytest.mark.parametrize(

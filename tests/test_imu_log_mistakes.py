@@ -41,10 +41,14 @@ def turning_imu(seed: int = 0):
     return t_ns, gyro, accel, R_wi.as_matrix()
 
 
-def write_log(path, t_ns, first, second):
-    rows = [f"{t},{a[0]:.9g},{a[1]:.9g},{a[2]:.9g},{b[0]:.9g},{b[1]:.9g},{b[2]:.9g}"
+def write_log(path, t_ns, first, second, header=HEADER, stamp=str):
+    rows = [f"{stamp(t)},{a[0]:.9g},{a[1]:.9g},{a[2]:.9g},{b[0]:.9g},{b[1]:.9g},{b[2]:.9g}"
             for t, a, b in zip(t_ns, first, second)]
-    path.write_text(HEADER + "\n".join(rows) + "\n")
+    path.write_text(header + "\n".join(rows) + "\n")
+
+
+EXPORT_HEADER = "t_s,gx,gy,gz,ax,ay,az\n"
+"""A common export: column names without '#', timestamps in seconds with decimals."""
 
 
 def euroc_folder(root, mistake: str):
@@ -62,6 +66,8 @@ def euroc_folder(root, mistake: str):
         write_log(log, t_ns, gyro, accel / 9.80665)
     elif mistake in ("time_us", "time_ms"):
         write_log(log, t_ns // (1000 if mistake == "time_us" else 1_000_000), gyro, accel)
+    elif mistake == "time_float_s":
+        write_log(log, t_ns, gyro, accel, EXPORT_HEADER, stamp=lambda t: f"{t * 1e-9:.6f}")
     elif mistake == "accel_first":
         write_log(log, t_ns, accel, gyro)
     elif mistake == "concatenated":
@@ -94,6 +100,8 @@ FIXED = [
     ("accel_g", r"columns 5-7 \(a_x, a_y, a_z\): median \|accel\| is 1, so the accelerometer is in g, not m/s\^2"),
     ("time_us", r"column 1 holds timestamps in us, not ns .* as us, 200 Hz\): converted to ns"),
     ("time_ms", r"column 1 holds timestamps in ms, not ns .* as ms, 200 Hz\): converted to ns"),
+    ("time_float_s", r"column 1 holds timestamps in seconds with decimals, not integer ns \(as seconds, 200 Hz\): "
+                     r"converted to ns"),
     ("accel_first", r"columns 2-4 .* read like an accelerometer .* accelerometer columns were written before the "
                     r"gyro's; swapped"),
     ("concatenated", r"2401 rows from row 2402 repeat earlier rows exactly \(the log concatenated with itself\?\): "
@@ -147,3 +155,18 @@ def test_imu_log_on_another_clock_than_the_video_is_refused(tmp_path):
         r"imu.csv: column 1 \(timestamp\): the IMU samples span 1\.40372e\+09 to 1\.40372e\+09 s and the frames 0 to "
         r"0\.1 s, with no overlap: the IMU log is on another clock than the video", errors[0]), result.stderr
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["stopped"] == "input_error"
+
+
+@pytest.mark.parametrize("unit, scale", [("ms", 1e-6), ("us", 1e-3)])
+def test_timestamps_with_decimals_not_in_seconds_are_refused(tmp_path, unit, scale):
+    """Decimals in ms or us (2.5 ms steps) are not seconds at an IMU rate: refused, nothing guessed."""
+    t_ns, gyro, accel, _ = turning_imu()
+    write_log(tmp_path / "imu.csv", t_ns - T0_NS + 2_500_500, gyro, accel, EXPORT_HEADER,
+              stamp=lambda t: f"{t * scale:.3f}")
+    result = runner.invoke(app, ["run", str(tmp_path / "imu.csv"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    rate = {"ms": "0.2", "us": "0.0002"}[unit]
+    assert result.stderr.strip() == (f"error: {tmp_path / 'imu.csv'}: column 1 (timestamp [ns]): holds numbers with "
+                                     f"decimals; read as seconds they imply {rate} Hz, not an IMU rate of 20-4000 Hz: "
+                                     "write integer nanoseconds")
+    assert not (tmp_path / "out" / "summary.json").exists()

@@ -308,3 +308,73 @@ def test_a_full_disk_during_ground_keeps_masks_and_overlays_in_step(small_disk):
     masks, overlays = sorted((out / "masks").iterdir()), sorted((out / "overlay").iterdir())
     assert len(masks) == len(overlays) == summary["ground_masks"] == summary["estimates"]
     assert all(cv2.imread(str(p)) is not None for p in masks + overlays)
+
+
+def test_a_full_disk_during_record_leaves_a_replayable_prefix(small_disk, tmp_path):
+    (small_disk / "filler").unlink()  # 200 KiB: the IMU, the ground truth and about one frame fit
+    rec = small_disk / "r"
+    proc = cli("run", "sim:room", "--max-frames", "40", "--out", tmp_path / "out", "--record", rec)
+    assert proc.returncode == 1
+    (line,) = error_lines(proc)
+    assert line.startswith(f"error: {rec}/") and "could not be written (No space left on device)" in line
+    meta = json.loads((rec / "source.json").read_text())  # the counts of close, not the placeholder
+    listed = [ln.split() for ln in (rec / "rgb.txt").read_text().splitlines()
+              if not ln.startswith("#")] if (rec / "rgb.txt").exists() else []
+    assert meta["frames"] == len(listed) and all(cv2.imread(str(rec / name)) is not None for _, name in listed)
+    imu_rows = (rec / "imu0" / "data.csv").read_text().splitlines()[1:]
+    assert meta["imu_samples"] == len(imu_rows) > 0 and all(row.count(",") == 6 for row in imu_rows)
+    truth = [ln.split() for ln in (rec / "groundtruth.txt").read_text().splitlines() if not ln.startswith("#")]
+    assert len(truth) == 300 and all(len(row) == 8 for row in truth)
+    assert [p.name for p in rec.rglob(".*")] == []  # no temporary file left
+    replay = cli("run", rec, "--out", tmp_path / "replay")
+    assert replay.returncode == 0, replay.stderr
+    assert json.loads((tmp_path / "replay" / "summary.json").read_text())["imu_samples"] == len(imu_rows)
+
+
+def test_bench_json_is_written_whole(tmp_path, monkeypatch):
+    """`bench --json FILE` goes through a temporary file: a failing write leaves the older file as it was."""
+    from uareme_fusion.benchmarks import solver
+
+    monkeypatch.setattr(solver, "run", lambda repeats: {"median_ms": 1.5})
+    out = tmp_path / "b.json"
+    assert cli("bench", "solver", "--repeats", "5", "--json", out).returncode == 0
+    assert json.loads(out.read_text()) == {"median_ms": 1.5}
+    monkeypatch.setattr(solver, "run", lambda repeats: {"median_ms": 2.5})
+    monkeypatch.setattr(os, "fsync", lambda fd: (_ for _ in ()).throw(OSError(28, "No space left on device")))
+    proc = cli("bench", "solver", "--repeats", "5", "--json", out)
+    assert proc.returncode == 1
+    assert error_lines(proc) == [f"error: {out}: could not be written (No space left on device)"]
+    assert json.loads(out.read_text()) == {"median_ms": 1.5} and sorted(p.name for p in tmp_path.iterdir()) == ["b.json"]
+
+
+def test_image_overlays_of_images_sharing_a_stem_get_distinct_names(tmp_path):
+    """`image a.png a.jpg --out DIR` names the overlays as `normals` does; a non-empty DIR, an existing
+    overlay file or two inputs with one name are refused, and nothing is overwritten without --force."""
+    assert cli("simulate", "room", "--frames", "2", "--size", "160x120", "--out", tmp_path / "s").returncode == 0
+    images = tmp_path / "images"
+    images.mkdir()
+    rgb = sorted((tmp_path / "s" / "rgb").iterdir())
+    cv2.imwrite(str(images / "a.png"), cv2.imread(str(rgb[0])))
+    cv2.imwrite(str(images / "a.jpg"), cv2.imread(str(rgb[1])))
+    out = tmp_path / "o"
+    proc = cli("image", images, "--cues", "lines", "--json", "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert [Path(json.loads(ln)["image"]).name for ln in proc.stdout.splitlines()] == ["a.jpg", "a.png"]
+    assert sorted(p.name for p in out.iterdir()) == ["a_jpg.png", "a_png.png"]
+    written = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert written["a_jpg.png"] != written["a_png.png"]  # two images, two overlays
+    assert all(cv2.imread(str(p)).shape == (120, 160, 3) for p in out.iterdir())
+    proc = cli("image", images, "--cues", "lines", "--out", out)
+    assert proc.returncode == 2
+    assert error_lines(proc) == [f"error: --out {out} is not empty (holds a_jpg.png, a_png.png); "
+                                 "pass --force to replace the results in it"]
+    proc = cli("image", images / "a.png", "--cues", "lines", "--out", out / "a_png.png")
+    assert proc.returncode == 2
+    assert error_lines(proc) == [f"error: --out {out / 'a_png.png'} exists; pass --force to replace it"]
+    proc = cli("image", images / "a.png", images / "a.png", "--cues", "lines", "--out", tmp_path / "o2")
+    assert proc.returncode == 2
+    assert error_lines(proc) == [f"error: {images / 'a.png'}, {images / 'a.png'}: these images would write the "
+                                 "same outputs (a_png); rename them"]
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == written and not (tmp_path / "o2").exists()
+    proc = cli("image", images, "--cues", "lines", "--out", out, "--force")
+    assert proc.returncode == 0 and sorted(p.name for p in out.iterdir()) == ["a_jpg.png", "a_png.png"]

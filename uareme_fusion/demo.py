@@ -19,6 +19,7 @@ from rich.table import Table
 from .benchmarks.peers import vqf_6d_R_wi
 from .drivers.base import ImuBatch, Source
 from .evaluation.statistics import error_stats
+from .io.safe_files import save_figure_atomic
 from .rotations import angle_between, exp_so3, nees, tilt_error_deg, up_in_camera
 from .sim.normal_maps import manhattan_normal_map
 from .solver import solve_manhattan
@@ -203,7 +204,7 @@ def _plot_tilt(tilts: dict, path: Path) -> Path:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure_atomic(path, fig, dpi=100)
     return path
 
 

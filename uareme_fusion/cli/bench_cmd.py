@@ -88,4 +88,6 @@ def bench(
 
         results = soak.run(seconds=minutes * 60.0, normals_noise_deg=normals_noise_deg, preset=preset)
     if json_out is not None:
-        json_out.write_text(json.dumps(results, indent=2, default=float))
+        from ..io.safe_files import write_text_atomic
+
+        write_text_atomic(json_out, json.dumps(results, indent=2, default=float) + "\n")

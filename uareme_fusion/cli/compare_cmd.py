@@ -40,6 +40,9 @@ def compare_command(
     """Run every backend on the same visual rotations and IMU; write a table and an error plot."""
     if (source is None) == (synthetic is None):
         raise fail("give either a dataset folder SOURCE or --synthetic SCENARIO (not both)")
+    from ..pipeline.session import make_output_folder
+
+    make_output_folder(out)  # refused before the sequence is computed
     if synthetic is not None:
         seq = synthetic_sequence(synthetic, seed=seed, duration_s=duration_s, drop_fraction=drop_fraction,
                                  bad_fraction=bad_fraction)

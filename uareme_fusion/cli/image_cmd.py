@@ -1,5 +1,9 @@
-"""`uareme-fusion image IMAGE... [--json] [--out PNG|DIR]`: images in; rotation, covariance, up, focal
-length, horizon and an overlay out (the model is loaded once)."""
+"""`uareme-fusion image IMAGE... [--json] [--out PNG|DIR] [--force]`: images in; rotation, covariance, up,
+focal length, horizon and an overlay out (the model is loaded once).
+
+Several images write `<stem>.png` into the --out folder, named as `normals` names its outputs
+(`a.png` and `a.jpg` become `a_png.png` and `a_jpg.png`); a non-empty folder, or an existing overlay
+file for one image, needs `--force`."""
 
 from __future__ import annotations
 
@@ -13,8 +17,9 @@ import typer
 from ..drivers.intrinsics import parse_intrinsics
 from ..errors import InputError
 from ..io.safe_files import refuse_input_as_output, write_image_atomic
+from ..normals.export import unique_stems
 from ..pipeline.cues import DEFAULT_CUES
-from ..pipeline.session import make_output_folder
+from ..pipeline.session import make_output_folder, prepare_output_folder
 from ..pipeline.single_image import ImageAnalyser, image_overlay, image_paths
 from .app import app
 from .run_cmd import _o
@@ -30,6 +35,8 @@ def image_command(
     fov_deg: float = typer.Option(60.0, "--fov-deg",
                                   help="Horizontal field of view assumed when the scene cannot tell the focal length."),
     intrinsics: Optional[str] = _o["intrinsics"],
+    force: bool = typer.Option(False, "--force", help="Write into a non-empty --out folder, or replace an "
+                               "existing --out image (overlays of the same name are replaced)."),
 ) -> None:
     """Manhattan rotation, covariance, up vector, focal length and horizon of images, with optional overlays."""
     if not 1.0 < fov_deg < 179.0:  # also refuses NaN
@@ -39,13 +46,21 @@ def image_command(
     if out is not None and not several and out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise InputError(f"{out}: the overlay is an image; use a .png or .jpg name")
     camera = parse_intrinsics(intrinsics) if intrinsics is not None else None
+    targets: list[Path | None] = [None] * len(paths)
     if out is not None:
         refuse_input_as_output(out, paths)
+        if several:
+            stems = unique_stems(paths)  # refused before the folder is made
+            folder = prepare_output_folder(out, force)
+            targets = [folder / f"{stem}.png" for stem in stems]
+        else:
+            if out.exists() and not force:
+                raise InputError(f"--out {out} exists; pass --force to replace it")
+            targets = [out]
     analyser = ImageAnalyser(normals, cues, camera=camera, assumed_fov_deg=fov_deg)
-    for path in paths:
+    for path, target in zip(paths, targets):
         result = analyser.analyse(path)
-        if out is not None:
-            target = make_output_folder(out) / f"{path.stem}.png" if several else out
+        if target is not None:
             make_output_folder(target.parent)
             write_image_atomic(target, image_overlay(result)[..., ::-1])
         doc = result.as_dict()

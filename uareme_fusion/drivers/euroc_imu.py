@@ -14,6 +14,10 @@ the backends' IMU stream reorders, drops and counts them; jumps in time are kept
 treat them as IMU gaps). Bad files raise `InputError` naming the file and the line: too few or
 ragged columns, a cell that is not a number (timestamps must be integers), NaN or infinite values.
 Columns after the seventh are ignored.
+
+`exports=True` (user IMU tables, `imu_csv.read_imu_log`) also takes what common exports write: a first
+line of column names without `#` (`t_s,gx,gy,gz,ax,ay,az`, skipped) and timestamps in seconds with
+decimals (kept as ns, `t_from_float_s` True, for `imu_checks` to accept or refuse by the rate).
 """
 
 from __future__ import annotations
@@ -22,11 +26,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
+import dataclasses
+
 import numpy as np
 
 from uareme_fusion.errors import InputError
 from uareme_fusion.io.paths import is_pipe, path_kind
-from uareme_fusion.io.text_tables import read_table
+from uareme_fusion.io.text_tables import TextTable, read_table
 from uareme_fusion.types import ImuSample
 
 EUROC_IMU_COLUMNS = ("timestamp [ns]", "w_x [rad/s]", "w_y [rad/s]", "w_z [rad/s]",
@@ -42,6 +48,8 @@ class EurocImu:
     t_s: np.ndarray
     gyro_rad_s: np.ndarray
     accel_m_s2: np.ndarray
+    t_from_float_s: bool = False
+    """The file's timestamps were seconds with decimals (`exports`), rounded to `t_ns`."""
 
     @property
     def n_non_increasing(self) -> int:
@@ -57,9 +65,9 @@ class EurocImu:
             yield ImuSample(float(t), g, a)
 
 
-def read_euroc_imu(path: str | Path, delimiter: str | None = ",") -> EurocImu:
+def read_euroc_imu(path: str | Path, delimiter: str | None = ",", exports: bool = False) -> EurocImu:
     """Read an EuRoC `imu0/data.csv` (`delimiter` None: whitespace-separated columns instead of
-    commas); raises InputError naming the file when it is not one."""
+    commas; `exports`: see the module docstring); raises InputError naming the file when it is not one."""
     path = Path(path)
     if path.is_dir():
         for candidate in (path / "data.csv", path / "imu0" / "data.csv", path / "mav0" / "imu0" / "data.csv"):
@@ -73,9 +81,43 @@ def read_euroc_imu(path: str | Path, delimiter: str | None = ",") -> EurocImu:
         kind = path_kind(path)
         raise InputError(f"EuRoC IMU file {path} " + (f"is {kind}" if kind else "does not exist"))
     table = read_table(path, EUROC_IMU_COLUMNS, delimiter=delimiter, kind="an EuRoC IMU file")
+    if exports:
+        table = _without_names_row(table)
     if len(table) == 0:
         raise InputError(f"{path} holds no IMU samples (only comments or blank lines)")
-    t_ns = table.ints(0)
+    t_ns, from_float_s = _timestamps_ns(table, exports)
     values = table.floats(slice(1, 7))
     table.require_finite(values, "gyro or accel value")
-    return EurocImu(path, t_ns, t_ns * 1e-9, values[:, :3], values[:, 3:])
+    return EurocImu(path, t_ns, t_ns * 1e-9, values[:, :3], values[:, 3:], from_float_s)
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+        return True
+    except ValueError:
+        return False
+
+
+def _without_names_row(table: TextTable) -> TextTable:
+    """`table` without its first row when no cell of it is a number (column names without `#`)."""
+    if len(table) and not any(_is_number(str(cell)) for cell in table.cells[0]):
+        return dataclasses.replace(table, cells=table.cells[1:], line=table.line[1:])
+    return table
+
+
+def _timestamps_ns(table: TextTable, float_seconds: bool) -> tuple[np.ndarray, bool]:
+    """Column 1 as integer ns, or (`float_seconds`) seconds with decimals rounded to ns: (t_ns, from_float_s)."""
+    try:
+        return table.ints(0), False
+    except InputError as not_integers:
+        if not float_seconds:
+            raise
+        try:
+            t_s = table.floats(0)
+        except InputError:
+            raise not_integers from None
+        fits = np.isfinite(t_s).all() and np.abs(t_s).max() < np.iinfo(np.int64).max * 1e-9
+        if not fits or np.all(t_s == np.rint(t_s)):  # integral or huge: not seconds with decimals
+            raise not_integers from None
+        return np.rint(t_s * 1e9).astype(np.int64), True

@@ -8,6 +8,8 @@ Checks, in this order (each sees the previous ones' fixes):
    `IMU_RATE_RANGE_HZ` (20 Hz .. 4 kHz). Read as ns, us, ms or s, exactly one unit can land in that
    range (the units are 1000x apart and the range is 200x wide): that unit is taken and the stamps
    converted to ns (FIX). No unit lands in it: refused, naming the column and the implied rate.
+   Timestamps written as seconds with decimals (`EurocImu.t_from_float_s`) are taken as seconds when
+   that gives an IMU rate (FIX), else refused: decimals in ms or us are not told apart by guessing.
 2. A log that runs backwards. Rows stamped no later than an earlier row that repeat earlier rows
    exactly (a log concatenated with itself) are dropped (FIX). A jump back of more than
    `BACKWARD_JUMP_S` that is not such a repeat (two recordings in one file) is refused, naming the
@@ -82,12 +84,30 @@ def _with(imu: EurocImu, t_ns=None, gyro=None, accel=None, keep=None) -> EurocIm
     return dataclasses.replace(imu, t_ns=t_ns, t_s=t_ns * 1e-9, gyro_rad_s=gyro, accel_m_s2=accel)
 
 
-def _timestamp_unit(imu: EurocImu, fixes: list[str]) -> EurocImu:
-    steps = np.diff(imu.t_ns)
+def _median_step_ns(t_ns: np.ndarray) -> float | None:
+    steps = np.diff(t_ns)
     steps = steps[steps > 0]
-    if len(steps) == 0:
+    return float(np.median(steps)) if len(steps) else None
+
+
+def _float_seconds(imu: EurocImu, fixes: list[str]) -> EurocImu:
+    step = _median_step_ns(imu.t_ns)
+    lo, hi = IMU_RATE_RANGE_HZ
+    if step is None or not lo <= 1e9 / step <= hi:
+        implied = "no rate (fewer than two distinct stamps)" if step is None else f"{1e9 / step:.3g} Hz"
+        raise InputError(f"{imu.path}: column 1 (timestamp [ns]): holds numbers with decimals; read as seconds they "
+                         f"imply {implied}, not an IMU rate of {lo:g}-{hi:g} Hz: write integer nanoseconds")
+    fixes.append(f"{imu.path}: column 1 holds timestamps in seconds with decimals, not integer ns (as seconds, "
+                 f"{1e9 / step:.4g} Hz): converted to ns")
+    return dataclasses.replace(imu, t_from_float_s=False)
+
+
+def _timestamp_unit(imu: EurocImu, fixes: list[str]) -> EurocImu:
+    if imu.t_from_float_s:
+        return _float_seconds(imu, fixes)
+    step = _median_step_ns(imu.t_ns)
+    if step is None:
         return imu
-    step = float(np.median(steps))
     lo, hi = IMU_RATE_RANGE_HZ
     fits = [unit for unit, ns in TIME_UNITS_NS.items() if lo <= 1e9 / (step * ns) <= hi]
     if fits == ["ns"]:

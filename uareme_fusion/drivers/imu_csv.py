@@ -4,8 +4,8 @@
     with merge_imu(VideoSource("clip.mp4"), ImuCsvSource("imu.csv"), time_offset_s=0.12) as src: ...
 
 Format (`euroc_imu.read_euroc_imu`): `timestamp [ns], w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2]`,
-comma- or whitespace-separated (any file extension), `#` header; gyro and specific force in the IMU
-frame. A file with other columns is refused with an `InputError` naming the file, line and column.
+comma- or whitespace-separated (any file extension), `#` header (or a line of column names), timestamps
+as integer ns (or seconds with decimals, see `imu_checks`); gyro and specific force in the IMU frame. A file with other columns is refused with an `InputError` naming the file, line and column.
 `read_imu_log` then checks the data for wrong units, column order and time running backwards
 (`imu_checks.check_imu_log`): the source's `fixes` list what it repaired.
 
@@ -37,7 +37,7 @@ def read_imu_log(path: str | Path) -> tuple[EurocImu, list[str]]:
     """An IMU table in EuRoC columns (commas, or whitespace when a file's first data line has no
     comma), checked and repaired by `check_imu_log`: (imu, fixes)."""
     path = Path(path)
-    return check_imu_log(read_euroc_imu(path, sniff_delimiter(path) if path.is_file() else ","))
+    return check_imu_log(read_euroc_imu(path, sniff_delimiter(path) if path.is_file() else ",", exports=True))
 
 
 def non_increasing_note(imu: EurocImu) -> list[str]:

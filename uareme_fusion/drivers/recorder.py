@@ -4,8 +4,9 @@
         for event in src.events(): ...
     with TumSource("session1/") as replay: ...              # the same frames, IMU and times
 
-Layout written (flushed after every frame and IMU batch, so a crash or Ctrl-C leaves a valid,
-replayable prefix; files are written before the list line that names them):
+Layout written (through `io.safe_files`: images, `.npz`, `groundtruth.txt` and `source.json` whole
+and atomically; the lists and `imu0/data.csv` streamed in whole rows, so a crash, Ctrl-C or a full
+disk leaves a valid, replayable prefix; files are written before the list line that names them):
 - `rgb/<n:06d>.png` 8-bit RGB (a normals-only frame gets a black image of the normals' size),
   `depth/<n:06d>.png` 16-bit, `depth_scale` units per metre (default 1000: millimetres, exact for
   OAK depth, 65.5 m range; deeper or non-finite depth is written as 0 = missing and counted);
@@ -25,11 +26,12 @@ import json
 from collections.abc import Iterator
 from pathlib import Path
 
-import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from uareme_fusion.errors import InputError
+from uareme_fusion.errors import InputError, OutputError
+from uareme_fusion.io.safe_files import (ReservedFile, RowFile, cannot_write, write_image_atomic, write_npz_atomic,
+                                          write_text_atomic)
 from uareme_fusion.sim.dataset import EUROC_IMU_HEADER
 from uareme_fusion.types import Frame
 
@@ -57,22 +59,28 @@ class Recorder:
         if not (np.isfinite(depth_scale) and depth_scale > 0):
             raise InputError(f"record depth_scale must be > 0 units per metre, got {depth_scale}")
         for sub in ("rgb", "depth", "imu0"):
-            (self.out / sub).mkdir(parents=True, exist_ok=True)
+            try:
+                (self.out / sub).mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise cannot_write(self.out / sub, exc) from None
         self.info, self.depth_scale = info, float(depth_scale)
         self.n_frames = self.n_imu = self.n_depth_dropped = 0
         self.K = info.K
-        self._rgb_list = open(self.out / "rgb.txt", "w")
-        self._depth_list = open(self.out / "depth.txt", "w")
-        self._imu_csv = open(self.out / "imu0" / "data.csv", "w", newline="")
-        self._rgb_list.write(f"# rgb images recorded from {info.name}\n# timestamp filename\n")
-        self._depth_list.write(f"# depth images recorded from {info.name} ({self.depth_scale:g} units per metre)\n"
-                               "# timestamp filename\n")
-        self._imu_csv.write(EUROC_IMU_HEADER + "\n")
+        self._rgb_list = RowFile(self.out / "rgb.txt")
+        self._depth_list = RowFile(self.out / "depth.txt")
+        self._imu_csv = RowFile(self.out / "imu0" / "data.csv")
+        self._rgb_list.write_row(f"# rgb images recorded from {info.name}\n# timestamp filename\n", counts=False)
+        self._depth_list.write_row(f"# depth images recorded from {info.name} ({self.depth_scale:g} units per "
+                                   "metre)\n# timestamp filename\n", counts=False)
+        self._imu_csv.write_row(EUROC_IMU_HEADER + "\n", counts=False)
         self._gravity_aligned = False
-        self._write_meta()
+        self._meta = ReservedFile(self.out / RECORD_META, self._meta_text())  # room for the counts at close
         self.closed = False
 
     def _write_meta(self) -> None:
+        self._meta.write(self._meta_text())
+
+    def _meta_text(self) -> str:
         info = self.info
         meta = dict(name=info.name, K=_jsonable(self.K), R_ci=_jsonable(info.R_ci),
                     imu_time_offset_s=float(info.imu_time_offset_s), depth_scale=self.depth_scale,
@@ -81,9 +89,7 @@ class Recorder:
                     conventions="R_ci maps IMU to camera (v_c = R_ci v_i); an IMU sample stamped t happened at "
                                 "camera time t + imu_time_offset_s; groundtruth.txt holds R_wc (camera OpenCV "
                                 "axes to world) as quaternions x y z w")
-        tmp = self.out / (RECORD_META + ".tmp")
-        tmp.write_text(json.dumps(meta, indent=1) + "\n")
-        tmp.replace(self.out / RECORD_META)
+        return json.dumps(meta, indent=1) + "\n"
 
     def write_frame(self, frame: Frame) -> None:
         n, stamp = self.n_frames, repr(float(frame.t))
@@ -91,22 +97,18 @@ class Recorder:
         if rgb is None:
             shape = frame.normals.normals.shape[:2] if frame.normals is not None else (1, 1)
             rgb = np.zeros((*shape, 3), np.uint8)
-        if not cv2.imwrite(str(self.out / "rgb" / f"{n:06d}.png"), np.ascontiguousarray(rgb[..., ::-1])):
-            raise OSError(f"cannot write {self.out / 'rgb' / f'{n:06d}.png'}")
+        write_image_atomic(self.out / "rgb" / f"{n:06d}.png", np.ascontiguousarray(rgb[..., ::-1]))
         if frame.depth is not None:
             units = np.asarray(frame.depth, np.float64) * self.depth_scale
             bad = ~np.isfinite(units) | (units > 65535.49) | (units < 0)
             self.n_depth_dropped += int(bad.sum())
             png = np.rint(np.where(bad, 0.0, units)).astype(np.uint16)
-            cv2.imwrite(str(self.out / "depth" / f"{n:06d}.png"), png)
-            self._depth_list.write(f"{stamp} depth/{n:06d}.png\n")
-            self._depth_list.flush()
+            write_image_atomic(self.out / "depth" / f"{n:06d}.png", png)
+            self._depth_list.write_row(f"{stamp} depth/{n:06d}.png\n")
         if frame.normals is not None:
-            (self.out / NORMALS_DIR).mkdir(exist_ok=True)
-            np.savez_compressed(self.out / NORMALS_DIR / f"{n:06d}.npz", normals=frame.normals.normals,
-                                kappa=frame.normals.kappa)
-        self._rgb_list.write(f"{stamp} rgb/{n:06d}.png\n")
-        self._rgb_list.flush()
+            write_npz_atomic(self.out / NORMALS_DIR / f"{n:06d}.npz", normals=frame.normals.normals,
+                             kappa=frame.normals.kappa)
+        self._rgb_list.write_row(f"{stamp} rgb/{n:06d}.png\n")
         if self.K is None and frame.K is not None:
             self.K = frame.K
             self._write_meta()
@@ -118,8 +120,7 @@ class Recorder:
         t_ns = np.rint(np.asarray(batch.t_s, np.float64) * 1e9).astype(np.int64)
         rows = np.column_stack([batch.gyro_rad_s, batch.accel_m_s2])
         lines = [f"{t}," + ",".join(f"{v:.17g}" for v in row) for t, row in zip(t_ns, rows)]
-        self._imu_csv.write("\n".join(lines) + "\n")
-        self._imu_csv.flush()
+        self._imu_csv.write_row("\n".join(lines) + "\n")
         self.n_imu += len(batch)
 
     def write(self, event: Frame | ImuBatch) -> None:
@@ -130,11 +131,9 @@ class Recorder:
 
     def write_ground_truth(self, truth: GroundTruth) -> None:
         quat = Rotation.from_matrix(truth.R_wc).as_quat(canonical=True)
-        with open(self.out / "groundtruth.txt", "w") as fh:
-            fh.write("# ground truth R_wc (camera OpenCV axes to world), positions unknown (0)\n"
-                     "# timestamp tx ty tz qx qy qz qw\n")
-            fh.writelines(f"{float(t)!r} 0 0 0 " + " ".join(f"{q:.17g}" for q in row) + "\n"
-                          for t, row in zip(truth.t_s, quat))
+        rows = (f"{float(t)!r} 0 0 0 " + " ".join(f"{q:.17g}" for q in row) + "\n" for t, row in zip(truth.t_s, quat))
+        write_text_atomic(self.out / "groundtruth.txt", "# ground truth R_wc (camera OpenCV axes to world), positions "
+                          "unknown (0)\n# timestamp tx ty tz qx qy qz qw\n" + "".join(rows))
         self._gravity_aligned = bool(truth.gravity_aligned)
 
     def close(self) -> None:
@@ -157,22 +156,36 @@ class RecordingSource(Source):
         self.info = source.info
         self.notes, self.fixes = source.report()
         self.recorder = Recorder(out_dir, source.info, **recorder_options)
+        self.failed: InputError | OutputError | None = None
 
     def events(self) -> Iterator[Frame | ImuBatch]:
         for event in self.source.events():
-            self.recorder.write(event)
+            try:
+                self.recorder.write(event)
+            except (InputError, OutputError) as exc:
+                self.failed = exc
+                raise
             yield event
 
     def ground_truth(self) -> GroundTruth | None:
         return self.source.ground_truth()
 
     def close(self) -> None:
-        if not self.recorder.closed:
-            truth = self.source.ground_truth()
-            if truth is not None:
-                self.recorder.write_ground_truth(truth)
-            self.recorder.close()
-        self.source.close()
+        """Ground truth and the final counts are written even after a failed write (the first error is
+        the one reported); the source is closed whatever happens."""
+        try:
+            if not self.recorder.closed:
+                try:
+                    truth = self.source.ground_truth()
+                    if truth is not None:
+                        self.recorder.write_ground_truth(truth)
+                finally:
+                    self.recorder.close()
+        except (InputError, OutputError):
+            if self.failed is None:
+                raise
+        finally:
+            self.source.close()
 
 
 def record(source: Source, out_dir: str | Path, **recorder_options) -> Source:

@@ -135,6 +135,8 @@ def _open(spec: str, fps: float | None, options: dict) -> Source:
     if path.is_dir():
         return _open_folder(path, fps, options)
     if path.is_file():
+        if path.stat().st_size == 0:
+            raise InputError(f"{spec}: empty file (0 bytes), expected a video, an image or an IMU table")
         suffix = path.suffix.lower()
         if suffix in BROAD_SUFFIXES:
             _no_fps(fps, spec)

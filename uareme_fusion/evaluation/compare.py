@@ -28,9 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.safe_files import write_text_atomic
+from ..io.safe_files import save_figure_atomic, write_text_atomic
 from ..backends.base import Backend
-from ..errors import InputError
 from ..types import Status
 from .backend_factory import BACKEND_NAMES, knows_gravity, make_backend
 from .metrics import JUMP_DEG, attitude_errors, jump_counts
@@ -109,11 +108,9 @@ def compare(seq: VisualSequence, out_dir: str | Path, names=BACKEND_NAMES) -> di
     Returns the JSON document: sequence name, notes, and one row per backend (see `summarise`);
     a backend that could not run has only a `note`.
     """
-    out = Path(out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"{out}: cannot create the output folder ({exc.strerror or exc})") from None
+    from ..pipeline.session import make_output_folder
+
+    out = make_output_folder(out_dir)
     backends, skipped = make_backends(names)
     rows, runs = {}, {}
     for name in names:
@@ -190,4 +187,4 @@ def plot_errors(runs: dict, seq: VisualSequence, path: Path) -> None:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure_atomic(path, fig)

@@ -145,6 +145,15 @@ def write_npz_atomic(path: Path, compressed: bool = True, **arrays: np.ndarray) 
     write_bytes_atomic(path, buffer.getvalue())
 
 
+def save_figure_atomic(path: Path, figure, **savefig_options) -> None:
+    """`figure.savefig(path)` (matplotlib; format from the suffix) rendered in memory, written atomically."""
+    import io
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format=Path(path).suffix.lstrip(".") or "png", **savefig_options)
+    write_bytes_atomic(path, buffer.getvalue())
+
+
 class RowFile:
     """A text file streamed row by row under its final name; see the module docstring.
 

@@ -57,7 +57,8 @@ def unique_stems(files: list[Path]) -> list[str]:
     names = [f"{p.stem}_{p.suffix[1:].lower()}" if p.stem in shared else p.stem for p in files]
     clashes = sorted({n for n in names if names.count(n) > 1})
     if clashes:
-        raise InputError(f"{files[0].parent}: several images would write the same outputs ({', '.join(clashes)}); "
+        clashing = [str(p) for p, name in zip(files, names) if name in clashes]
+        raise InputError(f"{', '.join(clashing)}: these images would write the same outputs ({', '.join(clashes)}); "
                          "rename them")
     return names
 

@@ -13,11 +13,14 @@ Needs `rerun-sdk` (the `viewer` extra: `pip install "uareme-fusion[viewer]"`). E
 
 from __future__ import annotations
 
+import os
+import re
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
+from ..io.safe_files import cannot_write
 from ..io.normal_maps import normals_to_rgb
 from ..overlay import confidence_to_rgb, intrinsics_or_assumed
 from ..rotations import quat_xyzw
@@ -33,6 +36,15 @@ def roll_pitch_deg(up_c: np.ndarray) -> tuple[float, float]:
     degrees, from world up in the OpenCV camera frame; (0, 0) for a level camera (`up_c = (0, -1, 0)`)."""
     up = np.asarray(up_c, float) / np.linalg.norm(up_c)
     return float(np.degrees(np.arctan2(up[0], -up[1]))), float(np.degrees(np.arcsin(np.clip(up[2], -1.0, 1.0))))
+
+
+def _os_error(exc: RuntimeError) -> OSError:
+    """The `OSError` inside a rerun SDK error message (errno and reason), for `cannot_write`."""
+    found = re.search(r"os error (\d+)", str(exc))
+    if found is None:
+        return OSError(str(exc).split(", path:")[0])
+    code = int(found.group(1))
+    return OSError(code, os.strerror(code))
 
 
 def _rerun():
@@ -51,9 +63,14 @@ class RerunSink:
         self.path, self.fov_deg, self.rr = Path(path), float(fov_deg), rr
         if self.path.suffix.lower() != ".rrd":
             raise InputError(f"--rerun {self.path}: a rerun recording is a .rrd file")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec = rr.RecordingStream(APPLICATION_ID)
-        self.rec.save(str(self.path))
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.rec.save(str(self.path))
+        except OSError as exc:
+            raise cannot_write(self.path, exc) from None
+        except RuntimeError as exc:  # the SDK's own: "Failed to create file: <reason> (os error N), path: ..."
+            raise cannot_write(self.path, _os_error(exc)) from None
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         self._pinhole_size = None
         self._status = None

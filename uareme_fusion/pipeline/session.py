@@ -21,7 +21,7 @@ from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
 from ..errors import InputError, OutputError
 from ..evaluation.backend_factory import backend_kind, knows_gravity
 from ..evaluation.metrics import attitude_errors, error_summary
-from ..io.safe_files import ReservedFile
+from ..io.safe_files import ENVIRONMENT_ERRNOS, ReservedFile
 from ..rotations import align_constant
 from ..types import Status
 from .config import RunConfig
@@ -60,8 +60,9 @@ def make_output_folder(out_dir: str | Path) -> Path:
         raise InputError(f"{out}: exists and is not a folder")
     try:
         out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"{out}: cannot create the output folder ({exc.strerror or exc})") from None
+    except OSError as exc:  # a read-only or full file system is the environment's (exit 1), not the user's
+        error = OutputError if exc.errno in ENVIRONMENT_ERRNOS else InputError
+        raise error(f"{out}: cannot create the output folder ({exc.strerror or exc})") from None
     return out
 
 
