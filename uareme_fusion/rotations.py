@@ -17,6 +17,9 @@ from scipy.spatial.transform import Rotation
 
 WORLD_UP = np.array([0.0, 0.0, 1.0])
 """The world frame's up direction (z up; gravity is -9.81 m/s^2 along it)."""
+R_CM_UPRIGHT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+"""Labelling used when there is no prior: m's x is nearest camera right, m's z nearest image up
+(-y in OpenCV), so that `R_wc = R_cm^T` is z-up for an upright camera."""
 
 
 def skew(v: np.ndarray) -> np.ndarray:

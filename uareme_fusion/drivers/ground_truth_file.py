@@ -20,8 +20,8 @@ from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
 from .base import GroundTruth
-from .euroc import read_euroc_ground_truth
-from .tum_rgbd import read_tum_trajectory
+from ..formats.euroc import read_euroc_ground_truth
+from ..formats.tum import read_tum_trajectory
 
 
 def _is_euroc(path: Path) -> bool:

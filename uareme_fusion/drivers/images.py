@@ -28,7 +28,7 @@ from uareme_fusion.io.images import read_image
 from uareme_fusion.types import Frame
 
 from .base import Source, SourceInfo
-from .video import to_rgb8
+from ..formats.images import to_rgb8
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm", ".jp2")
 DEFAULT_FPS = 30.0

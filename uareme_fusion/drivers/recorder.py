@@ -30,13 +30,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from uareme_fusion.errors import InputError
-from uareme_fusion.sim.dataset import EUROC_IMU_HEADER
+from uareme_fusion.formats.depth_png import MILLIMETRE_DEPTH_SCALE, depth_png_units
+from uareme_fusion.formats.euroc import EUROC_IMU_HEADER, euroc_imu_text
+from uareme_fusion.formats.tum import TUM_TRAJECTORY_HEADER, tum_trajectory_line
 from uareme_fusion.types import Frame
 
 from .base import GroundTruth, ImuBatch, Source, SourceInfo
 from .tum import NORMALS_DIR, RECORD_META
 
-RECORD_DEPTH_SCALE = 1000.0
+RECORD_DEPTH_SCALE = MILLIMETRE_DEPTH_SCALE
 """Depth PNG units per metre in recordings (millimetres)."""
 
 
@@ -94,10 +96,8 @@ class Recorder:
         if not cv2.imwrite(str(self.out / "rgb" / f"{n:06d}.png"), np.ascontiguousarray(rgb[..., ::-1])):
             raise OSError(f"cannot write {self.out / 'rgb' / f'{n:06d}.png'}")
         if frame.depth is not None:
-            units = np.asarray(frame.depth, np.float64) * self.depth_scale
-            bad = ~np.isfinite(units) | (units > 65535.49) | (units < 0)
-            self.n_depth_dropped += int(bad.sum())
-            png = np.rint(np.where(bad, 0.0, units)).astype(np.uint16)
+            png, n_dropped = depth_png_units(frame.depth, self.depth_scale, far="drop")
+            self.n_depth_dropped += n_dropped
             cv2.imwrite(str(self.out / "depth" / f"{n:06d}.png"), png)
             self._depth_list.write(f"{stamp} depth/{n:06d}.png\n")
             self._depth_list.flush()
@@ -115,10 +115,7 @@ class Recorder:
     def write_imu(self, batch: ImuBatch) -> None:
         if not len(batch):
             return
-        t_ns = np.rint(np.asarray(batch.t_s, np.float64) * 1e9).astype(np.int64)
-        rows = np.column_stack([batch.gyro_rad_s, batch.accel_m_s2])
-        lines = [f"{t}," + ",".join(f"{v:.17g}" for v in row) for t, row in zip(t_ns, rows)]
-        self._imu_csv.write("\n".join(lines) + "\n")
+        self._imu_csv.write(euroc_imu_text(batch.t_s, batch.gyro_rad_s, batch.accel_m_s2))
         self._imu_csv.flush()
         self.n_imu += len(batch)
 
@@ -132,9 +129,8 @@ class Recorder:
         quat = Rotation.from_matrix(truth.R_wc).as_quat(canonical=True)
         with open(self.out / "groundtruth.txt", "w") as fh:
             fh.write("# ground truth R_wc (camera OpenCV axes to world), positions unknown (0)\n"
-                     "# timestamp tx ty tz qx qy qz qw\n")
-            fh.writelines(f"{float(t)!r} 0 0 0 " + " ".join(f"{q:.17g}" for q in row) + "\n"
-                          for t, row in zip(truth.t_s, quat))
+                     f"# {TUM_TRAJECTORY_HEADER}\n")
+            fh.writelines(tum_trajectory_line(t, row, fmt=".17g") for t, row in zip(truth.t_s, quat))
         self._gravity_aligned = bool(truth.gravity_aligned)
 
     def close(self) -> None:

@@ -44,7 +44,7 @@ from .imu_csv import ImuCsvSource, merge_imu
 from .intrinsics import parse_intrinsics
 from .simulated import SimulatedSource
 from .tum import TumSource
-from .tum_rgbd import read_associations
+from ..formats.tum import read_associations
 from .video import VideoSource, parse_webcam
 
 BROAD_SUFFIXES = (".hdf5", ".h5")

@@ -28,7 +28,8 @@ from collections.abc import Iterator
 import numpy as np
 
 from uareme_fusion.errors import InputError
-from uareme_fusion.sim.dataset import GT_KAPPA, SequenceOptions
+from uareme_fusion.formats.datasets import GT_KAPPA
+from uareme_fusion.sim.options import SequenceOptions
 from uareme_fusion.sim.imu import ImuNoise, simulate_imu
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.sim.render import Renderer, intrinsics_from_fov

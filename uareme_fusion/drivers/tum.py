@@ -40,7 +40,7 @@ from .base import GroundTruth, ImuBatch, Source, SourceInfo
 from .imu_csv import non_increasing_note, read_imu_log
 from .interleave import interleave
 from .intrinsics import CameraModel, Undistorter, published_camera
-from .tum_rgbd import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
+from ..formats.tum import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
 
 SIM_META = "scene.json"
 RECORD_META = "source.json"

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.safe_files import RowFile
+from ..formats.tum import tum_trajectory_line
 from ..rotations import quat_xyzw
 from ..types import Status
 from .runner import FrameResult
@@ -46,8 +47,7 @@ class TumTrajectoryWriter:
                              "position not estimated)\n", counts=False)
 
     def write(self, result: FrameResult) -> None:
-        q = quat_xyzw(result.estimate.R_wc)
-        self._rows.write_row(f"{result.t_s:.9f} 0 0 0 {q[0]:.9f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f}\n")
+        self._rows.write_row(tum_trajectory_line(result.t_s, quat_xyzw(result.estimate.R_wc)))
 
     def undo_last(self) -> None:
         self._rows.drop_last_row()

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
-from ..rotations import nearest_symmetric
+from ..rotations import R_CM_UPRIGHT, nearest_symmetric
 from ..types import NormalMap, VisualRotation
 from .levenberg import levenberg_marquardt_so3
 from .moments import NormalMoments, normal_moments
@@ -23,9 +23,6 @@ from .quartic import gradient_hessian, normalised_cost
 RANDOM_NORMALS_COST = 0.4
 """Expected normalised cost of isotropic random normals: 1 - 3 E[c^4] = 1 - 3/5."""
 
-R_CM_UPRIGHT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-"""Labelling used when there is no prior: m's x is nearest camera right, m's z nearest image up
-(-y in OpenCV), so that `R_wc = R_cm^T` is z-up for an upright camera."""
 
 
 @dataclass(frozen=True)

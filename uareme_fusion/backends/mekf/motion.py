@@ -15,8 +15,7 @@ import numpy as np
 from filterpy.kalman import predict as kf_predict
 from scipy.spatial.transform import Rotation
 
-from ...rotations import WORLD_UP
-from ...solver.manhattan import R_CM_UPRIGHT
+from ...rotations import R_CM_UPRIGHT, WORLD_UP
 from ...types import Status, VisualRotation
 from ..imu_stream import COLUMNS, ImuBatch
 from .accel import PERIOD_TOLERANCE_S, chunk_bounds, tilt_direction

@@ -1,0 +1,114 @@
+"""EuRoC MAV files: IMU logs (`mav0/imu0/data.csv`, read and written) and ground truth (read).
+
+Format: one header line starting with `#`, then `timestamp [ns], w_x, w_y, w_z [rad/s], a_x, a_y,
+a_z [m/s^2]` comma-separated, gyro and specific force in the IMU (sensor) frame `S`.
+
+    imu = read_euroc_imu("mav0/imu0/data.csv")
+    imu.t_s, imu.gyro_rad_s, imu.accel_m_s2        # (N,), (N, 3), (N, 3)
+    for sample in imu.samples(): ...               # uareme_fusion.types.ImuSample
+
+Times: `t_ns` keeps the file's integer nanoseconds exactly; `t_s = t_ns * 1e-9` as float seconds.
+Rows are returned as they are in the file (no reordering, nothing dropped); `n_non_increasing`
+counts timestamps that do not increase (duplicates and steps back), for the caller to report, and
+the backends' IMU stream reorders, drops and counts them; jumps in time are kept (the backends
+treat them as IMU gaps). Bad files raise `InputError` naming the file and the line: too few or
+ragged columns, a cell that is not a number (timestamps must be integers), NaN or infinite values.
+Columns after the seventh are ignored. `euroc_imu_text` writes rows (integer ns, values in `value_fmt`)
+after `EUROC_IMU_HEADER`. Ground truth (`state_groundtruth_estimate0/data.csv`, `timestamp [ns], p,
+q_w q_x q_y q_z`) is read by `read_euroc_ground_truth` as `R_RS` (IMU body to the gravity-aligned world).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..errors import InputError
+from ..io.paths import is_pipe, path_kind
+from ..io.safe_files import write_text_atomic
+from ..io.text_tables import read_table
+from ..types import ImuSample
+
+EUROC_IMU_COLUMNS = ("timestamp [ns]", "w_x [rad/s]", "w_y [rad/s]", "w_z [rad/s]",
+                     "a_x [m/s^2]", "a_y [m/s^2]", "a_z [m/s^2]")
+
+EUROC_IMU_HEADER = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+                    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
+EUROC_GT_COLUMNS = ("timestamp [ns]", "p_x [m]", "p_y [m]", "p_z [m]", "q_w", "q_x", "q_y", "q_z")
+
+
+def euroc_imu_text(t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, value_fmt: str = ".17g") -> str:
+    """IMU rows `t_ns,wx,wy,wz,ax,ay,az` (no header): t_s (N,) s rounded to integer ns, (N, 3) values."""
+    t_ns = np.rint(np.asarray(t_s, np.float64) * 1e9).astype(np.int64)
+    rows = np.column_stack([gyro_rad_s, accel_m_s2])
+    return "".join(f"{t}," + ",".join(format(float(v), value_fmt) for v in row) + "\n" for t, row in zip(t_ns, rows))
+
+
+def write_euroc_imu(path: Path, t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray,
+                    value_fmt: str = ".10f") -> None:
+    """A whole EuRoC `imu0/data.csv` (header and rows), written atomically."""
+    write_text_atomic(Path(path), EUROC_IMU_HEADER + "\n" + euroc_imu_text(t_s, gyro_rad_s, accel_m_s2, value_fmt))
+
+
+def read_euroc_ground_truth(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """An EuRoC ground-truth CSV -> (t_s (N,), R_RS (N, 3, 3): body (IMU) to the gravity-aligned world)."""
+    table = read_table(path, EUROC_GT_COLUMNS, delimiter=",", kind="an EuRoC ground-truth file")
+    if len(table) == 0:
+        raise InputError(f"{path}: holds no ground-truth rows")
+    t_ns = table.ints(0)
+    table.require_increasing(t_ns)
+    quat_wxyz = table.floats(slice(4, 8))
+    table.require_finite(quat_wxyz, "quaternion")
+    return t_ns * 1e-9, Rotation.from_quat(quat_wxyz, scalar_first=True).as_matrix()
+
+
+@dataclass(frozen=True)
+class EurocImu:
+    """IMU log: `t_ns` (N,) int64, `t_s` (N,) float s, `gyro_rad_s`, `accel_m_s2` (N, 3) in the IMU frame."""
+
+    path: Path
+    t_ns: np.ndarray
+    t_s: np.ndarray
+    gyro_rad_s: np.ndarray
+    accel_m_s2: np.ndarray
+
+    @property
+    def n_non_increasing(self) -> int:
+        return int(np.sum(np.diff(self.t_ns) <= 0))
+
+    @property
+    def rate_hz(self) -> float:
+        """Median sample rate."""
+        return float(1e9 / np.median(np.diff(self.t_ns))) if len(self.t_ns) > 1 else float("nan")
+
+    def samples(self) -> Iterator[ImuSample]:
+        for t, g, a in zip(self.t_s, self.gyro_rad_s, self.accel_m_s2):
+            yield ImuSample(float(t), g, a)
+
+
+def read_euroc_imu(path: str | Path, delimiter: str | None = ",") -> EurocImu:
+    """Read an EuRoC `imu0/data.csv` (`delimiter` None: whitespace-separated columns instead of
+    commas); raises InputError naming the file when it is not one."""
+    path = Path(path)
+    if path.is_dir():
+        for candidate in (path / "data.csv", path / "imu0" / "data.csv", path / "mav0" / "imu0" / "data.csv"):
+            if candidate.is_file():
+                path = candidate
+                break
+    if path.is_dir():
+        raise InputError(f"EuRoC IMU file {path}: is a folder, and an IMU file inside it (data.csv, "
+                         "imu0/data.csv or mav0/imu0/data.csv) does not exist")
+    if not path.is_file() and not is_pipe(path):  # a pipe (FIFO, `<(cat f.csv)`) is read to its end
+        kind = path_kind(path)
+        raise InputError(f"EuRoC IMU file {path} " + (f"is {kind}" if kind else "does not exist"))
+    table = read_table(path, EUROC_IMU_COLUMNS, delimiter=delimiter, kind="an EuRoC IMU file")
+    if len(table) == 0:
+        raise InputError(f"{path} holds no IMU samples (only comments or blank lines)")
+    t_ns = table.ints(0)
+    values = table.floats(slice(1, 7))
+    table.require_finite(values, "gyro or accel value")
+    return EurocImu(path, t_ns, t_ns * 1e-9, values[:, :3], values[:, 3:])
