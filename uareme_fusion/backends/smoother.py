@@ -104,7 +104,8 @@ class SmootherConfig(BaseModel):
     R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
     """Camera-from-IMU rotation (3x3): `gyro_c = R_ci @ gyro_i`."""
     imu_time_offset_s: float = Field(0.0, ge=-3600.0, le=3600.0)
-    """IMU clock minus camera clock: a sample stamped `t` measures the camera time `t - offset`."""
+    """Camera clock minus IMU clock: a sample stamped `t` measures the camera time `t + offset`
+    (`t_cam = t_imu + imu_time_offset_s`, as `SourceInfo.imu_time_offset_s`)."""
 
     @field_validator("R_ci")
     @classmethod

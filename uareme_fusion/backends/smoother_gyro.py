@@ -41,7 +41,7 @@ class GyroSmoother(Smoother):
         `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3) in the IMU frame, rotated to the camera
         by `R_ci`. Non-finite or out-of-order samples are dropped and counted (`Status.IMU_DROPPED`).
         """
-        t_s = np.atleast_1d(np.asarray(t_s, dtype=float)) - self.config.imu_time_offset_s
+        t_s = np.atleast_1d(np.asarray(t_s, dtype=float)) + self.config.imu_time_offset_s
         gyro = np.atleast_2d(np.asarray(gyro_rad_s, dtype=float))
         accel = np.atleast_2d(np.asarray(accel_m_s2, dtype=float))
         if t_s.ndim != 1 or gyro.shape != (len(t_s), 3) or accel.shape != (len(t_s), 3):

@@ -29,14 +29,14 @@ import numpy as np
 from uareme_fusion.errors import InputError, SourceError
 from uareme_fusion.io.images import read_image
 from uareme_fusion.io.text_tables import read_table
-from uareme_fusion.types import Frame
+from uareme_fusion.types import Frame, ImuBatch
 
 from ..formats.euroc import read_euroc_ground_truth
-from .base import GroundTruth, ImuBatch, Source, SourceInfo
-from .imu_csv import non_increasing_note, read_imu_log
-from .intrinsics import CameraModel, Undistorter, read_camera_file, read_camera_mapping
-from .interleave import IMU_ONLY_BATCH_S, interleave, split_by_span
 from ..formats.images import to_rgb8
+from .base import GroundTruth, Source, SourceInfo
+from .imu_csv import non_increasing_note, read_imu_log
+from .interleave import IMU_ONLY_BATCH_S, interleave, split_by_span
+from .intrinsics import CameraModel, Undistorter, read_camera_file, read_camera_mapping
 
 GT_FOLDERS = ("gt0", "state_groundtruth_estimate0")
 CAM_COLUMNS = ("timestamp [ns]", "filename")

@@ -33,9 +33,9 @@ from uareme_fusion.errors import InputError
 from uareme_fusion.formats.depth_png import MILLIMETRE_DEPTH_SCALE, depth_png_units
 from uareme_fusion.formats.euroc import EUROC_IMU_HEADER, euroc_imu_text
 from uareme_fusion.formats.tum import TUM_TRAJECTORY_HEADER, tum_trajectory_line
-from uareme_fusion.types import Frame
+from uareme_fusion.types import Frame, ImuBatch
 
-from .base import GroundTruth, ImuBatch, Source, SourceInfo
+from .base import GroundTruth, Source, SourceInfo
 from .tum import NORMALS_DIR, RECORD_META
 
 RECORD_DEPTH_SCALE = MILLIMETRE_DEPTH_SCALE

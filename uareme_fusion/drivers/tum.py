@@ -20,8 +20,7 @@ What is read (built on `tum_rgbd.load_tum_rgbd` and `euroc_imu.read_euroc_imu`):
   undistorted with the published distortion and carry that K. `info.K_origin` says which.
 
 Clocks: frame times are the list's seconds; IMU batches keep the IMU clock
-(`info.imu_time_offset_s` is added to put them on the camera clock). scene.json's `time_offset_s`
-is "IMU clock minus camera clock", so `imu_time_offset_s = -time_offset_s`.
+(`info.imu_time_offset_s` from scene.json or source.json is added to put them on the camera clock).
 """
 
 from __future__ import annotations
@@ -34,13 +33,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from uareme_fusion.errors import InputError, SourceError
-from uareme_fusion.types import Frame, NormalMap
+from uareme_fusion.types import Frame, ImuBatch, NormalMap
 
-from .base import GroundTruth, ImuBatch, Source, SourceInfo
+from ..formats.tum import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
+from .base import GroundTruth, Source, SourceInfo
 from .imu_csv import non_increasing_note, read_imu_log
 from .interleave import interleave
 from .intrinsics import CameraModel, Undistorter, published_camera
-from ..formats.tum import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
 
 SIM_META = "scene.json"
 RECORD_META = "source.json"
@@ -82,12 +81,8 @@ def read_metadata(root: Path) -> dict:
     else:
         return {}
     meta = read_json_object(path)
-    if name == SIM_META:
-        offset = -_number(meta, "time_offset_s", path, 0.0)
-        gravity_aligned = True
-    else:
-        offset = _number(meta, "imu_time_offset_s", path, 0.0)
-        gravity_aligned = bool(meta.get("gravity_aligned", False))
+    offset = _number(meta, "imu_time_offset_s", path, 0.0)
+    gravity_aligned = True if name == SIM_META else bool(meta.get("gravity_aligned", False))
     return dict(path=path, K=_matrix(meta, "K", path), R_ci=_matrix(meta, "R_ci", path, rotation=True),
                 imu_time_offset_s=offset, depth_scale=_number(meta, "depth_scale", path, None, positive=True),
                 fps=_number(meta, "fps", path, None, positive=True), gravity_aligned=gravity_aligned)

@@ -5,7 +5,6 @@ a_z [m/s^2]` comma-separated, gyro and specific force in the IMU (sensor) frame 
 
     imu = read_euroc_imu("mav0/imu0/data.csv")
     imu.t_s, imu.gyro_rad_s, imu.accel_m_s2        # (N,), (N, 3), (N, 3)
-    for sample in imu.samples(): ...               # uareme_fusion.types.ImuSample
 
 Times: `t_ns` keeps the file's integer nanoseconds exactly; `t_s = t_ns * 1e-9` as float seconds.
 Rows are returned as they are in the file (no reordering, nothing dropped); `n_non_increasing`
@@ -22,7 +21,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -31,7 +29,6 @@ from ..errors import InputError
 from ..io.paths import is_pipe, path_kind
 from ..io.safe_files import write_text_atomic
 from ..io.text_tables import read_table
-from ..types import ImuSample
 
 EUROC_IMU_COLUMNS = ("timestamp [ns]", "w_x [rad/s]", "w_y [rad/s]", "w_z [rad/s]",
                      "a_x [m/s^2]", "a_y [m/s^2]", "a_z [m/s^2]")
@@ -84,10 +81,6 @@ class EurocImu:
     def rate_hz(self) -> float:
         """Median sample rate."""
         return float(1e9 / np.median(np.diff(self.t_ns))) if len(self.t_ns) > 1 else float("nan")
-
-    def samples(self) -> Iterator[ImuSample]:
-        for t, g, a in zip(self.t_s, self.gyro_rad_s, self.accel_m_s2):
-            yield ImuSample(float(t), g, a)
 
 
 def read_euroc_imu(path: str | Path, delimiter: str | None = ",") -> EurocImu:

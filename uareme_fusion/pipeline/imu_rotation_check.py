@@ -21,8 +21,9 @@ from collections.abc import Iterator
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..drivers.base import ImuBatch, Source
+from ..drivers.base import Source
 from ..drivers.extrinsics import axis_letters, convention_name
+from ..types import ImuBatch
 from .runner import FrameResult
 
 MAX_PAIRS = 3000

@@ -162,8 +162,7 @@ def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str |
 
 def make_backend(cfg: RunConfig, info: SourceInfo) -> Backend:
     """The backend of `cfg`, given the source's IMU-to-camera rotation and time offset."""
-    # SourceInfo adds its offset to IMU stamps to reach camera time; the EKF subtracts its own.
-    imu_geometry = {"R_ci": np.asarray(info.R_ci, float).tolist(), "imu_time_offset_s": -info.imu_time_offset_s}
+    imu_geometry = {"R_ci": np.asarray(info.R_ci, float).tolist(), "imu_time_offset_s": info.imu_time_offset_s}
     if cfg.backend == "single":
         return SingleFrame()
     if cfg.backend == "smoother":

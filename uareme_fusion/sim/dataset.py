@@ -134,7 +134,7 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
                                                              f"{options.seed})", stamps, [f"{kind}/{s}.png" for s in stamps]))
     R_ci = np.asarray(options.R_ci, float)
     t_imu, gyro, accel = simulate_imu(world.trajectory, options.imu_rate_hz, options.imu_noise,
-                                      seed=options.seed, R_ci=R_ci, time_offset_s=options.time_offset_s)
+                                      seed=options.seed, R_ci=R_ci, imu_time_offset_s=options.imu_time_offset_s)
     write_tum_table(out / "accelerometer.txt", "accelerometer data (specific force in the IMU frame, m/s^2)"
                  "\ntimestamp ax ay az", t_imu, accel, "%.9f")
     write_euroc_imu(out / "imu0" / "data.csv", t_imu, gyro, accel)
@@ -143,7 +143,7 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
         scenario=scenario, seed=options.seed, frames=options.frames, fps=options.fps,
         width=options.width, height=options.height, hfov_deg=hfov, K=K.tolist(),
         depth_scale=DEPTH_SCALE, gt_kappa=GT_KAPPA, imu_rate_hz=options.imu_rate_hz,
-        imu_noise=options.imu_noise.as_dict(), R_ci=R_ci.tolist(), time_offset_s=options.time_offset_s,
+        imu_noise=options.imu_noise.as_dict(), R_ci=R_ci.tolist(), imu_time_offset_s=options.imu_time_offset_s,
         spec=asdict(spec), dropped_frames=np.flatnonzero(dropped).tolist(),
         exposure_gains=[round(float(g), 6) for g in gains],
         trajectory=world.trajectory.params, scene=world.scene.as_dict(),
@@ -151,7 +151,7 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
         R_wm_quat_xyzw=Rotation.from_matrix(np.stack(R_wm_all)).as_quat(canonical=True).round(9).tolist(),
         conventions=("R_wc maps camera (OpenCV x right, y down, z forward) to world (z up); "
                      "quaternions x y z w; accel is specific force (+9.81 up at rest); "
-                     "IMU stamp t measures camera time t - time_offset_s; v_c = R_ci v_i"),
+                     "IMU stamp t measures camera time t + imu_time_offset_s; v_c = R_ci v_i"),
     )
     write_text_atomic(out / "scene.json", json.dumps(summary, indent=1, sort_keys=True, default=float))
     return summary

@@ -29,8 +29,8 @@ class SequenceOptions:
     imu_noise: ImuNoise = field(default_factory=ImuNoise)
     R_ci: tuple = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
     """Camera-from-IMU rotation (`v_c = R_ci @ v_i`)."""
-    time_offset_s: float = 0.0
-    """IMU clock minus camera clock, s (see `imu.simulate_imu`)."""
+    imu_time_offset_s: float = 0.0
+    """Camera clock minus IMU clock, s: `t_cam = t_imu + imu_time_offset_s` (see `imu.simulate_imu`)."""
 
     def validate(self) -> None:
         """Raise InputError naming the option for impossible values."""
@@ -47,8 +47,8 @@ class SequenceOptions:
             raise InputError(f"--fov must be between 45 and 95 degrees, got {self.hfov_deg}")
         if not 0 <= self.seed < 2**63:
             raise InputError(f"--seed must be an integer >= 0, got {self.seed}")
-        if not abs(self.time_offset_s) <= MAX_TIME_OFFSET_S:
-            raise InputError(f"time_offset_s must be within +-{MAX_TIME_OFFSET_S:g} s, got {self.time_offset_s}")
+        if not abs(self.imu_time_offset_s) <= MAX_TIME_OFFSET_S:
+            raise InputError(f"imu_time_offset_s must be within +-{MAX_TIME_OFFSET_S:g} s, got {self.imu_time_offset_s}")
         R_ci = np.asarray(self.R_ci, dtype=float) if np.shape(self.R_ci) == (3, 3) else None
         if (R_ci is None or not np.all(np.isfinite(R_ci)) or not np.allclose(R_ci.T @ R_ci, np.eye(3), atol=1e-6)
                 or np.linalg.det(R_ci) <= 0):

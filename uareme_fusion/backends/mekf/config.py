@@ -112,7 +112,7 @@ class MekfConfig(BaseModel):
     R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
     """Camera-from-IMU rotation (`v_c = R_ci v_i`), 3x3 row-major."""
     imu_time_offset_s: float = Field(0.0, ge=-3600.0, le=3600.0)
-    """The IMU clock runs this far ahead of the camera clock, s."""
+    """Camera clock minus IMU clock, s: `t_cam = t_imu + imu_time_offset_s` (as `SourceInfo`)."""
     gravity_m_s2: float = Field(9.81, ge=1.0, le=100.0)
     """Magnitude of gravity, m/s^2."""
     record_imu_estimates: bool = False

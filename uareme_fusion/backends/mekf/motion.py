@@ -16,13 +16,19 @@ from filterpy.kalman import predict as kf_predict
 from scipy.spatial.transform import Rotation
 
 from ...rotations import R_CM_UPRIGHT, WORLD_UP
-from ...types import Status, VisualRotation
-from ..imu_stream import COLUMNS, ImuBatch
+from ...types import IMU_COLUMNS as COLUMNS
+from ...types import ImuBatch, Status, VisualRotation
 from .accel import PERIOD_TOLERANCE_S, chunk_bounds, tilt_direction
 from .compiled import compiled_path_applies, integrate_compiled
 from .config import MekfMode
-from .propagation import constant_rate_model, gyro_chunk, gyro_process_noise, gyro_rates, gyro_transition
-from .propagation import manhattan_walk_noise
+from .propagation import (
+    constant_rate_model,
+    gyro_chunk,
+    gyro_process_noise,
+    gyro_rates,
+    gyro_transition,
+    manhattan_walk_noise,
+)
 from .state import BG, I3, MF, N_STATE, RATE, TH, ZERO_STATE, orthonormal
 
 _NO_ROWS = np.zeros((0, COLUMNS))
@@ -102,7 +108,7 @@ class GyroMotion:
         if len(batches) == 1:
             batch = batches[0]
         else:
-            batch = ImuBatch(np.concatenate([b.rows for b in batches]) if batches else _NO_ROWS)
+            batch = ImuBatch.from_rows(np.concatenate([b.rows for b in batches]) if batches else _NO_ROWS)
         t, gyro_i, accel_i, saturated = batch.t_s, batch.gyro_rad_s, batch.accel_m_s2, batch.saturated
         R_ci = filt.R_ci
         gyro_c, accel_c = (gyro_i, accel_i) if filt.imu_is_camera else (gyro_i @ R_ci.T, accel_i @ R_ci.T)
@@ -229,8 +235,8 @@ class GyroMotion:
         """Tilt from the mean of the first `init_accel_window_s` of accelerometer samples; yaw is the
         gauge (variance 0). Returns the samples still to integrate."""
         cfg = filt.config
-        filt.init_samples.append(ImuBatch.of(t, gyro_c, accel_c, saturated))
-        held = ImuBatch(np.concatenate([b.rows for b in filt.init_samples]))
+        filt.init_samples.append(ImuBatch(t, gyro_c, accel_c, saturated))
+        held = ImuBatch.from_rows(np.concatenate([b.rows for b in filt.init_samples]))
         t_all = held.t_s
         if t_all[-1] - t_all[0] < cfg.init_accel_window_s and not force:
             return t[:0], gyro_c[:0], accel_c[:0], saturated[:0]
