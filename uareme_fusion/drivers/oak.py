@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from uareme_fusion.errors import InputError, SourceError
+from uareme_fusion.rotations import is_rotation
 from uareme_fusion.types import Frame, ImuBatch
 
 from .base import Source, SourceInfo
@@ -109,7 +110,7 @@ def rotation_from_extrinsics(T, what: str = "IMU-to-camera extrinsics") -> np.nd
     if T.shape not in ((4, 4), (3, 4)) or not np.all(np.isfinite(T)):
         raise InputError(f"oak: {what} must be a 4x4 matrix, got shape {T.shape}")
     R = T[:3, :3]
-    if not (np.allclose(R @ R.T, np.eye(3), atol=1e-3) and np.linalg.det(R) > 0):
+    if not is_rotation(R, atol=1e-3):
         raise InputError(f"oak: {what} hold no rotation (device not IMU-calibrated?): {R.round(4).tolist()}")
     U, _, Vt = np.linalg.svd(R)
     return U @ Vt

@@ -33,6 +33,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from uareme_fusion.errors import InputError, SourceError
+from uareme_fusion.rotations import is_rotation
 from uareme_fusion.types import Frame, ImuBatch, NormalMap
 
 from ..formats.tum import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
@@ -55,7 +56,7 @@ def _matrix(meta: dict, key: str, path: Path, rotation: bool = False) -> np.ndar
         M = None
     if M is None or M.shape != (3, 3) or not np.all(np.isfinite(M)):
         raise InputError(f"{path}: {key} must be a 3x3 matrix of numbers, got {meta[key]!r}")
-    if rotation and not (np.allclose(M @ M.T, np.eye(3), atol=1e-5) and np.linalg.det(M) > 0):
+    if rotation and not is_rotation(M, atol=1e-5):
         raise InputError(f"{path}: {key} must be a rotation matrix (orthonormal, det +1), got {M.tolist()}")
     return M
 

@@ -43,7 +43,6 @@ from ..io.text_tables import read_table
 from ..types import Frame
 from .depth_png import TUM_DEPTH_SCALE, read_depth_png
 
-
 TUM_LIST_COLUMNS = ("timestamp [s]", "filename")
 TUM_TRAJECTORY_COLUMNS = ("timestamp [s]", "tx [m]", "ty [m]", "tz [m]", "qx", "qy", "qz", "qw")
 TUM_ACCELEROMETER_COLUMNS = ("timestamp [s]", "ax [m/s^2]", "ay [m/s^2]", "az [m/s^2]")

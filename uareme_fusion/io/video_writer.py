@@ -27,8 +27,9 @@ H264_CRF = "20"
 
 class _PyAvEncoder:
     def __init__(self, path: Path, fps: float, size_wh: tuple[int, int]):
-        import av
         from fractions import Fraction
+
+        import av
 
         self.container = av.open(str(path), mode="w")
         rate = Fraction(fps).limit_denominator(1001)

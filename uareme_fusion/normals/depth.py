@@ -26,16 +26,24 @@ frame) must pass |fy| here and convert their ground truth with `flip_y_rotation`
 from __future__ import annotations
 
 import dataclasses
-
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from ..errors import ConfigError, InputError
-from ..formats.datasets import (FLIP_Y, ICL_NUIM_K_OPENCV, ICL_NUIM_K_PUBLISHED, ICSL_CORRIDOR_K,  # noqa: F401
-                                flip_y_rotation)
-from ..formats.depth_png import ICL_NUIM_DEPTH_UNIT_M, MILLIMETRE_DEPTH_UNIT_M, read_depth_png  # noqa: F401
+from ..formats.datasets import (  # noqa: F401
+    FLIP_Y,
+    ICL_NUIM_K_OPENCV,
+    ICL_NUIM_K_PUBLISHED,
+    ICSL_CORRIDOR_K,
+    flip_y_rotation,
+)
+from ..formats.depth_png import (  # noqa: F401
+    ICL_NUIM_DEPTH_UNIT_M,
+    MILLIMETRE_DEPTH_UNIT_M,
+    read_depth_png,
+)
 from ..types import Frame, NormalMap
 
 # The dataset constants and `read_depth_png` live in `uareme_fusion.formats`; they are re-exported here

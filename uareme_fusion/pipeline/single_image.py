@@ -17,8 +17,8 @@ import numpy as np
 
 from ..drivers.base import SourceInfo
 from ..drivers.intrinsics import scaled_camera, undistorted_image
-from ..formats.images import read_rgb
 from ..errors import InputError
+from ..formats.images import read_rgb
 from ..io.images import image_size, reduction_for
 from ..lines.detect import LineSegments, SegmentDetector
 from ..overlay import side_by_side
@@ -26,7 +26,13 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K, check_K
 from ..overlay.compose import draw_overlay
 from ..overlay.horizon import horizon_line
 from ..rotations import quat_xyzw
-from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal, unknown_centre_floor
+from ..solver.focal import (
+    FocalConfig,
+    FocalEstimate,
+    solve_given_K,
+    solve_with_focal,
+    unknown_centre_floor,
+)
 from ..solver.joint import JointSolver
 from ..solver.manhattan import up_candidate
 from ..types import Frame, NormalMap, VisualRotation

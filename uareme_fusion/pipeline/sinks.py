@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.safe_files import RowFile
 from ..formats.tum import tum_trajectory_line
+from ..io.safe_files import RowFile
 from ..rotations import quat_xyzw
 from ..types import Status
 from .runner import FrameResult

@@ -30,6 +30,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..rotations import is_rotation
 from .trajectory import Trajectory
 
 GRAVITY_W_M_S2 = np.array([0.0, 0.0, -9.81])
@@ -95,7 +96,7 @@ def simulate_imu(
     if not np.isfinite(rate_hz) or not 1.0 <= rate_hz <= 10000.0:
         raise InputError(f"IMU rate_hz must be within [1, 10000] Hz, got {rate_hz}")
     R_ci = np.eye(3) if R_ci is None else np.asarray(R_ci, float)
-    if R_ci.shape != (3, 3) or not np.allclose(R_ci.T @ R_ci, np.eye(3), atol=1e-6):
+    if R_ci.shape != (3, 3) or not is_rotation(R_ci):
         raise InputError(f"R_ci must be a (3, 3) rotation matrix, got shape {R_ci.shape}")
     noise = ImuNoise() if noise is None else noise
     k0 = int(np.ceil(-imu_time_offset_s * rate_hz - 1e-9))

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
+from ..rotations import is_rotation
 from .imu import ImuNoise
 
 MAX_PIXELS = 4096 * 4096
@@ -49,9 +50,7 @@ class SequenceOptions:
             raise InputError(f"--seed must be an integer >= 0, got {self.seed}")
         if not abs(self.imu_time_offset_s) <= MAX_TIME_OFFSET_S:
             raise InputError(f"imu_time_offset_s must be within +-{MAX_TIME_OFFSET_S:g} s, got {self.imu_time_offset_s}")
-        R_ci = np.asarray(self.R_ci, dtype=float) if np.shape(self.R_ci) == (3, 3) else None
-        if (R_ci is None or not np.all(np.isfinite(R_ci)) or not np.allclose(R_ci.T @ R_ci, np.eye(3), atol=1e-6)
-                or np.linalg.det(R_ci) <= 0):
+        if np.shape(self.R_ci) != (3, 3) or not is_rotation(self.R_ci):
             raise InputError(f"R_ci must be a 3x3 rotation matrix (orthonormal, det +1), got {self.R_ci}")
         noise = self.imu_noise.as_dict()
         bad = [k for k, v in noise.items() if not np.all(np.isfinite(v)) or (np.ndim(v) == 0 and v < 0)
