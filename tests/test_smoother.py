@@ -16,8 +16,8 @@ from uareme_fusion.backends.smoother import (
     SmootherConfig,
     SmootherMode,
     label_up_as_z,
-    visual_R_wc_covariance,
 )
+from uareme_fusion.types import visual_R_wc_covariance
 from uareme_fusion.config import load_config, validate_config
 from uareme_fusion.errors import ConfigError, InputError
 from uareme_fusion.rotations import are_deg, exp_so3, log_so3, manhattan_symmetries, nees

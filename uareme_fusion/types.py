@@ -172,6 +172,16 @@ class Status(enum.IntFlag):
     """A filter update gave a non-finite correction or covariance and was dropped."""
 
 
+def visual_R_wc_covariance(visual: VisualRotation) -> np.ndarray:
+    """Covariance (rad^2) of the right perturbation of `R_mc = R_cm^T` given `visual.cov` of `R_cm`.
+
+    `(R_cm Exp(d))^T = R_cm^T Exp(-R_cm d)`, so the right error of `R_mc` (and of `R_wc = R_wm R_mc`)
+    is `-R_cm d` with covariance `R_cm cov R_cm^T`.
+    """
+    cov = visual.R_cm @ visual.cov @ visual.R_cm.T
+    return 0.5 * (cov + cov.T)
+
+
 @dataclass(frozen=True)
 class Estimate:
     """A backend's output at time `t`.

@@ -47,7 +47,7 @@ from gtsam.symbol_shorthand import M, X
 from pydantic import AliasChoices, ConfigDict, Field, field_validator
 
 from ..rotations import is_rotation, manhattan_symmetries
-from ..types import Estimate, Status, VisualRotation
+from ..types import Estimate, Status, VisualRotation, visual_R_wc_covariance
 from .base import Backend
 from .imu_noise import GyroNoiseConfig
 
@@ -126,16 +126,6 @@ def _robust(kernel_k: float | None, base: gtsam.noiseModel.Base) -> gtsam.noiseM
     if kernel_k is None:
         return base
     return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(kernel_k), base)
-
-
-def visual_R_wc_covariance(visual: VisualRotation) -> np.ndarray:
-    """Covariance (rad^2) of the right perturbation of `R_mc = R_cm^T` given `visual.cov` of `R_cm`.
-
-    `(R_cm Exp(d))^T = R_cm^T Exp(-R_cm d)`, so the right error of `R_mc` (and of `R_wc = R_wm R_mc`)
-    is `-R_cm d` with covariance `R_cm cov R_cm^T`.
-    """
-    cov = visual.R_cm @ visual.cov @ visual.R_cm.T
-    return 0.5 * (cov + cov.T)
 
 
 def label_up_as_z(R_cm: np.ndarray, up_c: np.ndarray) -> np.ndarray:

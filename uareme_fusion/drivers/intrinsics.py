@@ -40,7 +40,8 @@ import numpy as np
 import yaml
 
 from uareme_fusion.errors import ConfigError, InputError
-from uareme_fusion.formats.datasets import PUBLISHED_INTRINSICS, pinhole
+from uareme_fusion.formats.datasets import PUBLISHED_INTRINSICS
+from uareme_fusion.pinhole import pinhole
 from uareme_fusion.types import Frame
 
 DISTORTION_MODELS = ("radtan", "equidistant")

@@ -10,10 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def pinhole(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
-    """The (3, 3) pinhole matrix of focal lengths and principal point, pixels."""
-    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+from ..pinhole import pinhole
 
 
 ICL_NUIM_K_PUBLISHED = pinhole(481.20, -480.00, 319.50, 239.50)

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from ...rotations import R_CM_UPRIGHT, WORLD_UP
 from ...types import IMU_COLUMNS as COLUMNS
-from ...types import ImuBatch, Status, VisualRotation
+from ...types import ImuBatch, Status, VisualRotation, visual_R_wc_covariance
 from .accel import PERIOD_TOLERANCE_S, chunk_bounds, tilt_direction
 from .compiled import compiled_path_applies, integrate_compiled
 from .config import MekfMode
@@ -70,7 +70,7 @@ class ConstantRateMotion:
 
     def _restart(self, filt, visual: VisualRotation) -> None:
         filt.P = np.zeros((N_STATE, N_STATE))
-        filt.P[TH, TH] = visual.R_cm @ visual.cov @ visual.R_cm.T
+        filt.P[TH, TH] = visual_R_wc_covariance(visual)
         filt.P[RATE, RATE] = filt.config.rate_initial_std_rad_s**2 * I3
         filt.omega_c = np.zeros(3)
         filt.rejections = 0
