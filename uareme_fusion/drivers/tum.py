@@ -175,7 +175,7 @@ class TumSource(Source):
             self.notes.append(f"{folder}: {missing} frames have no normals file (yielded without normals)")
         return found
 
-    def _normals(self, i: int, t: float) -> NormalMap | None:
+    def _normals(self, i: int, t_s: float) -> NormalMap | None:
         if self.normal_files is None or self.normal_files[i] is None:
             return None
         path = self.normal_files[i]
@@ -190,7 +190,7 @@ class TumSource(Source):
             raise SourceError(f"{path}: expected normals (H, W, 3) and kappa (H, W), got {normals.shape}, {kappa.shape}")
         if dropped:  # the camera failed on this frame: no pixel is usable
             kappa = np.zeros_like(kappa)
-        return NormalMap(normals, kappa, t=t)
+        return NormalMap(normals, kappa, t=t_s)
 
     def read_frame(self, i: int) -> Frame:
         """Frame i with depth, K and normals; `SourceError` naming the file that cannot be read."""
