@@ -96,7 +96,7 @@ class Recorder:
         if not cv2.imwrite(str(self.out / "rgb" / f"{n:06d}.png"), np.ascontiguousarray(rgb[..., ::-1])):
             raise OSError(f"cannot write {self.out / 'rgb' / f'{n:06d}.png'}")
         if frame.depth is not None:
-            png, n_dropped = depth_png_units(frame.depth, self.depth_scale, far="drop")
+            png, n_dropped = depth_png_units(np.asarray(frame.depth, np.float64), self.depth_scale, far="drop")
             self.n_depth_dropped += n_dropped
             cv2.imwrite(str(self.out / "depth" / f"{n:06d}.png"), png)
             self._depth_list.write(f"{stamp} depth/{n:06d}.png\n")

@@ -56,7 +56,7 @@ def depth_png_units(depth_m: np.ndarray, units_per_m: float, far: str = "clip") 
 
     Non-finite and negative depth is stored as 0 (no depth) and counted; depth beyond 65535 units is
     clipped to 65535 (`far="clip"`) or stored as 0 and counted (`far="drop"`)."""
-    units = np.asarray(depth_m, dtype=np.float64) * units_per_m
+    units = np.asarray(depth_m) * units_per_m  # in the input's precision (float32 depth rounds as float32)
     bad = ~np.isfinite(units) | (units < 0)
     if far == "drop":
         bad |= units > 65535.49
