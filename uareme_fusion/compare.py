@@ -29,13 +29,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from .backends.base import Backend
+from .io.safe_files import write_text_atomic
 from .backends.single import SingleFrame
 from .backends.smoother import Smoother, SmootherConfig, SmootherMode
 from .config import load_config
 from .drivers.euroc_imu import read_euroc_imu
 from .drivers.tum_rgbd import read_tum_list, read_tum_trajectory
 from .errors import InputError
-from .io.safe_files import write_text_atomic
 from .metrics import JUMP_DEG, attitude_errors, jump_counts
 from .sim.normal_maps import manhattan_normal_map
 from .solver import solve_manhattan

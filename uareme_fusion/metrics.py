@@ -11,14 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .rotations import (
-    align_constant,
-    align_yaw,
-    are_deg,
-    nees,
-    tilt_error_deg,
-    up_in_camera,
-)
+from .rotations import align_constant, align_yaw, are_deg, nees, tilt_error_deg, up_in_camera
 
 JUMP_DEG = 10.0
 """An ARE above this is a globally inconsistent frame (a wrong Manhattan labelling or local minimum);

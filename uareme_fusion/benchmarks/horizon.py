@@ -122,9 +122,9 @@ def icl_scores(folder: Path, cues: str) -> dict:
     estimated from the first frames without the dataset's intrinsics."""
     import tempfile
 
-    from .. import pipeline  # noqa: F401
     from ..pipeline import RunConfig
     from ..pipeline.session import run_to_folder
+    from .. import pipeline  # noqa: F401
 
     with tempfile.TemporaryDirectory() as out:
         summary = run_to_folder(str(folder), out, RunConfig(backend="single", normals="learned", cues=cues),

@@ -10,12 +10,7 @@ from rich.table import Table
 
 from ..config import load_config, preset_names, validate_config
 from ..pipeline import RunConfig
-from ..pipeline.session import (
-    configure_imu,
-    prepare_output_folder,
-    run_notes,
-    run_source,
-)
+from ..pipeline.session import configure_imu, prepare_output_folder, run_notes, run_source
 from .app import StdoutConsole, app, err_console, fail
 from .progress import frame_progress
 

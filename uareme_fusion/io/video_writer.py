@@ -27,9 +27,8 @@ H264_CRF = "20"
 
 class _PyAvEncoder:
     def __init__(self, path: Path, fps: float, size_wh: tuple[int, int]):
-        from fractions import Fraction
-
         import av
+        from fractions import Fraction
 
         self.container = av.open(str(path), mode="w")
         rate = Fraction(fps).limit_denominator(1001)

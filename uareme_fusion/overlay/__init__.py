@@ -5,13 +5,7 @@ Conventions: camera frame OpenCV (x right, y down, z forward); `up_c` is world u
 frame; `R_cm` maps Manhattan to camera coordinates; K is in pixels with pixel centres at integers.
 """
 
-from .camera import (
-    DEFAULT_FOV_DEG,
-    assumed_fov_note,
-    assumed_K,
-    check_K,
-    intrinsics_or_assumed,
-)
+from .camera import DEFAULT_FOV_DEG, assumed_fov_note, assumed_K, check_K, intrinsics_or_assumed
 from .compose import draw_overlay
 from .ground import draw_ground, ground_mask
 from .horizon import (

@@ -13,14 +13,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ._draw import (
-    SHIFT_BITS,
-    fixed_point,
-    outlined_line,
-    outlined_text,
-    stroke_px,
-    text_height_px,
-)
+from ._draw import SHIFT_BITS, fixed_point, outlined_line, outlined_text, stroke_px, text_height_px
 from ._validate import check_rgb, check_rotation, check_vector3
 from .camera import check_K
 

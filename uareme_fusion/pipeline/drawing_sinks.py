@@ -15,14 +15,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, OutputError
-from ..io.safe_files import (
-    cannot_write,
-    discard,
-    publish,
-    refuse_link,
-    temporary_sibling,
-    write_image_atomic,
-)
+from ..io.safe_files import cannot_write, discard, publish, refuse_link, temporary_sibling, write_image_atomic
 from ..io.video_writer import OPENCV_CODECS, open_video_encoder
 from ..overlay import draw_ground, ground_mask, side_by_side
 from ..overlay.compose import draw_overlay

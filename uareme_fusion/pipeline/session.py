@@ -23,11 +23,11 @@ from ..io.safe_files import ReservedFile
 from ..metrics import attitude_errors, error_summary
 from ..rotations import align_constant
 from ..types import Status
-from . import stop_signals
 from .config import RunConfig
 from .cues import CueSolver, parse_cues
 from .imu_rotation_check import ImuRotationCheck
 from .runner import Pipeline, RunStats
+from . import stop_signals
 from .sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
 from .stages import CappedNormals, make_backend, make_normal_estimator, mekf_preset_for
 

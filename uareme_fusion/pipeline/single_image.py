@@ -26,13 +26,7 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K, check_K
 from ..overlay.compose import draw_overlay
 from ..overlay.horizon import horizon_line
 from ..rotations import quat_xyzw
-from ..solver.focal import (
-    FocalConfig,
-    FocalEstimate,
-    solve_given_K,
-    solve_with_focal,
-    unknown_centre_floor,
-)
+from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal, unknown_centre_floor
 from ..solver.joint import JointSolver
 from ..solver.manhattan import up_candidate
 from ..types import Frame, NormalMap, VisualRotation

@@ -27,25 +27,14 @@ import numpy as np
 from ..errors import InputError
 from ..rotations import nearest_symmetric
 from ..types import NormalMap, VisualRotation
+from .lines import (RANDOM_LINES_COST, LineMoments, line_cost_gradient_hessian, inlier_fraction, line_information,
+                    normalised_line_cost)
+from .manhattan import (R_CM_UPRIGHT, RANDOM_NORMALS_COST, ManhattanSolver, SolverConfig, _cell_candidates,
+                        _check_rotation)
 from .levenberg import levenberg_marquardt_so3
-from .lines import (
-    RANDOM_LINES_COST,
-    LineMoments,
-    inlier_fraction,
-    line_cost_gradient_hessian,
-    line_information,
-    normalised_line_cost,
-)
-from .manhattan import (
-    R_CM_UPRIGHT,
-    RANDOM_NORMALS_COST,
-    ManhattanSolver,
-    SolverConfig,
-    _cell_candidates,
-    _check_rotation,
-)
 from .moments import normal_moments
 from .quartic import gradient_hessian, normalised_cost
+
 
 _NORMALS_MIN_COST = 1e-6
 """Floor on E_N* in a_N: an exact synthetic normal map does not get infinite weight."""

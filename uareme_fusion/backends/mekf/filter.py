@@ -22,18 +22,7 @@ from .compiled import KERNEL, accel_update_compiled
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import gravity_model, stack, vertical_model, visual_model
 from .motion import ConstantRateMotion, GyroMotion
-from .state import (
-    BG,
-    I3,
-    MF,
-    N_STATE,
-    ORTHONORMALISE_EVERY,
-    TH,
-    ZERO_STATE,
-    inject,
-    orthonormal,
-    reset_jacobian,
-)
+from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
 
 
 def motion_for(mode: MekfMode):

@@ -16,19 +16,12 @@ from filterpy.kalman import predict as kf_predict
 from scipy.spatial.transform import Rotation
 
 from ...rotations import R_CM_UPRIGHT, WORLD_UP
-from ...types import IMU_COLUMNS as COLUMNS
-from ...types import ImuBatch, Status, VisualRotation, visual_R_wc_covariance
+from ...types import IMU_COLUMNS as COLUMNS, ImuBatch, Status, VisualRotation, visual_R_wc_covariance
 from .accel import PERIOD_TOLERANCE_S, chunk_bounds, tilt_direction
 from .compiled import compiled_path_applies, integrate_compiled
 from .config import MekfMode
-from .propagation import (
-    constant_rate_model,
-    gyro_chunk,
-    gyro_process_noise,
-    gyro_rates,
-    gyro_transition,
-    manhattan_walk_noise,
-)
+from .propagation import constant_rate_model, gyro_chunk, gyro_process_noise, gyro_rates, gyro_transition
+from .propagation import manhattan_walk_noise
 from .state import BG, I3, MF, N_STATE, RATE, TH, ZERO_STATE, orthonormal
 
 _NO_ROWS = np.zeros((0, COLUMNS))
