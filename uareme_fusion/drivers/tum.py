@@ -82,6 +82,9 @@ def read_metadata(root: Path) -> dict:
     else:
         return {}
     meta = read_json_object(path)
+    if name == SIM_META and "imu_time_offset_s" not in meta and meta.get("time_offset_s"):
+        raise InputError(f"{path}: time_offset_s is the old, opposite-sign key (IMU clock minus camera clock); "
+                         f"write imu_time_offset_s = {-float(meta['time_offset_s'])!r} instead, or simulate again")
     offset = _number(meta, "imu_time_offset_s", path, 0.0)
     gravity_aligned = True if name == SIM_META else bool(meta.get("gravity_aligned", False))
     return dict(path=path, K=_matrix(meta, "K", path), R_ci=_matrix(meta, "R_ci", path, rotation=True),
