@@ -2,6 +2,7 @@
 
     K = pinhole(fx, fy, cx, cy)
     K = intrinsics_from_fov(width=640, height=480, hfov_deg=60.0)
+    K = assumed_K(height, width)            # a source without intrinsics: DEFAULT_FOV_DEG
 """
 
 from __future__ import annotations
@@ -33,3 +34,13 @@ def intrinsics_from_fov(width: int, height: int, hfov_deg: float,
                          f"got {hfov_deg}")
     f_px = (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
     return pinhole(f_px, f_px, (width - 1) / 2.0, (height - 1) / 2.0)
+
+
+DEFAULT_FOV_DEG = 60.0
+"""Horizontal field of view assumed when a source has no intrinsics (the paper's training FOV)."""
+
+
+def assumed_K(height: int, width: int, fov_deg: float = DEFAULT_FOV_DEG) -> np.ndarray:
+    """K assumed for a `width` x `height` image without intrinsics: `intrinsics_from_fov` with
+    horizontal field of view `fov_deg` (arguments in the (height, width) order of image shapes)."""
+    return intrinsics_from_fov(width, height, fov_deg)

@@ -7,20 +7,10 @@ homogeneous pixels: p ~ K @ r.
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from ..errors import InputError
-from ..pinhole import intrinsics_from_fov
-
-DEFAULT_FOV_DEG = 60.0
-"""Horizontal field of view assumed when a source has no intrinsics (the paper's training FOV)."""
-
-
-def assumed_K(height: int, width: int, fov_deg: float = DEFAULT_FOV_DEG) -> np.ndarray:
-    """K assumed for a `width` x `height` image without intrinsics: `pinhole.intrinsics_from_fov`
-    with horizontal field of view `fov_deg` (note the (height, width) order of image shapes)."""
-    return intrinsics_from_fov(width, height, fov_deg)
+from ..pinhole import DEFAULT_FOV_DEG, assumed_K  # noqa: F401  (drawing code takes them from here)
 
 
 def check_K(K: np.ndarray, name: str = "K") -> np.ndarray:
