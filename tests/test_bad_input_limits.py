@@ -19,7 +19,8 @@ from uareme_fusion.backends.mekf import Mekf
 from uareme_fusion.errors import InputError
 from uareme_fusion.io.images import reduction_for
 from uareme_fusion.io.paths import read_pipe_text
-from uareme_fusion.pipeline.single_image import ANALYSIS_MAX_PIXELS, read_rgb
+from uareme_fusion.formats.images import read_rgb
+from uareme_fusion.pipeline.single_image import ANALYSIS_MAX_PIXELS
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.solver.manhattan import solve_manhattan
 from test_safe_outputs import _env, cli, error_lines  # pytest puts tests/ on sys.path

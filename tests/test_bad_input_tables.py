@@ -16,8 +16,8 @@ import pytest
 
 from uareme_fusion.backends.mekf import Mekf, MekfConfig
 from uareme_fusion.drivers.broad import read_broad
-from uareme_fusion.drivers.euroc_imu import read_euroc_imu
-from uareme_fusion.drivers.tum_rgbd import (
+from uareme_fusion.formats.euroc import read_euroc_imu
+from uareme_fusion.formats.tum import (
     load_tum_rgbd,
     read_associations,
     read_tum_accelerometer,

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from uareme_fusion.drivers.euroc_imu import read_euroc_imu
-from uareme_fusion.drivers.tum_rgbd import associate, load_tum_rgbd
+from uareme_fusion.formats.euroc import read_euroc_imu
+from uareme_fusion.formats.tum import associate, load_tum_rgbd
 from uareme_fusion.errors import InputError
 from uareme_fusion.sim.dataset import DEPTH_SCALE, SequenceOptions, write_sequence
 from uareme_fusion.sim.imu import simulate_imu

@@ -52,7 +52,7 @@ def test_run_applies_the_source_imu_geometry_and_overrides_to_the_ekf():
     info = SourceInfo(name="test", has_imu=True, R_ci=R_ci, imu_time_offset_s=0.02)
     mekf = pipeline_backend(RunConfig(mekf={"gyro_noise_rad_s_sqrt_hz": 0.005}), info)
     np.testing.assert_array_equal(mekf.config.R_ci, R_ci)
-    assert mekf.config.imu_time_offset_s == -0.02  # the EKF's sign convention (`make_backend`)
+    assert mekf.config.imu_time_offset_s == 0.02  # one convention end to end: t_cam = t_imu + offset
     assert mekf.config.gyro_noise_rad_s_sqrt_hz == 0.005
 
 
@@ -66,7 +66,7 @@ def test_compare_reads_a_simulated_folder_as_run_does(tmp_path):
     out = tmp_path / "sim"
     R_ci = ((0.0, -1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))  # a phone's IMU axes, 13 ms late
     write_sequence("room", out, SequenceOptions(frames=5, width=32, height=24, fps=10.0, seed=2, R_ci=R_ci,
-                                                time_offset_s=0.013))
+                                                imu_time_offset_s=-0.013))
     path = out / "normals" / "000002.npz"
     with np.load(path) as npz:
         arrays = {k: npz[k] for k in npz.files}

@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from uareme_fusion.cli import app
-from uareme_fusion.drivers.tum_rgbd import read_tum_trajectory
+from uareme_fusion.formats.tum import read_tum_trajectory
 
 EVO_APE = shutil.which("evo_ape")
 README_COMMAND = "evo_ape tum {gt} {traj} -r angle_deg --align_origin"

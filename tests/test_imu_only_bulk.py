@@ -40,7 +40,8 @@ def imu_log(seed: int = 0, duration_s: float = 20.0, bad: bool = True):
 
 
 def batch_ends(t: np.ndarray) -> np.ndarray:
-    return np.cumsum([len(b) for b in split_by_span(t, t, t, 1.0 / 30.0)])
+    zeros = np.zeros((t.size, 3))
+    return np.cumsum([len(b) for b in split_by_span(t, zeros, zeros, 1.0 / 30.0)])
 
 
 @pytest.mark.parametrize("compiled", [True, False])

@@ -88,8 +88,8 @@ def test_buildings_have_constant_manhattan_frame():
 def test_time_offset_shifts_samples_and_noise_is_seeded():
     traj = make_trajectory("pan", 10.0, seed=0)
     t0, g0, _ = simulate_imu(traj, 100.0, ImuNoise.noiseless())
-    t1, g1, _ = simulate_imu(traj, 100.0, ImuNoise.noiseless(), time_offset_s=0.05)
-    # Stamp t in the shifted log measures camera time t - 0.05: same as stamp t - 0.05 unshifted.
+    t1, g1, _ = simulate_imu(traj, 100.0, ImuNoise.noiseless(), imu_time_offset_s=-0.05)
+    # Stamp t in the shifted log measures camera time t - 0.05 (imu_time_offset_s = -0.05): same as stamp t - 0.05 unshifted.
     np.testing.assert_allclose(t1, t0 + 0.05, atol=1e-12)
     np.testing.assert_allclose(g1, g0, atol=1e-12)
     a = simulate_imu(traj, 100.0, ImuNoise(), seed=4)

@@ -179,7 +179,7 @@ R_CI = Rotation.from_euler("xyz", [90, 0, 90], degrees=True).as_matrix()
 def sim_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("sim")
     write_sequence("room", out, SequenceOptions(frames=6, width=32, height=24, fps=10.0, seed=2,
-                                                R_ci=tuple(map(tuple, R_CI)), time_offset_s=0.013))
+                                                R_ci=tuple(map(tuple, R_CI)), imu_time_offset_s=-0.013))
     return out
 
 
@@ -189,7 +189,7 @@ def test_simulate_folder_reads_fully(sim_dir):
         info = src.info
         assert info.has_imu and info.has_depth and info.n_frames == 6 and info.fps == pytest.approx(10.0)
         np.testing.assert_allclose(info.R_ci, R_CI, atol=1e-12)
-        assert info.imu_time_offset_s == pytest.approx(-0.013)  # scene.json: IMU clock minus camera clock
+        assert info.imu_time_offset_s == pytest.approx(-0.013)  # t_cam = t_imu + imu_time_offset_s
         events = list(src.events())
         truth = src.ground_truth()
     assert_time_ordered(events, info.imu_time_offset_s)
@@ -200,7 +200,7 @@ def test_simulate_folder_reads_fully(sim_dir):
     np.testing.assert_array_equal(frames[3].normals.kappa, npz["kappa"])
     t, gyro, _ = imu_of(events)
     t_ref, gyro_ref, _ = simulate_imu(build_scenario("room", 0.5, 2).trajectory, 200.0, ImuNoise(), seed=2,
-                                      R_ci=R_CI, time_offset_s=0.013)
+                                      R_ci=R_CI, imu_time_offset_s=-0.013)
     np.testing.assert_allclose(t, t_ref, atol=1e-9)
     np.testing.assert_allclose(gyro, gyro_ref, atol=1e-9)
     assert truth.gravity_aligned and truth.R_wc.shape == (6, 3, 3)

@@ -6,7 +6,7 @@ b-coordinates to a, perturbations on the right, covariances in rad^2.
 
 from .errors import ConfigError, InputError, UaremeError
 from .solver import ManhattanSolver, SolverConfig, solve_manhattan
-from .types import Estimate, Frame, ImuSample, NormalMap, Status, VisualRotation
+from .types import Estimate, Frame, ImuBatch, NormalMap, Status, VisualRotation
 
 __version__ = "0.1.0"
 
@@ -14,7 +14,7 @@ __all__ = [
     "ConfigError",
     "Estimate",
     "Frame",
-    "ImuSample",
+    "ImuBatch",
     "InputError",
     "ManhattanSolver",
     "NormalMap",

@@ -8,15 +8,40 @@ Conventions (see DESIGN.md):
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import math
+from functools import lru_cache
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 WORLD_UP = np.array([0.0, 0.0, 1.0])
 """The world frame's up direction (z up; gravity is -9.81 m/s^2 along it)."""
+R_CM_UPRIGHT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+"""Labelling used when there is no prior: m's x is nearest camera right, m's z nearest image up
+(-y in OpenCV), so that `R_wc = R_cm^T` is z-up for an upright camera."""
+
+
+def rotation_problem(R, atol: float = 1e-6) -> str | None:
+    """None when `R` is a finite (3, 3) rotation matrix (|R^T R - I| <= atol everywhere, det > 0),
+    else what is wrong with it, in words for an error message. The one rotation validator: callers
+    raise their own error type naming the option or file."""
+    try:
+        R = np.asarray(R, dtype=float)
+    except (TypeError, ValueError):
+        return "not a matrix of numbers"
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        return f"expected a finite 3x3 rotation matrix, got shape {R.shape}"
+    deviation = np.abs(R.T @ R - np.eye(3)).max()
+    if deviation > atol:
+        return f"the 3x3 is not orthonormal (max |R^T R - I| = {deviation:.2g})"
+    if np.linalg.det(R) <= 0:
+        return "the 3x3 is a reflection (det -1), not a rotation"
+    return None
+
+
+def is_rotation(R, atol: float = 1e-6) -> bool:
+    """True when `rotation_problem(R, atol)` finds nothing."""
+    return rotation_problem(R, atol) is None
 
 
 def skew(v: np.ndarray) -> np.ndarray:

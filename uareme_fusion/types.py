@@ -31,14 +31,68 @@ class Frame:
     pipeline is told to take normals from the source instead of estimating them."""
 
 
-@dataclass(frozen=True)
-class ImuSample:
-    """One IMU reading in the IMU frame `i`: gyro in rad/s, specific force in m/s^2 (an accelerometer
-    at rest reads +9.81 along up)."""
+IMU_COLUMNS = 8
+"""Columns of an `ImuBatch` row: time (s), gyro x y z (rad/s), accel x y z (m/s^2), saturated (0 or 1)."""
 
-    t: float
-    gyro_rad_s: np.ndarray
-    accel_m_s2: np.ndarray
+
+class ImuBatch:
+    """Consecutive IMU readings in the IMU frame `i`: gyro in rad/s, specific force in m/s^2 (an
+    accelerometer at rest reads +9.81 along up), one row each of `rows` (N, 8) (see `IMU_COLUMNS`).
+    The fields are views: `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3), `saturated` (N,)
+    (nonzero where the gyro is at or beyond its range on some axis).
+
+        batch = ImuBatch(t_s, gyro_rad_s, accel_m_s2)     # copies the columns into rows
+        batch[10:20], ImuBatch.concat([a, b]), ImuBatch.empty()
+    """
+
+    __slots__ = ("rows",)
+
+    def __init__(self, t_s, gyro_rad_s, accel_m_s2, saturated=None):
+        rows = np.empty((np.shape(t_s)[0], IMU_COLUMNS))
+        rows[:, 0], rows[:, 1:4], rows[:, 4:7] = t_s, gyro_rad_s, accel_m_s2
+        rows[:, 7] = 0.0 if saturated is None else saturated
+        self.rows = rows
+
+    @classmethod
+    def from_rows(cls, rows: np.ndarray) -> "ImuBatch":
+        """A batch holding `rows` (N, 8) itself (no copy)."""
+        batch = cls.__new__(cls)
+        batch.rows = rows
+        return batch
+
+    @classmethod
+    def empty(cls) -> "ImuBatch":
+        return cls.from_rows(np.zeros((0, IMU_COLUMNS)))
+
+    @classmethod
+    def concat(cls, batches: list["ImuBatch"]) -> "ImuBatch":
+        """One batch of all rows in order (the batch itself when there is one)."""
+        if len(batches) == 1:
+            return batches[0]
+        return cls.from_rows(np.concatenate([b.rows for b in batches]) if batches else np.zeros((0, IMU_COLUMNS)))
+
+    def __getitem__(self, index) -> "ImuBatch":
+        """The rows at `index` (a slice gives views, a mask or index array copies)."""
+        return ImuBatch.from_rows(self.rows[index])
+
+    @property
+    def t_s(self) -> np.ndarray:
+        return self.rows[:, 0]
+
+    @property
+    def gyro_rad_s(self) -> np.ndarray:
+        return self.rows[:, 1:4]
+
+    @property
+    def accel_m_s2(self) -> np.ndarray:
+        return self.rows[:, 4:7]
+
+    @property
+    def saturated(self) -> np.ndarray:
+        return self.rows[:, 7]
+
+    def __len__(self) -> int:
+        return self.rows.shape[0]
 
 
 @dataclass(frozen=True)
@@ -116,6 +170,16 @@ class Status(enum.IntFlag):
     """Depth normals were asked for and this frame has no depth map: it used the remaining cues."""
     UPDATE_NONFINITE = enum.auto()
     """A filter update gave a non-finite correction or covariance and was dropped."""
+
+
+def visual_R_wc_covariance(visual: VisualRotation) -> np.ndarray:
+    """Covariance (rad^2) of the right perturbation of `R_mc = R_cm^T` given `visual.cov` of `R_cm`.
+
+    `(R_cm Exp(d))^T = R_cm^T Exp(-R_cm d)`, so the right error of `R_mc` (and of `R_wc = R_wm R_mc`)
+    is `-R_cm d` with covariance `R_cm cov R_cm^T`.
+    """
+    cov = visual.R_cm @ visual.cov @ visual.R_cm.T
+    return 0.5 * (cov + cov.T)
 
 
 @dataclass(frozen=True)

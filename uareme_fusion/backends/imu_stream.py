@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..types import IMU_COLUMNS as COLUMNS
+from ..types import ImuBatch
 
 
 @dataclass
@@ -36,46 +38,6 @@ class ImuStreamCounts:
     @property
     def dropped(self) -> int:
         return self.nonfinite + self.duplicate + self.late
-
-
-COLUMNS = 8
-"""Columns of a sample row: time (s), gyro x y z (rad/s), accel x y z (m/s^2), saturated (0 or 1)."""
-
-
-@dataclass(frozen=True)
-class ImuBatch:
-    """Released samples in strictly increasing time, one row each in `rows` (N, 8) (see `COLUMNS`);
-    the fields are views: `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3), `saturated` (N,)
-    (nonzero where the gyro is at or beyond its range on some axis)."""
-
-    rows: np.ndarray
-
-    @classmethod
-    def of(cls, t_s, gyro_rad_s, accel_m_s2, saturated=None) -> "ImuBatch":
-        """A batch from its columns (`saturated` None: none saturated)."""
-        rows = np.empty((np.shape(t_s)[0], COLUMNS))
-        rows[:, 0], rows[:, 1:4], rows[:, 4:7] = t_s, gyro_rad_s, accel_m_s2
-        rows[:, 7] = 0.0 if saturated is None else saturated
-        return cls(rows)
-
-    @property
-    def t_s(self) -> np.ndarray:
-        return self.rows[:, 0]
-
-    @property
-    def gyro_rad_s(self) -> np.ndarray:
-        return self.rows[:, 1:4]
-
-    @property
-    def accel_m_s2(self) -> np.ndarray:
-        return self.rows[:, 4:7]
-
-    @property
-    def saturated(self) -> np.ndarray:
-        return self.rows[:, 7]
-
-    def __len__(self) -> int:
-        return self.rows.shape[0]
 
 
 _EMPTY_ROWS = np.zeros((0, COLUMNS))
@@ -132,7 +94,7 @@ class ImuStream:
         """Add samples; return those now older than the newest by more than the reorder window."""
         self.add(t_s, gyro_rad_s, accel_m_s2)
         if not self._held.shape[0]:
-            return ImuBatch(_EMPTY_ROWS)
+            return ImuBatch.from_rows(_EMPTY_ROWS)
         return self.release_until(self._held[-1, 0] - self.reorder_window_s, move_watermark=False)
 
     def add(self, t_s, gyro_rad_s, accel_m_s2) -> None:
@@ -190,7 +152,7 @@ class ImuStream:
                 self.counts.saturated += int(np.count_nonzero(out[:, 7]))
         if move_watermark and math.isfinite(t_s):
             self.watermark_s = max(self.watermark_s, float(t_s))
-        return ImuBatch(out)
+        return ImuBatch.from_rows(out)
 
     def flush(self) -> ImuBatch:
         """Release everything held."""

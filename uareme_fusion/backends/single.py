@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..types import Estimate, Status, VisualRotation
+from ..types import Estimate, Status, VisualRotation, visual_R_wc_covariance
 from .base import Backend
 
 
@@ -33,7 +33,7 @@ class SingleFrame(Backend):
                 # Keep the labelling nearest the last frame (the solver was initialised from it).
                 visual = visual.symmetric_to(self._last.R_wc.T)
             # (R_cm Exp(delta))^T = R_cm^T Exp(-R_cm delta): the right error of R_wc is -R_cm delta.
-            est = Estimate(t_s, visual.R_cm.T, visual.R_cm @ visual.cov @ visual.R_cm.T, R_wm=np.eye(3))
+            est = Estimate(t_s, visual.R_cm.T, visual_R_wc_covariance(visual), R_wm=np.eye(3))
         self._last = est
         return est
 

@@ -14,7 +14,7 @@ covariance of `R_wc`, as DESIGN.md requires.
 
 Paper mode (`mode: paper`), exactly the paper's graph: `BatchFixedLagSmoother` over the last
 `window_frames` frames; per frame a `PriorFactorRot3` on `X(k)` at `R_cm^T` with the visual
-covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`huber_k`) kernel (paper eq. 7, f^z); an
+covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`visual_huber_sigma`) kernel (paper eq. 7, f^z); an
 identity `BetweenFactorRot3` with isotropic `between_sigma_rad` between consecutive frames (f^s); the
 oldest frame's marginal prior (f^p) is what the fixed-lag smoother leaves when it marginalises.
 The world is the Manhattan frame as labelled on the first frame: `R_wm = I`.
@@ -44,11 +44,12 @@ import logging
 import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import M, X
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import AliasChoices, ConfigDict, Field, field_validator
 
-from ..rotations import manhattan_symmetries
-from ..types import Estimate, Status, VisualRotation
+from ..rotations import is_rotation, manhattan_symmetries
+from ..types import Estimate, Status, VisualRotation, visual_R_wc_covariance
 from .base import Backend
+from .imu_noise import GyroNoiseConfig
 
 try:  # BatchFixedLagSmoother moved from gtsam_unstable into gtsam in 4.3/5.0.
     from gtsam import BatchFixedLagSmoother
@@ -69,7 +70,7 @@ class SmootherMode(str, enum.Enum):
     """Gyro preintegration between frames, accelerometer gravity factors, gravity-aligned world."""
 
 
-class SmootherConfig(BaseModel):
+class SmootherConfig(GyroNoiseConfig):
     """Parameters of `Smoother`; defaults are the paper's values (configs/paper.yaml, section `smoother`)."""
 
     model_config = ConfigDict(extra="forbid")
@@ -77,19 +78,21 @@ class SmootherConfig(BaseModel):
     mode: SmootherMode = SmootherMode.PAPER
     window_frames: int = Field(30, ge=2, le=10000)
     """Frames kept in the sliding window (the paper's n)."""
-    huber_k: float | None = Field(0.1, ge=1e-3, le=1e6)
-    """Huber threshold on the whitened visual residual; None for a plain Gaussian prior."""
+    visual_huber_sigma: float | None = Field(0.1, ge=1e-3, le=1e6,
+                                             validation_alias=AliasChoices("visual_huber_sigma", "huber_k"))
+    """Huber threshold on the whitened visual residual (the Mahalanobis distance, as `MekfConfig`'s);
+    None for a plain Gaussian prior. The old key `huber_k` is accepted."""
     between_sigma_rad: float = Field(0.1, ge=1e-6, le=10.0)
     """Isotropic sigma of the identity smoothness factor (paper's lambda = sigma^2)."""
     missing_variance_rad2: float = Field(1.0, ge=1e-12, le=100.0)
     """Variance reported per axis before the first visual rotation."""
-    # Gyro-aided mode.
-    gyro_noise_rad_s_sqrt_hz: float = Field(2e-3, ge=1e-9, le=1.0)
-    """Gyro white-noise density (continuous time)."""
-    gyro_bias_walk_rad_s2_sqrt_hz: float = Field(1e-4, ge=1e-9, le=1.0)
-    """Gyro bias random-walk density."""
-    gyro_bias_prior_sigma_rad_s: float = Field(0.02, ge=1e-6, le=10.0)
-    """Prior sigma of the gyro bias on the first frame."""
+    # Gyro-aided mode: gyro noise from `GyroNoiseConfig`; the smoother's bias prior default is wider.
+    gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-4, ge=1e-9, le=1.0, validation_alias=AliasChoices(
+        "gyro_bias_rw_rad_s2_sqrt_hz", "gyro_bias_walk_rad_s2_sqrt_hz"))
+    """Gyro bias random-walk density, rad/s^2/sqrt(Hz) (> 0: a gtsam sigma; old key accepted)."""
+    gyro_bias_initial_std_rad_s: float = Field(0.02, ge=1e-6, le=10.0, validation_alias=AliasChoices(
+        "gyro_bias_initial_std_rad_s", "gyro_bias_prior_sigma_rad_s"))
+    """Prior sigma of the gyro bias on the first frame, rad/s (old key accepted)."""
     accel_sigma_rad: float = Field(0.03, ge=1e-6, le=10.0)
     """Sigma of the gravity direction from the mean accelerometer reading when the camera is still."""
     accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0, le=100.0)
@@ -104,13 +107,13 @@ class SmootherConfig(BaseModel):
     R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
     """Camera-from-IMU rotation (3x3): `gyro_c = R_ci @ gyro_i`."""
     imu_time_offset_s: float = Field(0.0, ge=-3600.0, le=3600.0)
-    """IMU clock minus camera clock: a sample stamped `t` measures the camera time `t - offset`."""
+    """Camera clock minus IMU clock: a sample stamped `t` measures the camera time `t + offset`
+    (`t_cam = t_imu + imu_time_offset_s`, as `SourceInfo.imu_time_offset_s`)."""
 
     @field_validator("R_ci")
     @classmethod
     def _check_rotation(cls, value):
-        R = np.asarray(value, dtype=float)
-        if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) <= 0:
+        if not is_rotation(value):
             raise ValueError("R_ci must be a 3x3 rotation matrix (orthonormal rows, det +1)")
         return value
 
@@ -123,16 +126,6 @@ def _robust(kernel_k: float | None, base: gtsam.noiseModel.Base) -> gtsam.noiseM
     if kernel_k is None:
         return base
     return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(kernel_k), base)
-
-
-def visual_R_wc_covariance(visual: VisualRotation) -> np.ndarray:
-    """Covariance (rad^2) of the right perturbation of `R_mc = R_cm^T` given `visual.cov` of `R_cm`.
-
-    `(R_cm Exp(d))^T = R_cm^T Exp(-R_cm d)`, so the right error of `R_mc` (and of `R_wc = R_wm R_mc`)
-    is `-R_cm d` with covariance `R_cm cov R_cm^T`.
-    """
-    cov = visual.R_cm @ visual.cov @ visual.R_cm.T
-    return 0.5 * (cov + cov.T)
 
 
 def label_up_as_z(R_cm: np.ndarray, up_c: np.ndarray) -> np.ndarray:
@@ -211,7 +204,7 @@ class Smoother(Backend):
 
     # ----------------------------------------------------------------------------- shared factors
     def _visual_noise(self, visual: VisualRotation) -> gtsam.noiseModel.Base:
-        return _robust(self.config.huber_k, gtsam.noiseModel.Gaussian.Covariance(visual_R_wc_covariance(visual)))
+        return _robust(self.config.visual_huber_sigma, gtsam.noiseModel.Gaussian.Covariance(visual_R_wc_covariance(visual)))
 
     def _smoothness_factor(self, k: int) -> gtsam.NonlinearFactor:
         return gtsam.BetweenFactorRot3(X(k - 1), X(k), gtsam.Rot3(), self._between_noise)

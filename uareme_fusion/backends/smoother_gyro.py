@@ -41,7 +41,7 @@ class GyroSmoother(Smoother):
         `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3) in the IMU frame, rotated to the camera
         by `R_ci`. Non-finite or out-of-order samples are dropped and counted (`Status.IMU_DROPPED`).
         """
-        t_s = np.atleast_1d(np.asarray(t_s, dtype=float)) - self.config.imu_time_offset_s
+        t_s = np.atleast_1d(np.asarray(t_s, dtype=float)) + self.config.imu_time_offset_s
         gyro = np.atleast_2d(np.asarray(gyro_rad_s, dtype=float))
         accel = np.atleast_2d(np.asarray(accel_m_s2, dtype=float))
         if t_s.ndim != 1 or gyro.shape != (len(t_s), 3) or accel.shape != (len(t_s), 3):
@@ -96,7 +96,7 @@ class GyroSmoother(Smoother):
         else:  # no gyro sample between the frames: fall back to the paper's smoothness factor
             graph.add(self._smoothness_factor(k))
         dt = max(t_s - self._t_frame, 1e-3)
-        walk = gtsam.noiseModel.Isotropic.Sigma(3, self.config.gyro_bias_walk_rad_s2_sqrt_hz * np.sqrt(dt))
+        walk = gtsam.noiseModel.Isotropic.Sigma(3, self.config.gyro_bias_rw_rad_s2_sqrt_hz * np.sqrt(dt))
         graph.add(gtsam.BetweenFactorVector(B(k - 1), B(k), np.zeros(3), walk))
         values.insert(B(k), self._bias)
         stamps[B(k)] = float(k)
@@ -114,7 +114,7 @@ class GyroSmoother(Smoother):
             up_c = np.mean(self._accel_c, axis=0)
             visual = visual.symmetric_to(label_up_as_z(visual.R_cm, up_c / np.linalg.norm(up_c)))
         self._add_world_priors(graph, values, stamps, 0, np.eye(3), self._bias,
-                               self.config.gyro_bias_prior_sigma_rad_s**2 * np.eye(3))
+                               self.config.gyro_bias_initial_std_rad_s**2 * np.eye(3))
         gravity = self._gravity_factor(X(0))
         if gravity is not None:
             graph.add(gravity)
@@ -122,7 +122,7 @@ class GyroSmoother(Smoother):
 
     def _restart_priors(self, graph, values, stamps, k: int) -> None:
         self._add_world_priors(graph, values, stamps, k, self._R_wm, self._bias,
-                               self.config.gyro_bias_prior_sigma_rad_s**2 * np.eye(3))
+                               self.config.gyro_bias_initial_std_rad_s**2 * np.eye(3))
 
     def _world_and_bias(self, values) -> tuple[np.ndarray, np.ndarray]:
         return values.atRot3(MANHATTAN_KEY).matrix(), np.asarray(values.atVector(B(self._k)), dtype=float)

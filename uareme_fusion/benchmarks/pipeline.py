@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..drivers.base import ImuBatch, Source, SourceInfo
+from ..drivers.base import Source, SourceInfo
 from ..pipeline import RunConfig
 from ..pipeline.session import run_source
 from ..sim.imu import simulate_imu
 from ..sim.render import Renderer, intrinsics_from_fov
 from ..sim.scenarios import SCENARIOS, build_scenario
-from ..types import Frame
+from ..types import Frame, ImuBatch
 
 
 def rss_mb() -> float:

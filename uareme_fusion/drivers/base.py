@@ -18,19 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from uareme_fusion.types import Frame
-
-
-@dataclass(frozen=True)
-class ImuBatch:
-    """Consecutive IMU samples: `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3) in frame `i`."""
-
-    t_s: np.ndarray
-    gyro_rad_s: np.ndarray
-    accel_m_s2: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.t_s)
+from uareme_fusion.types import Frame, ImuBatch  # noqa: F401  (sources yield ImuBatch)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .base import GroundTruth, ImuBatch, Source, SourceInfo
+from uareme_fusion.types import ImuBatch
+
+from .base import GroundTruth, Source, SourceInfo
 from .broad import read_broad
 from .interleave import IMU_ONLY_BATCH_S, count_spans, split_by_span
 

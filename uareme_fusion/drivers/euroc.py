@@ -25,21 +25,20 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from uareme_fusion.errors import InputError, SourceError
 from uareme_fusion.io.images import read_image
 from uareme_fusion.io.text_tables import read_table
-from uareme_fusion.types import Frame
+from uareme_fusion.types import Frame, ImuBatch
 
-from .base import GroundTruth, ImuBatch, Source, SourceInfo
+from ..formats.euroc import read_euroc_ground_truth
+from ..formats.images import to_rgb8
+from .base import GroundTruth, Source, SourceInfo
 from .imu_csv import non_increasing_note, read_imu_log
-from .intrinsics import CameraModel, Undistorter, read_camera_file, read_camera_mapping
 from .interleave import IMU_ONLY_BATCH_S, interleave, split_by_span
-from .video import to_rgb8
+from .intrinsics import CameraModel, Undistorter, read_camera_file, read_camera_mapping
 
 GT_FOLDERS = ("gt0", "state_groundtruth_estimate0")
-GT_COLUMNS = ("timestamp [ns]", "p_x [m]", "p_y [m]", "p_z [m]", "q_w", "q_x", "q_y", "q_z")
 CAM_COLUMNS = ("timestamp [ns]", "filename")
 
 
@@ -155,15 +154,3 @@ class EurocSource(Source):
             return None
         t_s, R_RS = read_euroc_ground_truth(path)
         return GroundTruth(t_s, R_RS @ self.R_BS_cam, gravity_aligned=True)
-
-
-def read_euroc_ground_truth(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """An EuRoC ground-truth CSV -> (t_s (N,), R_RS (N, 3, 3): body (IMU) to the gravity-aligned world)."""
-    table = read_table(path, GT_COLUMNS, delimiter=",", kind="an EuRoC ground-truth file")
-    if len(table) == 0:
-        raise InputError(f"{path}: holds no ground-truth rows")
-    t_ns = table.ints(0)
-    table.require_increasing(t_ns)
-    quat_wxyz = table.floats(slice(4, 8))
-    table.require_finite(quat_wxyz, "quaternion")
-    return t_ns * 1e-9, Rotation.from_quat(quat_wxyz, scalar_first=True).as_matrix()

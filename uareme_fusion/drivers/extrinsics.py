@@ -25,6 +25,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import ConfigError
+from ..rotations import rotation_problem
 
 AXIS_LETTERS = {"r": (1, 0, 0), "l": (-1, 0, 0), "d": (0, 1, 0), "u": (0, -1, 0), "f": (0, 0, 1), "b": (0, 0, -1)}
 """Camera-frame direction of each axis letter (OpenCV: x right, y down, z forward)."""
@@ -67,15 +68,10 @@ def parse_imu_rotation(text: str, option: str = OPTION) -> np.ndarray:
 
 def checked_rotation(R: np.ndarray, where: str) -> np.ndarray:
     """`R` when it is a rotation matrix (orthonormal to `ORTHONORMAL_TOL`, det +1), else a ConfigError."""
-    R = np.asarray(R, float)
-    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
-        raise ConfigError(f"{where}: expected a finite 3x3 rotation matrix, got shape {R.shape}")
-    if np.abs(R.T @ R - np.eye(3)).max() > ORTHONORMAL_TOL:
-        raise ConfigError(f"{where}: the 3x3 is not orthonormal (max |R^T R - I| = "
-                          f"{np.abs(R.T @ R - np.eye(3)).max():.2g})")
-    if np.linalg.det(R) < 0:
-        raise ConfigError(f"{where}: the 3x3 is a reflection (det -1), not a rotation")
-    return R
+    problem = rotation_problem(R, ORTHONORMAL_TOL)
+    if problem is not None:
+        raise ConfigError(f"{where}: {problem}")
+    return np.asarray(R, float)
 
 
 def axis_letters_rotation(letters: str, option: str = OPTION) -> np.ndarray:

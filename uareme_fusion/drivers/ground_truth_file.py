@@ -19,9 +19,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
+from ..formats.euroc import read_euroc_ground_truth
+from ..formats.tum import read_tum_trajectory
 from .base import GroundTruth
-from .euroc import read_euroc_ground_truth
-from .tum_rgbd import read_tum_trajectory
 
 
 def _is_euroc(path: Path) -> bool:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from uareme_fusion.errors import InputError
-from uareme_fusion.normals.depth import flip_y_rotation
+from uareme_fusion.formats.datasets import flip_y_rotation
 
 from .base import GroundTruth
 from .intrinsics import PUBLISHED, CameraModel

@@ -27,8 +27,8 @@ from uareme_fusion.errors import InputError, SourceError
 from uareme_fusion.io.images import read_image
 from uareme_fusion.types import Frame
 
+from ..formats.images import to_rgb8
 from .base import Source, SourceInfo
-from .video import to_rgb8
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm", ".jp2")
 DEFAULT_FPS = 30.0

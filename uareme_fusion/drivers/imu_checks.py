@@ -36,7 +36,7 @@ from scipy.ndimage import uniform_filter1d
 
 from uareme_fusion.errors import InputError
 
-from .euroc_imu import EurocImu
+from ..formats.euroc import EurocImu
 
 G_M_S2 = 9.80665
 IMU_RATE_RANGE_HZ = (20.0, 4000.0)

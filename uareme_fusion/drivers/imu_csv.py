@@ -26,9 +26,10 @@ import numpy as np
 
 from uareme_fusion.errors import InputError
 from uareme_fusion.io.text_tables import sniff_delimiter
+from uareme_fusion.types import ImuBatch
 
-from .base import GroundTruth, ImuBatch, Source, SourceInfo
-from .euroc_imu import EurocImu, read_euroc_imu
+from ..formats.euroc import EurocImu, read_euroc_imu
+from .base import GroundTruth, Source, SourceInfo
 from .imu_checks import check_imu_log
 from .interleave import IMU_ONLY_BATCH_S, count_spans, interleave, split_by_span
 

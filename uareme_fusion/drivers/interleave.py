@@ -19,25 +19,10 @@ from collections.abc import Iterable, Iterator
 
 import numpy as np
 
-from .base import ImuBatch
+from ..types import ImuBatch
 
 IMU_ONLY_BATCH_S = 1.0 / 30.0
 """Span of the batches IMU-only sources yield: the pipeline reports one estimate per batch."""
-
-
-def empty_batch() -> ImuBatch:
-    return ImuBatch(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
-
-
-def concat_batches(batches: list[ImuBatch]) -> ImuBatch:
-    if len(batches) == 1:
-        return batches[0]
-    return ImuBatch(np.concatenate([b.t_s for b in batches]), np.concatenate([b.gyro_rad_s for b in batches]),
-                    np.concatenate([b.accel_m_s2 for b in batches]))
-
-
-def slice_batch(batch: ImuBatch, start: int, stop: int | None = None) -> ImuBatch:
-    return ImuBatch(batch.t_s[start:stop], batch.gyro_rad_s[start:stop], batch.accel_m_s2[start:stop])
 
 
 def split_by_span(t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray,
@@ -88,13 +73,13 @@ class ImuInterleaver:
                 self._pending.append(batch)
         if not self._pending:
             return None
-        pending = concat_batches(self._pending)
+        pending = ImuBatch.concat(self._pending)
         cut = int(np.searchsorted(pending.t_s, t_cam_s - self.time_offset_s, side="right"))
-        self._pending = [slice_batch(pending, cut)] if cut < len(pending) else []
+        self._pending = [pending[cut:]] if cut < len(pending) else []
         if cut == 0:
             return None
         self.n_samples += cut
-        return slice_batch(pending, 0, cut)
+        return pending[:cut]
 
     def rest(self) -> Iterator[ImuBatch]:
         """The samples after the last frame, batch by batch."""

@@ -40,7 +40,8 @@ import numpy as np
 import yaml
 
 from uareme_fusion.errors import ConfigError, InputError
-from uareme_fusion.normals.depth import ICL_NUIM_K_OPENCV
+from uareme_fusion.formats.datasets import PUBLISHED_INTRINSICS
+from uareme_fusion.pinhole import pinhole
 from uareme_fusion.types import Frame
 
 DISTORTION_MODELS = ("radtan", "equidistant")
@@ -77,20 +78,9 @@ def scaled_camera(camera: CameraModel, scale: float) -> CameraModel:
     return replace(camera, K=K, image_size=size)
 
 
-def pinhole(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
-    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-
-
-PUBLISHED: dict[str, CameraModel] = {
-    "TUM RGB-D freiburg1": CameraModel(pinhole(517.3, 516.5, 318.6, 255.3),
-                                       np.array([0.2624, -0.9531, -0.0054, 0.0026, 1.1633])),
-    "TUM RGB-D freiburg2": CameraModel(pinhole(520.9, 521.0, 325.1, 249.7),
-                                       np.array([0.2312, -0.7849, -0.0033, -0.0001, 0.9172])),
-    "TUM RGB-D freiburg3": CameraModel(pinhole(535.4, 539.2, 320.1, 247.6), np.zeros(0)),
-    "ICL-NUIM": CameraModel(ICL_NUIM_K_OPENCV.copy(), np.zeros(0)),
-}
-"""Intrinsics datasets publish (640x480 images). ICL-NUIM publishes fy = -480 for its y-up camera; the
-same pixels in OpenCV's y-down frame have fy = +480 (`normals.depth.ICL_NUIM_K_OPENCV`)."""
+PUBLISHED: dict[str, CameraModel] = {name: CameraModel(K.copy(), dist.copy())
+                                     for name, (K, dist) in PUBLISHED_INTRINSICS.items()}
+"""Intrinsics datasets publish (640x480 images; `formats.datasets.PUBLISHED_INTRINSICS`)."""
 
 _PUBLISHED_NAMES = (
     (re.compile(r"freiburg([123])"), lambda m: f"TUM RGB-D freiburg{m.group(1)}"),

@@ -28,10 +28,10 @@ import cv2
 import numpy as np
 
 from uareme_fusion.errors import InputError, SourceError
-from uareme_fusion.types import Frame
+from uareme_fusion.rotations import is_rotation
+from uareme_fusion.types import Frame, ImuBatch
 
-from .base import ImuBatch, Source, SourceInfo
-from .interleave import concat_batches, empty_batch, slice_batch
+from .base import Source, SourceInfo
 
 OAK_DEPTH_UNITS_PER_M = 1000.0
 """OAK stereo depth is uint16 millimetres."""
@@ -98,7 +98,7 @@ def batch_from_packets(packets: Iterable, counts: ImuConversionCounts | None = N
         times.append(t)
         rows.append((g.x, g.y, g.z, a.x, a.y, a.z))
     if not rows:
-        return empty_batch()
+        return ImuBatch.empty()
     values = np.asarray(rows, float)
     return ImuBatch(np.asarray(times, float), values[:, :3], values[:, 3:])
 
@@ -110,7 +110,7 @@ def rotation_from_extrinsics(T, what: str = "IMU-to-camera extrinsics") -> np.nd
     if T.shape not in ((4, 4), (3, 4)) or not np.all(np.isfinite(T)):
         raise InputError(f"oak: {what} must be a 4x4 matrix, got shape {T.shape}")
     R = T[:3, :3]
-    if not (np.allclose(R @ R.T, np.eye(3), atol=1e-3) and np.linalg.det(R) > 0):
+    if not is_rotation(R, atol=1e-3):
         raise InputError(f"oak: {what} hold no rotation (device not IMU-calibrated?): {R.round(4).tolist()}")
     U, _, Vt = np.linalg.svd(R)
     return U @ Vt
@@ -140,7 +140,7 @@ class FrameImuSync:
             if late.any():
                 self.late_imu += int(late.sum())
                 keep = np.flatnonzero(~late)
-                batch = ImuBatch(batch.t_s[keep], batch.gyro_rad_s[keep], batch.accel_m_s2[keep])
+                batch = batch[keep]
             if len(batch):
                 self._imu.append(batch)
         return self._release()
@@ -168,10 +168,10 @@ class FrameImuSync:
     def _imu_until(self, t_s: float) -> list:
         if not self._imu:
             return []
-        pending = concat_batches(self._imu)
+        pending = ImuBatch.concat(self._imu)
         cut = int(np.searchsorted(pending.t_s, t_s, side="right"))
-        self._imu = [slice_batch(pending, cut)] if cut < len(pending) else []
-        return [slice_batch(pending, 0, cut)] if cut else []
+        self._imu = [pending[cut:]] if cut < len(pending) else []
+        return [pending[:cut]] if cut else []
 
     def flush(self) -> list:
         """Everything still held, in order (end of stream)."""

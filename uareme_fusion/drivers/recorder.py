@@ -30,15 +30,17 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from uareme_fusion.errors import InputError, OutputError
+from uareme_fusion.formats.depth_png import MILLIMETRE_DEPTH_SCALE, depth_png_units
+from uareme_fusion.formats.euroc import EUROC_IMU_HEADER, euroc_imu_text
+from uareme_fusion.formats.tum import TUM_TRAJECTORY_HEADER, tum_trajectory_line
 from uareme_fusion.io.safe_files import (ReservedFile, RowFile, cannot_write, write_image_atomic, write_npz_atomic,
                                           write_text_atomic)
-from uareme_fusion.sim.dataset import EUROC_IMU_HEADER
-from uareme_fusion.types import Frame
+from uareme_fusion.types import Frame, ImuBatch
 
-from .base import GroundTruth, ImuBatch, Source, SourceInfo
+from .base import GroundTruth, Source, SourceInfo
 from .tum import NORMALS_DIR, RECORD_META
 
-RECORD_DEPTH_SCALE = 1000.0
+RECORD_DEPTH_SCALE = MILLIMETRE_DEPTH_SCALE
 """Depth PNG units per metre in recordings (millimetres)."""
 
 
@@ -99,10 +101,8 @@ class Recorder:
             rgb = np.zeros((*shape, 3), np.uint8)
         write_image_atomic(self.out / "rgb" / f"{n:06d}.png", np.ascontiguousarray(rgb[..., ::-1]))
         if frame.depth is not None:
-            units = np.asarray(frame.depth, np.float64) * self.depth_scale
-            bad = ~np.isfinite(units) | (units > 65535.49) | (units < 0)
-            self.n_depth_dropped += int(bad.sum())
-            png = np.rint(np.where(bad, 0.0, units)).astype(np.uint16)
+            png, n_dropped = depth_png_units(np.asarray(frame.depth, np.float64), self.depth_scale, far="drop")
+            self.n_depth_dropped += n_dropped
             write_image_atomic(self.out / "depth" / f"{n:06d}.png", png)
             self._depth_list.write_row(f"{stamp} depth/{n:06d}.png\n")
         if frame.normals is not None:
@@ -117,10 +117,7 @@ class Recorder:
     def write_imu(self, batch: ImuBatch) -> None:
         if not len(batch):
             return
-        t_ns = np.rint(np.asarray(batch.t_s, np.float64) * 1e9).astype(np.int64)
-        rows = np.column_stack([batch.gyro_rad_s, batch.accel_m_s2])
-        lines = [f"{t}," + ",".join(f"{v:.17g}" for v in row) for t, row in zip(t_ns, rows)]
-        self._imu_csv.write_row("\n".join(lines) + "\n")
+        self._imu_csv.write_row(euroc_imu_text(batch.t_s, batch.gyro_rad_s, batch.accel_m_s2))
         self.n_imu += len(batch)
 
     def write(self, event: Frame | ImuBatch) -> None:
@@ -131,9 +128,9 @@ class Recorder:
 
     def write_ground_truth(self, truth: GroundTruth) -> None:
         quat = Rotation.from_matrix(truth.R_wc).as_quat(canonical=True)
-        rows = (f"{float(t)!r} 0 0 0 " + " ".join(f"{q:.17g}" for q in row) + "\n" for t, row in zip(truth.t_s, quat))
+        rows = "".join(tum_trajectory_line(t, row, fmt=".17g") for t, row in zip(truth.t_s, quat))
         write_text_atomic(self.out / "groundtruth.txt", "# ground truth R_wc (camera OpenCV axes to world), positions "
-                          "unknown (0)\n# timestamp tx ty tz qx qy qz qw\n" + "".join(rows))
+                          f"unknown (0)\n# {TUM_TRAJECTORY_HEADER}\n" + rows)
         self._gravity_aligned = bool(truth.gravity_aligned)
 
     def close(self) -> None:

@@ -31,9 +31,10 @@ from pathlib import Path
 import numpy as np
 
 from uareme_fusion.errors import InputError
-from uareme_fusion.io.text_tables import is_text_file
 from uareme_fusion.io.paths import is_pipe, path_kind
+from uareme_fusion.io.text_tables import is_text_file
 
+from ..formats.tum import read_associations
 from .base import Source
 from .broad_source import BroadSource
 from .calibrated import with_intrinsics
@@ -44,7 +45,6 @@ from .imu_csv import ImuCsvSource, merge_imu
 from .intrinsics import parse_intrinsics
 from .simulated import SimulatedSource
 from .tum import TumSource
-from .tum_rgbd import read_associations
 from .video import VideoSource, parse_webcam
 
 BROAD_SUFFIXES = (".hdf5", ".h5")

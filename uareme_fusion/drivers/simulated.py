@@ -28,15 +28,16 @@ from collections.abc import Iterator
 import numpy as np
 
 from uareme_fusion.errors import InputError
-from uareme_fusion.sim.dataset import GT_KAPPA, SequenceOptions
+from uareme_fusion.formats.datasets import GT_KAPPA
 from uareme_fusion.sim.imu import ImuNoise, simulate_imu
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
+from uareme_fusion.sim.options import SequenceOptions
 from uareme_fusion.sim.render import Renderer, intrinsics_from_fov
 from uareme_fusion.sim.scenarios import SCENARIOS, build_scenario
 from uareme_fusion.sim.trajectory import Trajectory, make_trajectory
-from uareme_fusion.types import Frame, NormalMap
+from uareme_fusion.types import Frame, ImuBatch, NormalMap
 
-from .base import GroundTruth, ImuBatch, Source, SourceInfo
+from .base import GroundTruth, Source, SourceInfo
 from .interleave import interleave
 
 CHUNK_S = 2.0

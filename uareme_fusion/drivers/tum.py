@@ -20,8 +20,7 @@ What is read (built on `tum_rgbd.load_tum_rgbd` and `euroc_imu.read_euroc_imu`):
   undistorted with the published distortion and carry that K. `info.K_origin` says which.
 
 Clocks: frame times are the list's seconds; IMU batches keep the IMU clock
-(`info.imu_time_offset_s` is added to put them on the camera clock). scene.json's `time_offset_s`
-is "IMU clock minus camera clock", so `imu_time_offset_s = -time_offset_s`.
+(`info.imu_time_offset_s` from scene.json or source.json is added to put them on the camera clock).
 """
 
 from __future__ import annotations
@@ -35,13 +34,14 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from uareme_fusion.errors import InputError, SourceError
-from uareme_fusion.types import Frame, NormalMap
+from uareme_fusion.rotations import is_rotation
+from uareme_fusion.types import Frame, ImuBatch, NormalMap
 
-from .base import GroundTruth, ImuBatch, Source, SourceInfo
+from ..formats.tum import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
+from .base import GroundTruth, Source, SourceInfo
 from .imu_csv import non_increasing_note, read_imu_log
 from .interleave import interleave
 from .intrinsics import CameraModel, Undistorter, published_camera
-from .tum_rgbd import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
 
 SIM_META = "scene.json"
 RECORD_META = "source.json"
@@ -57,7 +57,7 @@ def _matrix(meta: dict, key: str, path: Path, rotation: bool = False) -> np.ndar
         M = None
     if M is None or M.shape != (3, 3) or not np.all(np.isfinite(M)):
         raise InputError(f"{path}: {key} must be a 3x3 matrix of numbers, got {meta[key]!r}")
-    if rotation and not (np.allclose(M @ M.T, np.eye(3), atol=1e-5) and np.linalg.det(M) > 0):
+    if rotation and not is_rotation(M, atol=1e-5):
         raise InputError(f"{path}: {key} must be a rotation matrix (orthonormal, det +1), got {M.tolist()}")
     return M
 
@@ -83,12 +83,11 @@ def read_metadata(root: Path) -> dict:
     else:
         return {}
     meta = read_json_object(path)
-    if name == SIM_META:
-        offset = -_number(meta, "time_offset_s", path, 0.0)
-        gravity_aligned = True
-    else:
-        offset = _number(meta, "imu_time_offset_s", path, 0.0)
-        gravity_aligned = bool(meta.get("gravity_aligned", False))
+    if name == SIM_META and "imu_time_offset_s" not in meta and meta.get("time_offset_s"):
+        raise InputError(f"{path}: time_offset_s is the old, opposite-sign key (IMU clock minus camera clock); "
+                         f"write imu_time_offset_s = {-float(meta['time_offset_s'])!r} instead, or simulate again")
+    offset = _number(meta, "imu_time_offset_s", path, 0.0)
+    gravity_aligned = True if name == SIM_META else bool(meta.get("gravity_aligned", False))
     return dict(path=path, K=_matrix(meta, "K", path), R_ci=_matrix(meta, "R_ci", path, rotation=True),
                 imu_time_offset_s=offset, depth_scale=_number(meta, "depth_scale", path, None, positive=True),
                 fps=_number(meta, "fps", path, None, positive=True), gravity_aligned=gravity_aligned)
@@ -198,11 +197,11 @@ class TumSource(Source):
             self.notes.append(f"{folder}: {missing} frames have no normals file (yielded without normals)")
         return found
 
-    def _normals(self, i: int, t: float) -> NormalMap | None:
+    def _normals(self, i: int, t_s: float) -> NormalMap | None:
         if self.normal_files is None or self.normal_files[i] is None:
             return None
         try:
-            return read_frame_normals(self.normal_files[i], t)
+            return read_frame_normals(self.normal_files[i], t_s)
         except InputError as exc:  # met mid-stream: the source fails there
             raise SourceError(str(exc)) from None
 

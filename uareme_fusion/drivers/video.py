@@ -24,6 +24,7 @@ import numpy as np
 from uareme_fusion.errors import InputError, SourceError
 from uareme_fusion.types import Frame
 
+from ..formats.images import to_rgb8
 from .base import Source, SourceInfo
 
 WEBCAM_PATTERN = re.compile(r"^webcam(?::(\d+))?$")
@@ -31,20 +32,6 @@ DEFAULT_FPS = 30.0
 """Frame rate assumed when the container does not state one."""
 WEBCAM_READ_RETRIES = 3
 """Consecutive failed reads after which a webcam counts as disconnected."""
-
-
-def to_rgb8(image: np.ndarray) -> np.ndarray:
-    """An OpenCV image (gray, BGR or BGRA; uint8 or uint16) as (H, W, 3) uint8 RGB."""
-    if image.dtype == np.uint16:
-        image = (image.astype(np.uint32) * 255 + 32767) // 65535  # full 16-bit range -> 0..255, rounded
-        image = image.astype(np.uint8)
-    elif image.dtype != np.uint8:
-        raise InputError(f"expected an 8- or 16-bit image, got dtype {image.dtype}")
-    if image.ndim == 2 or image.shape[2] == 1:
-        return cv2.cvtColor(image, cv2.COLOR_GRAY2RGB)
-    if image.shape[2] == 4:
-        return cv2.cvtColor(image, cv2.COLOR_BGRA2RGB)
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
 MAX_CAMERA_INDEX = 9999

@@ -26,31 +26,28 @@ frame) must pass |fy| here and convert their ground truth with `flip_y_rotation`
 from __future__ import annotations
 
 import dataclasses
-
 from dataclasses import dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
 
 from ..errors import ConfigError, InputError
-from ..io.images import read_image
+from ..formats.datasets import (  # noqa: F401
+    FLIP_Y,
+    ICL_NUIM_K_OPENCV,
+    ICL_NUIM_K_PUBLISHED,
+    ICSL_CORRIDOR_K,
+    flip_y_rotation,
+)
+from ..formats.depth_png import (  # noqa: F401
+    ICL_NUIM_DEPTH_UNIT_M,
+    MILLIMETRE_DEPTH_UNIT_M,
+    read_depth_png,
+)
 from ..types import Frame, NormalMap
 
-ICL_NUIM_DEPTH_UNIT_M = 1.0 / 5000.0
-"""ICL-NUIM and TUM RGB-D store depth PNGs in units of 1/5000 m."""
-MILLIMETRE_DEPTH_UNIT_M = 1e-3
-"""Asus Xtion / Kinect v2 / OAK / ICSL corridor depth PNGs are in millimetres."""
-
-ICL_NUIM_K_PUBLISHED = np.array([[481.20, 0.0, 319.50], [0.0, -480.00, 239.50], [0.0, 0.0, 1.0]])
-"""ICL-NUIM intrinsics as published: fy < 0 means the dataset's camera y axis points UP."""
-ICL_NUIM_K_OPENCV = np.array([[481.20, 0.0, 319.50], [0.0, 480.00, 239.50], [0.0, 0.0, 1.0]])
-"""The same pixels in the OpenCV camera frame (y down): fy = +480. Its rotations need `flip_y_rotation`."""
-ICSL_CORRIDOR_K = np.array([[537.60, 0.0, 316.15], [0.0, 539.03, 245.52], [0.0, 0.0, 1.0]])
-
-FLIP_Y = np.diag([1.0, -1.0, 1.0])
-"""The reflection between a y-up camera frame (negative published fy) and OpenCV's y-down frame."""
-
+# The dataset constants and `read_depth_png` live in `uareme_fusion.formats`; they are re-exported here
+# for scripts that import them from `uareme_fusion.normals.depth`.
 
 @dataclass(frozen=True)
 class DepthNormalsConfig:
@@ -131,40 +128,6 @@ def check_intrinsics(K, source: str = "depth map") -> tuple[float, float, float,
     if not (fx > 0 and fy > 0):
         raise InputError(f"{source}: K needs fx > 0 and fy > 0, got fx = {fx:g}, fy = {fy:g}")
     return float(fx), float(fy), float(cx), float(cy)
-
-
-def flip_y_rotation(R_wc_published: np.ndarray) -> np.ndarray:
-    """Camera-to-world rotations of a dataset with negative published fy, in the OpenCV camera frame.
-
-    A negative fy means the dataset's camera frame c' has y up: `p_c = FLIP_Y p_c'` with FLIP_Y =
-    diag(1, -1, 1), a reflection. `R_wc' @ FLIP_Y` has det -1, so the world must be reflected too:
-    we return `FLIP_Y @ R_wc' @ FLIP_Y` (..., 3, 3), a proper rotation from the OpenCV camera frame
-    to the dataset's world mirrored in its y axis. Any constant proper rotation of that world is
-    absorbed by the ARE alignment, and rotation errors keep their size.
-    """
-    return FLIP_Y @ np.asarray(R_wc_published, dtype=float) @ FLIP_Y
-
-
-def read_depth_png(path, unit_m: float, expected_shape: tuple[int, int] | None = None) -> np.ndarray:
-    """A 16-bit single-channel depth PNG as float32 metres (0 where missing).
-
-    `unit_m`: metres per stored unit (`ICL_NUIM_DEPTH_UNIT_M`, `MILLIMETRE_DEPTH_UNIT_M`).
-    Raises `InputError` naming the file for a missing or unreadable file, a wrong dtype or channel
-    count, or a size other than `expected_shape` (H, W).
-    """
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: depth image not found")
-    if not (np.isfinite(unit_m) and unit_m > 0):
-        raise InputError(f"{path}: depth unit must be > 0 metres, got {unit_m}")
-    raw = read_image(path, cv2.IMREAD_UNCHANGED, what="a 16-bit depth PNG")
-    if raw.ndim != 2:
-        raise InputError(f"{path}: expected a single-channel depth image, got shape {raw.shape}")
-    if raw.dtype != np.uint16:
-        raise InputError(f"{path}: expected 16-bit depth (uint16), got {raw.dtype}")
-    if expected_shape is not None and raw.shape != tuple(expected_shape):
-        raise InputError(f"{path}: expected depth of size {tuple(expected_shape)} (H, W), got {raw.shape}")
-    return raw.astype(np.float32) * np.float32(unit_m)
 
 
 def _offset_kernels(window_px: int) -> dict[int, np.ndarray]:

@@ -22,9 +22,9 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
+from ..formats.images import read_rgb
 from ..io.normal_maps import normals_to_rgb
 from ..io.safe_files import write_image_atomic, write_npz_atomic
-from ..pipeline.single_image import read_rgb
 from ..types import NormalMap
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")

@@ -7,25 +7,10 @@ homogeneous pixels: p ~ K @ r.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..errors import InputError
-
-DEFAULT_FOV_DEG = 60.0
-"""Horizontal field of view assumed when a source has no intrinsics (the paper's training FOV)."""
-
-
-def assumed_K(height: int, width: int, fov_deg: float = DEFAULT_FOV_DEG) -> np.ndarray:
-    """Intrinsics (3, 3) of a `width` x `height` pinhole camera with horizontal field of view
-    `fov_deg` over the full image width, square pixels and the principal point at the image centre."""
-    if not (isinstance(height, (int, np.integer)) and isinstance(width, (int, np.integer)) and height > 0 and width > 0):
-        raise InputError(f"Image size must be positive integers, got height={height!r}, width={width!r}")
-    if not (0.0 < float(fov_deg) < 180.0):
-        raise InputError(f"fov_deg must be in (0, 180) degrees, got {fov_deg}")
-    f_px = (width / 2.0) / math.tan(math.radians(fov_deg) / 2.0)
-    return np.array([[f_px, 0.0, (width - 1) / 2.0], [0.0, f_px, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+from ..pinhole import DEFAULT_FOV_DEG, assumed_K  # noqa: F401  (drawing code takes them from here)
 
 
 def check_K(K: np.ndarray, name: str = "K") -> np.ndarray:

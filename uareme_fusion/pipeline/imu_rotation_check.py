@@ -21,8 +21,9 @@ from collections.abc import Iterator
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..drivers.base import ImuBatch, Source
+from ..drivers.base import Source
 from ..drivers.extrinsics import axis_letters, convention_name
+from ..types import ImuBatch
 from .runner import FrameResult
 
 MAX_PAIRS = 3000
@@ -150,10 +151,10 @@ class ImuRotationCheck:
         dt = np.diff(edges)  # each sample holds over the interval before it
         return _compose_rotvecs(w[inside] * dt[:, None])
 
-    def _keep_imu_after(self, t: float) -> None:
+    def _keep_imu_after(self, t_s: float) -> None:
         if self._imu_t:
             t_all, w_all = np.concatenate(self._imu_t), np.concatenate(self._imu_w)
-            keep = t_all > t
+            keep = t_all > t_s
             self._imu_t, self._imu_w = [t_all[keep]], [w_all[keep]]
 
     def close(self) -> None:

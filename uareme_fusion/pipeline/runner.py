@@ -22,10 +22,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..backends.base import Backend
-from ..drivers.base import ImuBatch, Source
+from ..drivers.base import Source
 from ..errors import InputError, OutputError, SourceError
 from ..solver import solve_manhattan
-from ..types import Estimate, Estimates, Frame, NormalMap, Status, VisualRotation
+from ..types import Estimate, Estimates, Frame, ImuBatch, NormalMap, Status, VisualRotation
 from . import stop_signals
 
 STAGES = ("source", "normals", "solver", "backend", "sinks")

@@ -13,14 +13,13 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from ..drivers.base import SourceInfo
 from ..drivers.intrinsics import scaled_camera, undistorted_image
-from ..drivers.video import to_rgb8
 from ..errors import InputError
-from ..io.images import image_size, read_image, reduction_for
+from ..formats.images import read_rgb
+from ..io.images import image_size, reduction_for
 from ..lines.detect import LineSegments, SegmentDetector
 from ..overlay import side_by_side
 from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K, check_K
@@ -78,17 +77,6 @@ class ImageAnalysis:
 ANALYSIS_MAX_PIXELS = 4_000_000
 """Larger images are decoded at 1/2, 1/4 or 1/8 size for `analyse_image` (normals are estimated at
 far lower resolution; a 48-megapixel photo at full size needs 4 GB through the pipeline)."""
-
-
-def read_rgb(path: str | Path, max_pixels: int | None = None) -> np.ndarray:
-    """An image file as RGB uint8 (grayscale, RGBA and 16-bit converted as the image sources do);
-    decoded at reduced size when larger than `max_pixels` (`io.images.read_image`)."""
-    try:
-        return to_rgb8(read_image(path, cv2.IMREAD_UNCHANGED, max_pixels=max_pixels))
-    except InputError as exc:
-        if str(path) in str(exc):
-            raise
-        raise InputError(f"{path}: {exc}") from None
 
 
 def image_paths(inputs: list[str | Path]) -> list[Path]:

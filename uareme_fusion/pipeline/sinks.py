@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..formats.tum import TUM_ROW
 from ..io.safe_files import RowFile
 from ..rotations import quat_xyzw
 from ..types import Estimates, Status
@@ -43,8 +44,6 @@ def _quats_xyzw(R_wc: np.ndarray) -> np.ndarray:
     return quat_xyzw(R_wc[0])[None] if R_wc.shape[0] == 1 else quat_xyzw(R_wc, assume_valid=True)
 
 
-TUM_ROW = "%.9f 0 0 0 %.9f %.9f %.9f %.9f\n"
-"""One trajectory.tum row: time, position zeros, quaternion x y z w of `R_wc`."""
 
 
 class TumTrajectoryWriter:

@@ -163,8 +163,7 @@ def make_backend(cfg: RunConfig, info: SourceInfo) -> Backend:
     and time offset."""
     from ..evaluation.backend_factory import backend_kind, make_backend as make_named_backend
 
-    # SourceInfo adds its offset to IMU stamps to reach camera time; the EKF subtracts its own.
-    imu_geometry = {"R_ci": np.asarray(info.R_ci, float).tolist(), "imu_time_offset_s": -info.imu_time_offset_s}
+    imu_geometry = {"R_ci": np.asarray(info.R_ci, float).tolist(), "imu_time_offset_s": info.imu_time_offset_s}
     kind = backend_kind(cfg.backend, info.has_imu)
     overrides = cfg.mekf if kind.name == "mekf" else cfg.smoother
     preset = mekf_preset_for(cfg.mekf_preset, info)[0] if kind.name == "mekf" else None

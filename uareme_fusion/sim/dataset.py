@@ -27,7 +27,7 @@ import io
 import json
 import shutil
 import zipfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Callable
 
@@ -35,66 +35,18 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
+from ..formats.datasets import GT_KAPPA
+from ..formats.depth_png import TUM_DEPTH_SCALE, depth_png_units
+from ..formats.euroc import write_euroc_imu
+from ..formats.tum import TUM_TRAJECTORY_HEADER, tum_list_text, write_tum_table
 from ..io.safe_files import write_bytes_atomic, write_image_atomic, write_text_atomic
-from .imu import ImuNoise, simulate_imu
+from .imu import simulate_imu
+from .options import SequenceOptions
 from .render import Renderer, intrinsics_from_fov
 from .scenarios import SCENARIOS, build_scenario
 
-DEPTH_SCALE = 5000.0
+DEPTH_SCALE = TUM_DEPTH_SCALE
 """Depth PNG units per metre (TUM RGB-D / ICL-NUIM convention)."""
-GT_KAPPA = 100.0
-"""kappa written with ground-truth normals (the paper's cap)."""
-EUROC_IMU_HEADER = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
-                    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]")
-MAX_PIXELS = 4096 * 4096
-MAX_TIME_OFFSET_S = 1.0
-"""Largest IMU-camera clock offset the simulator writes, s."""
-
-
-@dataclass(frozen=True)
-class SequenceOptions:
-    """How much to simulate and how; units in the names."""
-
-    frames: int = 100
-    width: int = 320
-    height: int = 240
-    fps: float = 30.0
-    seed: int = 0
-    imu_rate_hz: float = 200.0
-    hfov_deg: float | None = None
-    """Horizontal field of view; None takes the scenario's."""
-    imu_noise: ImuNoise = field(default_factory=ImuNoise)
-    R_ci: tuple = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-    """Camera-from-IMU rotation (`v_c = R_ci @ v_i`)."""
-    time_offset_s: float = 0.0
-    """IMU clock minus camera clock, s (see `imu.simulate_imu`)."""
-
-    def validate(self) -> None:
-        """Raise InputError naming the option for impossible values."""
-        if self.frames < 1 or self.frames > 1_000_000:
-            raise InputError(f"--frames must be between 1 and 1000000, got {self.frames}")
-        if self.width < 8 or self.height < 8 or self.width * self.height > MAX_PIXELS:
-            raise InputError(f"--size must be at least 8x8 and at most 4096x4096 pixels, got "
-                             f"{self.width}x{self.height}")
-        if not 1.0 <= self.fps <= 1000.0:
-            raise InputError(f"--fps must be between 1 and 1000, got {self.fps}")
-        if not 100.0 <= self.imu_rate_hz <= 1000.0:
-            raise InputError(f"--imu-rate must be between 100 and 1000 Hz, got {self.imu_rate_hz}")
-        if self.hfov_deg is not None and not 45.0 <= self.hfov_deg <= 95.0:
-            raise InputError(f"--fov must be between 45 and 95 degrees, got {self.hfov_deg}")
-        if not 0 <= self.seed < 2**63:
-            raise InputError(f"--seed must be an integer >= 0, got {self.seed}")
-        if not abs(self.time_offset_s) <= MAX_TIME_OFFSET_S:
-            raise InputError(f"time_offset_s must be within +-{MAX_TIME_OFFSET_S:g} s, got {self.time_offset_s}")
-        R_ci = np.asarray(self.R_ci, dtype=float) if np.shape(self.R_ci) == (3, 3) else None
-        if (R_ci is None or not np.all(np.isfinite(R_ci)) or not np.allclose(R_ci.T @ R_ci, np.eye(3), atol=1e-6)
-                or np.linalg.det(R_ci) <= 0):
-            raise InputError(f"R_ci must be a 3x3 rotation matrix (orthonormal, det +1), got {self.R_ci}")
-        noise = self.imu_noise.as_dict()
-        bad = [k for k, v in noise.items() if not np.all(np.isfinite(v)) or (np.ndim(v) == 0 and v < 0)
-               or np.shape(v) not in ((), (3,))]
-        if bad:
-            raise InputError(f"imu_noise: {', '.join(bad)} must be finite (densities >= 0, biases 3-vectors)")
 
 
 def _save_npz(path: Path, **arrays) -> None:
@@ -108,22 +60,6 @@ def _save_npz(path: Path, **arrays) -> None:
             info.compress_type = zipfile.ZIP_DEFLATED
             zf.writestr(info, buf.getvalue())
     write_bytes_atomic(path, archive.getvalue())
-
-
-def _write_table(path: Path, header: str, t_s: np.ndarray, columns: np.ndarray, fmt: str) -> None:
-    rows = np.column_stack([t_s, columns])
-    text = io.StringIO()
-    np.savetxt(text, rows, fmt=fmt, header=header, comments="# ")
-    write_text_atomic(path, text.getvalue())
-
-
-def _write_euroc_imu(path: Path, t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray):
-    t_ns = np.rint(t_s * 1e9).astype(np.int64)
-    data = np.column_stack([t_ns.astype(np.float64), gyro_rad_s, accel_m_s2])
-    text = io.StringIO(newline="")
-    text.write(EUROC_IMU_HEADER + "\n")
-    np.savetxt(text, data, fmt=["%d"] + ["%.10f"] * 6, delimiter=",")
-    write_text_atomic(path, text.getvalue())
 
 
 def prepare_out_dir(out_dir: Path, force: bool) -> None:
@@ -174,7 +110,7 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
             subs = t + np.linspace(-0.5, 0.5, 5) * spec.motion_blur_exposure_s
             radiance = np.mean([world.render_radiance(renderer, ts)[0] for ts in subs], axis=0)
         rgb = Renderer.to_uint8(radiance, gains[i], spec.noise_std_dn, rng)
-        depth_png = np.clip(np.rint(depth * DEPTH_SCALE), 0, 65535).astype(np.uint16)
+        depth_png = depth_png_units(depth, DEPTH_SCALE)[0]
         if dropped[i]:
             rgb[:] = 0
             depth_png[:] = 0
@@ -190,24 +126,24 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
 
     sample = world.trajectory.sample(t_frames)
     quat = Rotation.from_matrix(sample.R_wc).as_quat(canonical=True)
-    _write_table(out / "groundtruth.txt", "ground truth trajectory (R_wc: camera OpenCV axes to world z up)"
-                 "\ntimestamp tx ty tz qx qy qz qw", t_frames, np.column_stack([sample.p_w, quat]),
+    write_tum_table(out / "groundtruth.txt", "ground truth trajectory (R_wc: camera OpenCV axes to world z up)"
+                    "\n" + TUM_TRAJECTORY_HEADER, t_frames, np.column_stack([sample.p_w, quat]),
                  "%.6f")
     for kind in ("rgb", "depth"):
-        write_text_atomic(out / f"{kind}.txt", f"# {kind} images (simulated, scenario {scenario}, seed "
-                          f"{options.seed})\n# timestamp filename\n" + "".join(f"{s} {kind}/{s}.png\n" for s in stamps))
+        write_text_atomic(out / f"{kind}.txt", tum_list_text(f"{kind} images (simulated, scenario {scenario}, seed "
+                                                             f"{options.seed})", stamps, [f"{kind}/{s}.png" for s in stamps]))
     R_ci = np.asarray(options.R_ci, float)
     t_imu, gyro, accel = simulate_imu(world.trajectory, options.imu_rate_hz, options.imu_noise,
-                                      seed=options.seed, R_ci=R_ci, time_offset_s=options.time_offset_s)
-    _write_table(out / "accelerometer.txt", "accelerometer data (specific force in the IMU frame, m/s^2)"
+                                      seed=options.seed, R_ci=R_ci, imu_time_offset_s=options.imu_time_offset_s)
+    write_tum_table(out / "accelerometer.txt", "accelerometer data (specific force in the IMU frame, m/s^2)"
                  "\ntimestamp ax ay az", t_imu, accel, "%.9f")
-    _write_euroc_imu(out / "imu0" / "data.csv", t_imu, gyro, accel)
+    write_euroc_imu(out / "imu0" / "data.csv", t_imu, gyro, accel)
 
     summary = dict(
         scenario=scenario, seed=options.seed, frames=options.frames, fps=options.fps,
         width=options.width, height=options.height, hfov_deg=hfov, K=K.tolist(),
         depth_scale=DEPTH_SCALE, gt_kappa=GT_KAPPA, imu_rate_hz=options.imu_rate_hz,
-        imu_noise=options.imu_noise.as_dict(), R_ci=R_ci.tolist(), time_offset_s=options.time_offset_s,
+        imu_noise=options.imu_noise.as_dict(), R_ci=R_ci.tolist(), imu_time_offset_s=options.imu_time_offset_s,
         spec=asdict(spec), dropped_frames=np.flatnonzero(dropped).tolist(),
         exposure_gains=[round(float(g), 6) for g in gains],
         trajectory=world.trajectory.params, scene=world.scene.as_dict(),
@@ -215,7 +151,7 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
         R_wm_quat_xyzw=Rotation.from_matrix(np.stack(R_wm_all)).as_quat(canonical=True).round(9).tolist(),
         conventions=("R_wc maps camera (OpenCV x right, y down, z forward) to world (z up); "
                      "quaternions x y z w; accel is specific force (+9.81 up at rest); "
-                     "IMU stamp t measures camera time t - time_offset_s; v_c = R_ci v_i"),
+                     "IMU stamp t measures camera time t + imu_time_offset_s; v_c = R_ci v_i"),
     )
     write_text_atomic(out / "scene.json", json.dumps(summary, indent=1, sort_keys=True, default=float))
     return summary

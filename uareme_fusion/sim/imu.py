@@ -4,7 +4,7 @@ Public API::
 
     noise = ImuNoise(gyro_noise_rad_s_sqrt_hz=1.7e-4, ...)     # or ImuNoise.noiseless()
     t_s, gyro_rad_s, accel_m_s2 = simulate_imu(traj, rate_hz=200.0, noise=noise, seed=0,
-                                              R_ci=np.eye(3), time_offset_s=0.0)
+                                              R_ci=np.eye(3), imu_time_offset_s=0.0)
 
 Conventions (DESIGN.md):
 - IMU frame `i`; `R_ci` (3, 3) maps IMU coordinates to camera coordinates (`v_c = R_ci @ v_i`).
@@ -12,9 +12,9 @@ Conventions (DESIGN.md):
 - `gyro_rad_s` (N, 3): angular velocity in `i`, `omega_i = R_ci^T omega_c`, plus bias and noise.
 - `accel_m_s2` (N, 3): specific force in `i`, `f_i = R_ci^T R_wc^T (a_w - g_w)` with
   `g_w = (0, 0, -9.81)`, plus bias and noise: at rest it reads +9.81 m/s^2 along up.
-- Time offset: the IMU clock runs `time_offset_s` ahead of the camera clock. A sample stamped
-  `t_s` (IMU clock, the returned times) measures the motion at camera time `t_s - time_offset_s`.
-  Samples are stamped `k / rate_hz` for every k with `t_s - time_offset_s` inside
+- Time offset: `t_cam = t_imu + imu_time_offset_s` (as `SourceInfo`). A sample stamped `t_s` (IMU
+  clock, the returned times) measures the motion at camera time `t_s + imu_time_offset_s`.
+  Samples are stamped `k / rate_hz` for every k with `t_s + imu_time_offset_s` inside
   [0, duration_s] of the trajectory.
 - Noise: white noise of density `*_noise_*_sqrt_hz` becomes a per-sample standard deviation of
   `density * sqrt(rate_hz)`; biases start at `*_bias_init` and follow a random walk of density
@@ -30,6 +30,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..rotations import is_rotation
 from .trajectory import Trajectory
 
 GRAVITY_W_M_S2 = np.array([0.0, 0.0, -9.81])
@@ -83,7 +84,7 @@ def simulate_imu(
     noise: ImuNoise | None = None,
     seed: int = 0,
     R_ci: np.ndarray | None = None,
-    time_offset_s: float = 0.0,
+    imu_time_offset_s: float = 0.0,
     return_bias: bool = False,
 ):
     """Simulated IMU readings `(t_s, gyro_rad_s, accel_m_s2)` over the trajectory; see module doc.
@@ -95,13 +96,13 @@ def simulate_imu(
     if not np.isfinite(rate_hz) or not 1.0 <= rate_hz <= 10000.0:
         raise InputError(f"IMU rate_hz must be within [1, 10000] Hz, got {rate_hz}")
     R_ci = np.eye(3) if R_ci is None else np.asarray(R_ci, float)
-    if R_ci.shape != (3, 3) or not np.allclose(R_ci.T @ R_ci, np.eye(3), atol=1e-6):
+    if R_ci.shape != (3, 3) or not is_rotation(R_ci):
         raise InputError(f"R_ci must be a (3, 3) rotation matrix, got shape {R_ci.shape}")
     noise = ImuNoise() if noise is None else noise
-    k0 = int(np.ceil(time_offset_s * rate_hz - 1e-9))
-    k1 = int(np.floor((traj.duration_s + time_offset_s) * rate_hz + 1e-9))
+    k0 = int(np.ceil(-imu_time_offset_s * rate_hz - 1e-9))
+    k1 = int(np.floor((traj.duration_s - imu_time_offset_s) * rate_hz + 1e-9))
     t_s = np.arange(k0, k1 + 1) / rate_hz
-    gyro, accel = ideal_imu(traj, t_s - time_offset_s, R_ci)
+    gyro, accel = ideal_imu(traj, t_s + imu_time_offset_s, R_ci)
     rng = np.random.default_rng(seed)
     n = t_s.size
     gyro_bias = _bias_walk(rng, n, noise.gyro_bias_init_rad_s, noise.gyro_bias_rw_rad_s2_sqrt_hz,

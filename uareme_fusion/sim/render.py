@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..pinhole import intrinsics_from_fov as pinhole_from_fov
 from .scenes import Scene, Shape
 
 NEAR_M = 0.05
@@ -41,12 +42,8 @@ _UNIT_CUBE_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z
 
 
 def intrinsics_from_fov(width: int, height: int, hfov_deg: float) -> np.ndarray:
-    """Pinhole K (3, 3) in pixels with square pixels, principal point at the image centre and the
-    given horizontal field of view in degrees."""
-    if not FOV_RANGE_DEG[0] <= hfov_deg <= FOV_RANGE_DEG[1]:
-        raise InputError(f"field of view must be within {FOV_RANGE_DEG} degrees, got {hfov_deg}")
-    f = 0.5 * width / np.tan(np.radians(hfov_deg) / 2.0)
-    return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+    """`pinhole.intrinsics_from_fov` within the simulator's `FOV_RANGE_DEG`."""
+    return pinhole_from_fov(width, height, hfov_deg, FOV_RANGE_DEG)
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,7 @@ from scipy.interpolate import CubicHermiteSpline
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
+from .signals import Signal, const_signal, random_sines
 
 # Camera mounted looking along body x (forward), image x right = body -y, image y down = body -z.
 R_BC_FORWARD = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -56,69 +57,6 @@ R_BC_FORWARD = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 EYE_HEIGHT_M = 1.5
 """Camera height of handheld trajectories above the floor (z = 0), metres."""
-
-
-# --------------------------------------------------------------------------------------------
-# Scalar signals with analytic derivatives
-# --------------------------------------------------------------------------------------------
-
-
-def _ramp(t: np.ndarray, t0: float, duration: float, order: int) -> tuple[np.ndarray, ...]:
-    """Raised-cosine step from 0 to 1 over [t0, t0 + duration], or (order=1) its time integral.
-
-    Returns (value, first derivative, second derivative) in units of 1/s^k.
-    """
-    u = np.clip((t - t0) / duration, 0.0, 1.0)
-    inside = (t > t0) & (t < t0 + duration)
-    s = 0.5 * (1.0 - np.cos(np.pi * u))
-    ds = np.where(inside, 0.5 * np.pi / duration * np.sin(np.pi * u), 0.0)
-    dds = np.where(inside, 0.5 * (np.pi / duration) ** 2 * np.cos(np.pi * u), 0.0)
-    if order == 0:
-        return s, ds, dds
-    # Integral of s from t0 to t: T (u/2 - sin(pi u) / (2 pi)) inside, t - t0 - T/2 after.
-    integral = duration * (u / 2.0 - np.sin(np.pi * u) / (2.0 * np.pi))
-    integral = np.where(t >= t0 + duration, t - t0 - duration / 2.0, integral)
-    return integral, s, ds
-
-
-@dataclass(frozen=True)
-class Signal:
-    """A smooth scalar function of time with analytic derivatives.
-
-    value(t) = sum_k c_k t^k + sum_j A_j sin(w_j t + phi_j) + sum_r h_r ramp_r(t), where each ramp
-    is a raised-cosine step (order 0) or its integral (order 1) starting at t0 and lasting T.
-    Units are whatever the caller gives (rad for angles, m for positions, m/s for speeds).
-    """
-
-    poly: tuple[float, ...] = (0.0,)
-    sines: tuple[tuple[float, float, float], ...] = ()
-    """(amplitude, angular frequency rad/s, phase rad) triples."""
-    ramps: tuple[tuple[float, float, float, int], ...] = ()
-    """(height, t0 s, duration s, order) quadruples."""
-
-    def __call__(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(value, d/dt, d^2/dt^2) at times `t_s` (any shape)."""
-        t = np.asarray(t_s, dtype=float)
-        p = np.polynomial.Polynomial(self.poly)
-        v, d1, d2 = p(t), p.deriv(1)(t), p.deriv(2)(t)
-        for amp, w, phi in self.sines:
-            arg = w * t + phi
-            v = v + amp * np.sin(arg)
-            d1 = d1 + amp * w * np.cos(arg)
-            d2 = d2 - amp * w * w * np.sin(arg)
-        for height, t0, dur, order in self.ramps:
-            r0, r1, r2 = _ramp(t, t0, dur, order)
-            v, d1, d2 = v + height * r0, d1 + height * r1, d2 + height * r2
-        return v, d1, d2
-
-
-def _random_sines(rng: np.random.Generator, n: int, amp: float, f_lo_hz: float, f_hi_hz: float):
-    """n sinusoids of total amplitude <= amp with random frequencies and phases."""
-    amps = rng.uniform(0.5, 1.0, n)
-    amps *= amp / amps.sum()
-    freqs = 2 * np.pi * rng.uniform(f_lo_hz, f_hi_hz, n)
-    phases = rng.uniform(0, 2 * np.pi, n)
-    return tuple((float(a), float(w), float(p)) for a, w, p in zip(amps, freqs, phases))
 
 
 # --------------------------------------------------------------------------------------------
@@ -252,28 +190,24 @@ def _vehicle_position(speed: Signal, yaw: Signal, height_m: float, t_end_s: floa
 # --------------------------------------------------------------------------------------------
 
 
-def _const(value: float) -> Signal:
-    return Signal(poly=(float(value),))
-
-
 def _handheld(name: str, duration_s: float, rng: np.random.Generator, **kw) -> Trajectory:
     yaw0 = float(rng.uniform(-np.pi, np.pi))
     if name == "static":
         pitch0 = float(np.radians(rng.uniform(-15, 15)))
         roll0 = float(np.radians(rng.uniform(-10, 10)))
-        pos = _signal_position(_const(0.0), _const(0.0), _const(EYE_HEIGHT_M))
+        pos = _signal_position(const_signal(0.0), const_signal(0.0), const_signal(EYE_HEIGHT_M))
         params = dict(yaw0_rad=yaw0, pitch0_rad=pitch0, roll0_rad=roll0)
-        return Trajectory(name, duration_s, _const(yaw0), _const(pitch0), _const(roll0), pos,
+        return Trajectory(name, duration_s, const_signal(yaw0), const_signal(pitch0), const_signal(roll0), pos,
                           params=params)
     if name in ("pan", "tilt", "roll"):
         amp = np.radians(float(kw.get("amplitude_deg", {"pan": 60, "tilt": 30, "roll": 40}[name])))
         period = float(kw.get("period_s", rng.uniform(4.0, 8.0)))
         sweep = Signal(sines=((float(amp), 2 * np.pi / period, float(rng.uniform(0, 2 * np.pi))),))
-        jitter = lambda: Signal(sines=_random_sines(rng, 2, np.radians(1.5), 0.1, 0.5))  # noqa: E731
+        jitter = lambda: Signal(sines=random_sines(rng, 2, np.radians(1.5), 0.1, 0.5))  # noqa: E731
         yaw = Signal(poly=(yaw0,), sines=sweep.sines if name == "pan" else jitter().sines)
         pitch = sweep if name == "tilt" else jitter()
         roll = sweep if name == "roll" else jitter()
-        pos = _signal_position(*(Signal(poly=(c,), sines=_random_sines(rng, 2, 0.02, 0.2, 1.0))
+        pos = _signal_position(*(Signal(poly=(c,), sines=random_sines(rng, 2, 0.02, 0.2, 1.0))
                                  for c in (0.0, 0.0, EYE_HEIGHT_M)))
         params = dict(amplitude_rad=float(amp), period_s=period, yaw0_rad=yaw0)
         return Trajectory(name, duration_s, yaw, pitch, roll, pos, params=params)
@@ -282,13 +216,13 @@ def _handheld(name: str, duration_s: float, rng: np.random.Generator, **kw) -> T
         # Amplitude per axis so that sum_j A_j w_j stays near max_rate (about 3 rad/s rms).
         sines = []
         for _ in range(3):
-            s = _random_sines(rng, 3, 1.0, 2.0, 6.0)
+            s = random_sines(rng, 3, 1.0, 2.0, 6.0)
             scale = max_rate / sum(a * w for a, w, _ in s)
             sines.append(tuple((a * scale, w, p) for a, w, p in s))
-        yaw = Signal(poly=(yaw0,), sines=sines[0] + _random_sines(rng, 1, 0.3, 0.05, 0.1))
+        yaw = Signal(poly=(yaw0,), sines=sines[0] + random_sines(rng, 1, 0.3, 0.05, 0.1))
         pitch = Signal(sines=sines[1])
         roll = Signal(sines=sines[2])
-        pos = _signal_position(*(Signal(poly=(c,), sines=_random_sines(rng, 3, 0.01, 2.0, 6.0))
+        pos = _signal_position(*(Signal(poly=(c,), sines=random_sines(rng, 3, 0.01, 2.0, 6.0))
                                  for c in (0.0, 0.0, EYE_HEIGHT_M)))
         return Trajectory(name, duration_s, yaw, pitch, roll, pos,
                           params=dict(max_rate_rad_s=max_rate, yaw0_rad=yaw0))
@@ -302,11 +236,11 @@ def _handheld(name: str, duration_s: float, rng: np.random.Generator, **kw) -> T
         y = Signal(sines=((radius, w, ph),))
         z = Signal(poly=(EYE_HEIGHT_M,), sines=((0.02, 2 * np.pi * step_hz, 0.0),))
         # Facing roughly along the direction of travel, plus looking around.
-        yaw = Signal(poly=(ph + np.pi, w), sines=_random_sines(rng, 3, np.radians(35), 0.05, 0.3))
+        yaw = Signal(poly=(ph + np.pi, w), sines=random_sines(rng, 3, np.radians(35), 0.05, 0.3))
         pitch = Signal(poly=(float(np.radians(rng.uniform(-5, 10))),),
-                       sines=_random_sines(rng, 3, np.radians(12), 0.05, 0.4)
+                       sines=random_sines(rng, 3, np.radians(12), 0.05, 0.4)
                        + ((np.radians(0.8), 2 * np.pi * step_hz, 0.3),))
-        roll = Signal(sines=_random_sines(rng, 3, np.radians(6), 0.05, 0.4)
+        roll = Signal(sines=random_sines(rng, 3, np.radians(6), 0.05, 0.4)
                       + ((np.radians(1.0), np.pi * step_hz, 0.0),))
         pos = _signal_position(x, y, z)
         return Trajectory(name, duration_s, yaw, pitch, roll, pos,
@@ -316,12 +250,12 @@ def _handheld(name: str, duration_s: float, rng: np.random.Generator, **kw) -> T
         start_x = float(kw.get("start_x_m", 0.0))
         step_hz = float(rng.uniform(1.6, 2.0))
         x = Signal(poly=(start_x, speed), sines=((0.01, 2 * np.pi * step_hz, 0.0),))
-        y = Signal(sines=_random_sines(rng, 2, 0.2, 0.02, 0.1)
+        y = Signal(sines=random_sines(rng, 2, 0.2, 0.02, 0.1)
                    + ((0.03, np.pi * step_hz, 0.0),))
         z = Signal(poly=(EYE_HEIGHT_M,), sines=((0.02, 2 * np.pi * step_hz, 0.0),))
-        yaw = Signal(sines=_random_sines(rng, 3, np.radians(30), 0.05, 0.3))
-        pitch = Signal(sines=_random_sines(rng, 3, np.radians(10), 0.05, 0.4))
-        roll = Signal(sines=_random_sines(rng, 3, np.radians(5), 0.05, 0.4))
+        yaw = Signal(sines=random_sines(rng, 3, np.radians(30), 0.05, 0.3))
+        pitch = Signal(sines=random_sines(rng, 3, np.radians(10), 0.05, 0.4))
+        roll = Signal(sines=random_sines(rng, 3, np.radians(5), 0.05, 0.4))
         return Trajectory(name, duration_s, yaw, pitch, roll, _signal_position(x, y, z),
                           params=dict(speed_m_s=speed, start_x_m=start_x, step_hz=step_hz))
     raise AssertionError(name)
@@ -387,8 +321,8 @@ def _bus(duration_s: float, rng: np.random.Generator, **kw) -> Trajectory:
     speed = Signal(ramps=tuple(speed_ramps))
     yaw = Signal(poly=(yaw0,), ramps=tuple(yaw_steps) + tuple(rate_ramps))
     sway_rad = np.radians(float(kw.get("sway_deg", 1.2)))
-    pitch = Signal(sines=_random_sines(rng, 3, sway_rad, 0.3, 1.5))
-    roll = Signal(sines=_random_sines(rng, 3, sway_rad, 0.3, 1.5))
+    pitch = Signal(sines=random_sines(rng, 3, sway_rad, 0.3, 1.5))
+    roll = Signal(sines=random_sines(rng, 3, sway_rad, 0.3, 1.5))
     height = float(kw.get("camera_height_m", 1.6))
     # Camera mount in the bus: looking mostly forward, yawed and pitched down a little.
     mount_yaw = float(np.radians(rng.uniform(-30, 30)))

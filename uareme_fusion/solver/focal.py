@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lines.detect import LineSegments
-from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
+from ..pinhole import DEFAULT_FOV_DEG, assumed_K
 from ..rotations import log_so3
 from ..types import NormalMap, VisualRotation
 from .joint import JointSolver

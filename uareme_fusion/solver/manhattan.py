@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
-from ..rotations import nearest_symmetric
+from ..rotations import R_CM_UPRIGHT, is_rotation, nearest_symmetric
 from ..types import NormalMap, VisualRotation
 from .levenberg import levenberg_marquardt_so3
 from .moments import NormalMoments, normal_moments
@@ -23,9 +23,6 @@ from .quartic import gradient_hessian, normalised_cost
 RANDOM_NORMALS_COST = 0.4
 """Expected normalised cost of isotropic random normals: 1 - 3 E[c^4] = 1 - 3/5."""
 
-R_CM_UPRIGHT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-"""Labelling used when there is no prior: m's x is nearest camera right, m's z nearest image up
-(-y in OpenCV), so that `R_wc = R_cm^T` is z-up for an upright camera."""
 
 
 @dataclass(frozen=True)
@@ -162,7 +159,7 @@ def _check_rotation(R) -> np.ndarray:
     R = np.asarray(R, dtype=float)
     if R.shape != (3, 3) or not np.all(np.isfinite(R)):
         raise InputError(f"Expected R_init as a finite (3, 3) rotation matrix, got shape {R.shape}")
-    if not np.allclose(R.T @ R, np.eye(3), atol=1e-5) or np.linalg.det(R) <= 0:
+    if not is_rotation(R, atol=1e-5):
         raise InputError("Expected R_init to be a rotation matrix (orthonormal, det +1)")
     return R
 

@@ -19,7 +19,7 @@ See DESIGN.md "Backends: mekf". Conventions:
   frame labelled with its z the axis nearest image up (`R_wm = I`).
 - Visual measurement: `R_cm = R_wc^T R_wm`, covariance from the solver; Manhattan labelling resolved
   against the prediction. The IMU: `omega_c = R_ci (gyro_i - b_i)`, `accel_c = R_ci accel_i`; an
-  IMU sample stamped `t` measures the camera time `t - imu_time_offset_s`.
+  IMU sample stamped `t` measures the camera time `t + imu_time_offset_s`.
 - Updates: gyro samples are integrated in one chunk per frame (or per accelerometer period in a long
   batch); the accelerometer updates once per `accel_update_period_s`, and an update that falls due
   at a frame is stacked into that frame's visual update (one filterpy update, same state time). With

@@ -8,7 +8,10 @@ from __future__ import annotations
 import enum
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field, field_validator
+
+from ...rotations import is_rotation
+from ..imu_noise import GyroNoiseConfig
 
 
 class MekfMode(str, enum.Enum):
@@ -29,18 +32,14 @@ class GyroSampling(str, enum.Enum):
     INTERVAL = "interval"
 
 
-class MekfConfig(BaseModel):
-    """Noise model and robustness settings of `Mekf`; SI units and radians, unit in every name."""
+class MekfConfig(GyroNoiseConfig):
+    """Noise model and robustness settings of `Mekf`; SI units and radians, unit in every name. The
+    gyro noise fields (`gyro_noise_rad_s_sqrt_hz`, `gyro_bias_rw_rad_s2_sqrt_hz`,
+    `gyro_bias_initial_std_rad_s`) come from `GyroNoiseConfig`, shared with the smoother."""
 
     model_config = ConfigDict(extra="forbid")
 
     mode: MekfMode = MekfMode.AUTO
-    gyro_noise_rad_s_sqrt_hz: float = Field(2e-3, ge=1e-9, le=1.0)
-    """Gyro white-noise density (angle random walk), rad/s/sqrt(Hz)."""
-    gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-4, ge=0, le=1.0)
-    """Gyro bias random-walk density, rad/s^2/sqrt(Hz)."""
-    gyro_bias_initial_std_rad_s: float = Field(0.01, ge=0, le=10.0)
-    """Prior standard deviation of each gyro bias component, rad/s."""
     gyro_rate_noise_sqrt_s: float = Field(0.0, ge=0, le=1.0)
     """Relative gyro error (scale factor, axis misalignment, timing) as a white-noise density, sqrt(s):
     the attitude variance grows by `(this * |omega|)^2` per second of rotation at `|omega|` (0 = off),
@@ -112,7 +111,7 @@ class MekfConfig(BaseModel):
     R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
     """Camera-from-IMU rotation (`v_c = R_ci v_i`), 3x3 row-major."""
     imu_time_offset_s: float = Field(0.0, ge=-3600.0, le=3600.0)
-    """The IMU clock runs this far ahead of the camera clock, s."""
+    """Camera clock minus IMU clock, s: `t_cam = t_imu + imu_time_offset_s` (as `SourceInfo`)."""
     gravity_m_s2: float = Field(9.81, ge=1.0, le=100.0)
     """Magnitude of gravity, m/s^2."""
     record_imu_estimates: bool = False
@@ -124,8 +123,7 @@ class MekfConfig(BaseModel):
     @field_validator("R_ci")
     @classmethod
     def _rotation(cls, value):
-        R = np.asarray(value, float)
-        if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) <= 0:
+        if not is_rotation(value):
             raise ValueError(f"must be a 3x3 rotation matrix, got {value}")
         return value
 

@@ -14,9 +14,9 @@ from filterpy.kalman import update as kf_update
 
 from ...config import load_config, preset_names
 from ...errors import InputError
-from ...types import Estimate, Estimates, Status, VisualRotation
+from ...types import Estimate, Estimates, ImuBatch, Status, VisualRotation
 from ..base import Backend
-from ..imu_stream import ImuBatch, ImuStream
+from ..imu_stream import ImuStream
 from .accel import AccelPeriod
 from .compiled import KERNEL, accel_update_compiled
 from .config import GyroSampling, MekfConfig, MekfMode
@@ -129,7 +129,7 @@ class Mekf(Backend):
             self.counters["imu_ignored"] += int(np.size(t_s))
             return
         if self.config.imu_time_offset_s:
-            t_s = np.asarray(t_s, float) - self.config.imu_time_offset_s
+            t_s = np.asarray(t_s, float) + self.config.imu_time_offset_s
         stream = self.stream
         stream.add(t_s, gyro_rad_s, accel_m_s2)
         # Samples wait in the reorder buffer; a frame's `propagate_to` releases them, or, in an

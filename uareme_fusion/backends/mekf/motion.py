@@ -15,10 +15,8 @@ import numpy as np
 from filterpy.kalman import predict as kf_predict
 from scipy.spatial.transform import Rotation
 
-from ...rotations import WORLD_UP
-from ...solver.manhattan import R_CM_UPRIGHT
-from ...types import Status, VisualRotation
-from ..imu_stream import COLUMNS, ImuBatch
+from ...rotations import R_CM_UPRIGHT, WORLD_UP
+from ...types import IMU_COLUMNS as COLUMNS, ImuBatch, Status, VisualRotation, visual_R_wc_covariance
 from .accel import PERIOD_TOLERANCE_S, chunk_bounds, tilt_direction
 from .compiled import compiled_path_applies, integrate_compiled
 from .config import MekfMode
@@ -65,7 +63,7 @@ class ConstantRateMotion:
 
     def _restart(self, filt, visual: VisualRotation) -> None:
         filt.P = np.zeros((N_STATE, N_STATE))
-        filt.P[TH, TH] = visual.R_cm @ visual.cov @ visual.R_cm.T
+        filt.P[TH, TH] = visual_R_wc_covariance(visual)
         filt.P[RATE, RATE] = filt.config.rate_initial_std_rad_s**2 * I3
         filt.omega_c = np.zeros(3)
         filt.rejections = 0
@@ -103,7 +101,7 @@ class GyroMotion:
         if len(batches) == 1:
             batch = batches[0]
         else:
-            batch = ImuBatch(np.concatenate([b.rows for b in batches]) if batches else _NO_ROWS)
+            batch = ImuBatch.from_rows(np.concatenate([b.rows for b in batches]) if batches else _NO_ROWS)
         t, gyro_i, accel_i, saturated = batch.t_s, batch.gyro_rad_s, batch.accel_m_s2, batch.saturated
         R_ci = filt.R_ci
         gyro_c, accel_c = (gyro_i, accel_i) if filt.imu_is_camera else (gyro_i @ R_ci.T, accel_i @ R_ci.T)
@@ -230,8 +228,8 @@ class GyroMotion:
         """Tilt from the mean of the first `init_accel_window_s` of accelerometer samples; yaw is the
         gauge (variance 0). Returns the samples still to integrate."""
         cfg = filt.config
-        filt.init_samples.append(ImuBatch.of(t, gyro_c, accel_c, saturated))
-        held = ImuBatch(np.concatenate([b.rows for b in filt.init_samples]))
+        filt.init_samples.append(ImuBatch(t, gyro_c, accel_c, saturated))
+        held = ImuBatch.from_rows(np.concatenate([b.rows for b in filt.init_samples]))
         t_all = held.t_s
         if t_all[-1] - t_all[0] < cfg.init_accel_window_s and not force:
             return t[:0], gyro_c[:0], accel_c[:0], saturated[:0]

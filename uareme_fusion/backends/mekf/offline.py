@@ -92,7 +92,7 @@ class OfflineImu(Backend):
     name = "mekf-offline"
 
     def __init__(self, config: MekfConfig, t_s, gyro_rad_s, accel_m_s2):
-        t = np.asarray(t_s, float) - config.imu_time_offset_s
+        t = np.asarray(t_s, float) + config.imu_time_offset_s
         self.t_s, self.R_wc, self.cov = forward_backward_imu(
             config.model_copy(update={"imu_time_offset_s": 0.0}), t, gyro_rad_s, accel_m_s2, with_cov=True)
 

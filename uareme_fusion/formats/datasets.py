@@ -1,0 +1,47 @@
+"""Published camera intrinsics of the datasets this project reads, and their frame conventions.
+
+All matrices are (3, 3) pinhole K in pixels for 640x480 images; distortion in OpenCV's radtan order
+(k1, k2, p1, p2, k3), empty for none. ICL-NUIM publishes fy = -480 for a camera frame with y up;
+`ICL_NUIM_K_OPENCV` holds the same pixels in OpenCV's y-down frame (fy = +480), and ground-truth
+rotations need `flip_y_rotation` to match it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..pinhole import pinhole
+
+
+ICL_NUIM_K_PUBLISHED = pinhole(481.20, -480.00, 319.50, 239.50)
+"""ICL-NUIM intrinsics as published: fy < 0 means the dataset's camera y axis points UP."""
+ICL_NUIM_K_OPENCV = pinhole(481.20, 480.00, 319.50, 239.50)
+"""The same pixels in the OpenCV camera frame (y down): fy = +480. Its rotations need `flip_y_rotation`."""
+ICSL_CORRIDOR_K = pinhole(537.60, 539.03, 316.15, 245.52)
+"""ICSL corridor RGB-D camera (millimetre depth)."""
+
+PUBLISHED_INTRINSICS: dict[str, tuple[np.ndarray, np.ndarray]] = {
+    "TUM RGB-D freiburg1": (pinhole(517.3, 516.5, 318.6, 255.3), np.array([0.2624, -0.9531, -0.0054, 0.0026, 1.1633])),
+    "TUM RGB-D freiburg2": (pinhole(520.9, 521.0, 325.1, 249.7), np.array([0.2312, -0.7849, -0.0033, -0.0001, 0.9172])),
+    "TUM RGB-D freiburg3": (pinhole(535.4, 539.2, 320.1, 247.6), np.zeros(0)),
+    "ICL-NUIM": (ICL_NUIM_K_OPENCV, np.zeros(0)),
+}
+"""(K, distortion) that datasets publish, by dataset name (ICL-NUIM in OpenCV axes)."""
+
+FLIP_Y = np.diag([1.0, -1.0, 1.0])
+"""The reflection between a y-up camera frame (negative published fy) and OpenCV's y-down frame."""
+
+
+def flip_y_rotation(R_wc_published: np.ndarray) -> np.ndarray:
+    """Camera-to-world rotations of a dataset with negative published fy, in the OpenCV camera frame.
+
+    A negative fy means the dataset's camera frame c' has y up: `p_c = FLIP_Y p_c'` with FLIP_Y =
+    diag(1, -1, 1), a reflection. `R_wc' @ FLIP_Y` has det -1, so the world must be reflected too:
+    we return `FLIP_Y @ R_wc' @ FLIP_Y` (..., 3, 3), a proper rotation from the OpenCV camera frame
+    to the dataset's world mirrored in its y axis. Any constant proper rotation of that world is
+    absorbed by the ARE alignment, and rotation errors keep their size.
+    """
+    return FLIP_Y @ np.asarray(R_wc_published, dtype=float) @ FLIP_Y
+
+GT_KAPPA = 100.0
+"""kappa of ground-truth normals in simulated sequences (`normals/*.npz`; the paper's cap)."""
