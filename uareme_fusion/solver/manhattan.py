@@ -177,6 +177,15 @@ def solve_manhattan(normals, kappa=None, R_init=None, config: SolverConfig | Non
     Manhattan axes in camera coordinates) and `cov` (3, 3, rad^2) of `delta` in
     `R_cm_true = R_cm @ Exp(delta)`. NaN/zero-length normals and NaN kappa are ignored and counted
     in `n_invalid`; a map with no valid pixel raises `InputError` (a `ValueError`).
+
+    >>> import numpy as np
+    >>> from uareme_fusion.sim.normal_maps import manhattan_normal_map
+    >>> from uareme_fusion.rotations import manhattan_symmetries
+    >>> R_cm_true = manhattan_symmetries()[0]
+    >>> nm = manhattan_normal_map(R_cm_true, np.random.default_rng(0), height=48, width=64, noise_deg=5.0)
+    >>> v = solve_manhattan(nm)
+    >>> v.R_cm.shape, v.cov.shape, bool(np.all(np.linalg.eigvalsh(v.cov) > 0))
+    ((3, 3), (3, 3), True)
     """
     solver = _DEFAULT_SOLVER if config is None else ManhattanSolver(config)
     if isinstance(normals, NormalMap):
