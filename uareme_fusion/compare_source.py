@@ -1,7 +1,7 @@
 """A `VisualSequence` for `compare` from any source `run` accepts (a video, a dataset, sim:...).
 
-The source is read once: each frame's normals (`--normals`, as in `run`) are solved into a visual
-rotation (each solve initialised from the previous one, as `compare.solve_frames` does), the IMU
+The source is read once: each frame's cues (`--cues`: normals as `--normals` says, and/or line
+segments, as in `run`) are solved into a visual rotation (`pipeline.cues.CueSolver`) (each solve initialised from the previous one, as `compare.solve_frames` does), the IMU
 samples are kept on the camera clock, and the source's ground truth (or none) is taken at the
 frame times. Every backend then runs on these same rotations (`compare.compare`).
 """
@@ -14,8 +14,8 @@ from .compare import VisualSequence
 from .drivers.base import ImuBatch, Source
 from .errors import InputError
 from .pipeline.config import RunConfig
+from .pipeline.cues import CueSolver, parse_cues
 from .pipeline.stages import CappedNormals, make_normal_estimator
-from .solver import solve_manhattan
 
 
 def source_sequence(source: Source, cfg: RunConfig, progress=None) -> VisualSequence:
@@ -23,19 +23,22 @@ def source_sequence(source: Source, cfg: RunConfig, progress=None) -> VisualSequ
     is called after each frame when given."""
     if not source.info.has_frames:
         raise InputError(f"{source.info.name}: 'compare' needs frames to compare visual backends (IMU only)")
-    normals = CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
+    cues = parse_cues(cfg.cues)
+    normals = (CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
+               if "normals" in cues else None)
+    solver = CueSolver(lines="lines" in cues)
     t_frames, visuals, imu = [], [], []
     R_prev, invalid = None, 0
     for event in source.events():
         if isinstance(event, ImuBatch):
             imu.append(event)
             continue
-        normal_map = normals.estimate_frame(event)
-        try:
-            visual = solve_manhattan(normal_map, R_init=R_prev)
+        normal_map = normals.estimate_frame(event) if normals is not None else None
+        visual = solver.solve(event, normal_map, R_init=R_prev)
+        if visual is None:  # no valid normals nor segments (as in `compare.solve_frames`)
+            invalid += 1
+        else:
             R_prev = visual.R_cm
-        except InputError:  # no valid normals in this map (as in `compare.solve_frames`)
-            visual, invalid = None, invalid + 1
         t_frames.append(event.t)
         visuals.append(visual)
         if progress is not None:
@@ -45,9 +48,10 @@ def source_sequence(source: Source, cfg: RunConfig, progress=None) -> VisualSequ
     if not t_frames:
         raise InputError(f"{source.info.name}: no frames")
     t = np.asarray(t_frames, float)
-    notes = [f"{source.info.name}: {len(t)} frames, normals {normals.name}"]
+    notes = [f"{source.info.name}: {len(t)} frames, cues {','.join(cues)}"
+             + (f", normals {normals.name}" if normals is not None else "")]
     if invalid:
-        notes.append(f"{invalid} frames had no valid normals and gave no visual rotation")
+        notes.append(f"{invalid} frames had no valid normals or segments and gave no visual rotation")
     imu_t = imu_gyro = imu_accel = None
     if imu:
         offset = source.info.imu_time_offset_s
