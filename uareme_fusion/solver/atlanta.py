@@ -14,7 +14,8 @@ and t (pixels along n from c, negative below the centre) is where the horizontal
    v_ij = n . (x_ij - c); pairs along one horizontal direction meet on the horizon, other pairs
    anywhere. t is the mode of the density sum_ij w_i w_j N(v; v_ij, s_ij^2), s_ij the height
    uncertainty of the intersection from end point noise (near-parallel pairs: large s_ij);
-3. the horizon's standard deviation `t_std_px` from the width of that mode.
+3. the horizon's standard deviation `t_std_px`: the scatter of the heights in that mode over the root
+   of the effective number of segments behind it, scaled (`AtlantaConfig.std_scale`).
 With a finite zenith at height v_z, f^2 = -t v_z (K = [f 0 c; 0 f c; 0 0 1]): `focal_px`.
 """
 
@@ -54,8 +55,6 @@ class AtlantaConfig:
     """Multiplies the horizon's standard deviation (the mode's scatter over the root of its segments):
     on the first half of ECD the unscaled figure gives median |error / std| 1.70 (Gaussian: 0.67).
     A wrong mode (clutter) is not covered by it: the errors have heavy tails."""
-    prior_std_fraction: float = 0.0
-    """> 0: the first guess's horizon (`K^-T up_c`) as a Gaussian prior on t, this std (fraction of the diagonal)."""
     min_pairs_weight_fraction: float = 0.02
     """Below this share of the pair weight in the mode's +-3 sigma window, there is no horizon evidence."""
 
@@ -167,10 +166,6 @@ def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
         s = slice(start, start + 4096)
         zsc = (grid[None, :] - height[s, None]) / spread[s, None]
         density += ((pair_w[s] / spread[s])[:, None] * np.exp(-0.5 * zsc**2)).sum(axis=0)
-    if cfg.prior_std_fraction > 0:  # the first guess's horizon height as a prior on t
-        l0 = np.linalg.solve(K.T, up_c)  # the first guess's horizon in pixels
-        t_first = -float(l0[:2] @ c + l0[2]) / (scale * float(l0[:2] @ n)) if abs(l0[:2] @ n) > 1e-12 else 0.0
-        density = density * np.exp(-0.5 * ((grid - t_first) / cfg.prior_std_fraction) ** 2)
     if n_vertical > 0 and abs(zenith[2]) > 1e-12:
         # A seen zenith at height v_z puts the horizon at t = -f^2 / v_z: keep f within the plausible range.
         inv_v_z = float(zenith[2] / (n @ zenith[:2]))
