@@ -26,3 +26,19 @@ def test_compare_bad_normals_is_one_error_line(tmp_path):
     result = CliRunner().invoke(app, ["compare", "sim:room", "--normals", "nonsense", "--max-frames", "3",
                                       "--out", str(tmp_path)])
     assert result.exit_code == 2 and "--normals" in result.output
+
+
+def test_compare_cues_lines_only(tmp_path):
+    result = CliRunner().invoke(app, ["compare", "sim:room", "--cues", "lines", "--max-frames", "10",
+                                      "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    doc = json.loads((tmp_path / "compare.json").read_text())
+    assert doc["frames"] == 10 and any("cues lines" in n for n in doc.get("notes", [])) or "cues lines" in result.output
+    # The rendered room has few long edges: segments alone give about 10 deg here (normals: < 2).
+    assert doc["backends"]["single"]["are_deg_mean"] < 20.0
+
+
+def test_compare_bad_cues_is_one_error_line(tmp_path):
+    result = CliRunner().invoke(app, ["compare", "sim:room", "--cues", "edges", "--max-frames", "3",
+                                      "--out", str(tmp_path)])
+    assert result.exit_code == 2 and "--cues" in result.output and "normals, lines" in result.output

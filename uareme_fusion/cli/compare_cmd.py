@@ -22,7 +22,7 @@ MAX_SYNTHETIC_DURATION_S = 3600.0
 def compare_command(
     source: Optional[str] = typer.Argument(None, help="Any source 'run' accepts (a video, images, a dataset "
                                                       "folder, sim:SCENARIO); a 'simulate' folder uses its "
-                                                      "normals unless --normals is given."),
+                                                      "normals unless --normals or --cues is given."),
     out: Path = typer.Option(..., "--out", help="Folder for compare.md, compare.json and compare.png."),
     synthetic: Optional[str] = typer.Option(
         None, help="Build the sequence in memory from this simulator trajectory (walk, shake, static, bus, ...)."),
@@ -33,6 +33,7 @@ def compare_command(
     bad_fraction: float = typer.Option(0.05, help="Synthetic: fraction of frames with random normals."),
     normals: Optional[str] = typer.Option(None, "--normals", help="As 'run': auto, learned, depth, source, a model "
                                                                   "file (.pt) or a folder of normal maps."),
+    cues: Optional[str] = _o["cues"],
     imu: Optional[Path] = _o["imu"], max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
@@ -46,10 +47,10 @@ def compare_command(
     if synthetic is not None:
         seq = synthetic_sequence(synthetic, seed=seed, duration_s=duration_s, drop_fraction=drop_fraction,
                                  bad_fraction=bad_fraction)
-    elif normals is None and imu is None and _has_saved_normals(Path(source)):
+    elif normals is None and cues is None and imu is None and _has_saved_normals(Path(source)):
         seq = load_sequence(source)
     else:
-        seq = _source_sequence(source, imu, fps, run_config(None, normals=normals, max_frames=max_frames,
+        seq = _source_sequence(source, imu, fps, run_config(None, normals=normals, cues=cues, max_frames=max_frames,
                                                             threads=threads, imu_rotation=imu_rotation,
                                                             imu_time_offset_s=imu_time_offset_s))
     doc = compare(seq, out)

@@ -41,20 +41,28 @@ class VisualSequence:
 
 
 class ChainedSolver:
-    """Solves normal maps in frame order, each solve initialised from the previous solution;
-    `invalid` counts the maps without valid normals (they give no visual rotation)."""
+    """Solves frames in order, each solve initialised from the previous solution; `invalid` counts
+    the frames without a usable cue (they give no visual rotation). With `cues` (a
+    `pipeline.cues.CueSolver`) a frame's normals and line segments are solved together, as in `run`;
+    without, its normal map alone."""
 
-    def __init__(self):
-        self.R_prev, self.invalid = None, 0
+    def __init__(self, cues=None):
+        self.R_prev, self.invalid, self.cues = None, 0, cues
 
-    def solve(self, normal_map: NormalMap | None) -> VisualRotation | None:
-        if normal_map is None:
+    def solve(self, normal_map: NormalMap | None, frame=None) -> VisualRotation | None:
+        if self.cues is not None and frame is not None:
+            visual = self.cues.solve(frame, normal_map, R_init=self.R_prev)
+            if visual is None:  # no valid normals nor segments
+                self.invalid += 1
+                return None
+        elif normal_map is None:
             return None
-        try:
-            visual = solve_manhattan(normal_map, R_init=self.R_prev)
-        except InputError:  # no valid normals in this map: the frame gives no visual rotation
-            self.invalid += 1
-            return None
+        else:
+            try:
+                visual = solve_manhattan(normal_map, R_init=self.R_prev)
+            except InputError:  # no valid normals in this map: the frame gives no visual rotation
+                self.invalid += 1
+                return None
         self.R_prev = visual.R_cm
         return visual
 

@@ -1,8 +1,8 @@
 """A `VisualSequence` for `compare` from any source `run` accepts (a video, a dataset, sim:...), or
 from a dataset folder with its normals saved (`load_sequence`).
 
-The source is read once: each frame's normals (`--normals`, as in `run`) are solved into a visual
-rotation (each solve initialised from the previous one, `sequence.ChainedSolver`), the IMU samples
+The source is read once: each frame's cues (`--cues`: normals as `--normals` says, and/or line
+segments, as in `run`) are solved into a visual rotation (each solve initialised from the previous one, `sequence.ChainedSolver`), the IMU samples
 are put on the camera clock and axes, and the source's ground truth (or none) is taken at the frame
 times. Every backend then runs on these same rotations (`compare.compare`).
 """
@@ -25,15 +25,19 @@ def source_sequence(source: Source, cfg: RunConfig, progress=None) -> VisualSequ
     is called after each frame when given."""
     if not source.info.has_frames:
         raise InputError(f"{source.info.name}: 'compare' needs frames to compare visual backends (IMU only)")
-    normals = CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
+    from ..pipeline.cues import CueSolver, parse_cues
+
+    cues = parse_cues(cfg.cues)
+    normals = (CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
+               if "normals" in cues else None)
     t_frames, visuals, imu = [], [], []
-    solver = ChainedSolver()
+    solver = ChainedSolver(CueSolver(lines="lines" in cues))
     for event in source.events():
         if isinstance(event, ImuBatch):
             imu.append(event)
             continue
         t_frames.append(event.t)
-        visuals.append(solver.solve(normals.estimate_frame(event)))
+        visuals.append(solver.solve(normals.estimate_frame(event) if normals is not None else None, event))
         if progress is not None:
             progress(len(t_frames), source.info.n_frames)
         if cfg.max_frames and len(t_frames) >= cfg.max_frames:
@@ -41,9 +45,10 @@ def source_sequence(source: Source, cfg: RunConfig, progress=None) -> VisualSequ
     if not t_frames:
         raise InputError(f"{source.info.name}: no frames")
     t = np.asarray(t_frames, float)
-    notes = [f"{source.info.name}: {len(t)} frames, normals {normals.name}"]
+    notes = [f"{source.info.name}: {len(t)} frames, cues {','.join(cues)}"
+             + (f", normals {normals.name}" if normals is not None else "")]
     if solver.invalid:
-        notes.append(f"{solver.invalid} frames had no valid normals and gave no visual rotation")
+        notes.append(f"{solver.invalid} frames had no valid normals or segments and gave no visual rotation")
     imu_arrays = camera_imu(imu, source.info.R_ci, source.info.imu_time_offset_s) if imu else (None, None, None)
     R_wc_true = None
     truth = source.ground_truth()

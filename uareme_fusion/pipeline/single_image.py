@@ -3,7 +3,9 @@
 Without gravity, "up" is the scene axis nearest image up (`solver.up_candidate`); the rotation is
 `R_cm` (Manhattan to camera coordinates) with the covariance (rad^2) of its right perturbation.
 Cues: learned normals and line segments (`cues`); without intrinsics the focal length comes from
-the segments when they tell it (`solver/focal.py`), else from an assumed field of view. The horizon
+the segments when they tell it (`solver/focal.py`), else from an assumed field of view. Up comes
+from the segments' Atlanta-world horizon when they show one (`solver/atlanta.py`: the zenith and
+horizontal vanishing points in any directions), else from the Manhattan axis nearest image up. The horizon
 is `l ~ K^-T up_c` in pixels, scaled so that [a, b] is unit (a x + b y + c = 0, positive on the sky side).
 """
 
@@ -26,6 +28,7 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K, check_K
 from ..overlay.compose import draw_overlay
 from ..overlay.horizon import horizon_line
 from ..rotations import quat_xyzw
+from ..solver.atlanta import AtlantaHorizon, estimate_horizon
 from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal, unknown_centre_floor
 from ..solver.joint import JointSolver
 from ..solver.manhattan import up_candidate
@@ -49,6 +52,8 @@ class ImageAnalysis:
     up_c: np.ndarray
     focal: FocalEstimate
     timing_ms: dict
+    atlanta: AtlantaHorizon | None = None
+    """The segments' Atlanta-world horizon when they showed one (`up_c` then comes from it)."""
 
     @property
     def horizon(self) -> np.ndarray:
@@ -66,12 +71,18 @@ class ImageAnalysis:
                 "cov_rad2": v.cov.tolist(), "std_deg": np.degrees(np.sqrt(np.diag(v.cov))).tolist(),
                 "up_c": self.up_c.tolist(), "analysed_size_px": [self.rgb.shape[1], self.rgb.shape[0]],
                 "quality": v.quality, "cost": v.cost, "valid_pixels": v.n_valid,
-                **self.focal.as_dict(), "horizon": self.horizon.tolist(), "cues": cues,
+                **self.focal.as_dict(), "horizon": self.horizon.tolist(), **self._horizon_source(), "cues": cues,
                 "timing_ms": self.timing_ms,
                 "conventions": "camera OpenCV (x right, y down, z forward); R_cm maps Manhattan to camera "
-                               "coordinates; cov of the right perturbation; up_c = the Manhattan axis nearest "
-                               "image up; horizon [a, b, c]: a x + b y + c = 0 in pixels, [a, b] unit, "
+                               "coordinates; cov of the right perturbation; up_c = up from the "
+                               "segments' horizon (horizon_source atlanta; horizon_std_px its std along its normal) or "
+                               "the Manhattan axis nearest image up (manhattan); horizon [a, b, c]: a x + b y + c = 0 in pixels, [a, b] unit, "
                                "positive on the sky side"}
+
+    def _horizon_source(self) -> dict:
+        if self.atlanta is None:
+            return {"horizon_source": "manhattan", "horizon_std_px": None}
+        return {"horizon_source": "atlanta", "horizon_std_px": self.atlanta.t_std_px}
 
 
 ANALYSIS_MAX_PIXELS = 4_000_000
@@ -137,10 +148,14 @@ class ImageAnalyser:
         except InputError:
             raise InputError(f"{path}: no confident normals and no line segments in this image "
                              "(blank or dark?)") from None
-        t3 = time.perf_counter()
         _, up_c = up_candidate(visual.R_cm)
+        atlanta = estimate_horizon(segments, focal.K, up_c) if segments is not None else None
+        if atlanta is not None:
+            up_c = atlanta.up_c(focal.K)
+        t3 = time.perf_counter()
         return ImageAnalysis(path, rgb, normal_map, segments, visual, up_c, focal,
-                             {"normals": 1e3 * (t1 - t0), "lines": 1e3 * (t2 - t1), "solver": 1e3 * (t3 - t2)})
+                             {"normals": 1e3 * (t1 - t0), "lines": 1e3 * (t2 - t1), "solver": 1e3 * (t3 - t2)},
+                             atlanta)
 
 
 def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0,
