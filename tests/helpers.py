@@ -4,6 +4,13 @@ and the path of the development data (`../shared/data`; tests take it through co
 
 from __future__ import annotations
 
+import contextlib
+import csv
+import json
+import os
+import subprocess
+from types import SimpleNamespace
+
 import struct
 import zlib
 from datetime import timedelta
@@ -11,7 +18,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
+from uareme_fusion.cli import app
+from uareme_fusion.pipeline.sinks import ESTIMATE_COLUMNS
 from uareme_fusion.drivers.base import GroundTruth, ImuBatch, Source, SourceInfo
 from uareme_fusion.errors import SourceError
 from uareme_fusion.sim.imu import simulate_imu
@@ -113,3 +123,59 @@ class WalkSource(Source):
 
     def close(self):
         self.closed = True
+
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def cli(*args, cwd: Path | None = None) -> SimpleNamespace:
+    """`uareme-fusion ARGS` in this process (typer's runner: the same error boundary as the console
+    script); `returncode`, `stdout`, `stderr` as from a subprocess."""
+    with contextlib.chdir(cwd or Path.cwd()):
+        result = CliRunner().invoke(app, [str(a) for a in args])
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        raise result.exception
+    return SimpleNamespace(returncode=result.exit_code, stdout=result.stdout, stderr=result.stderr)
+
+
+def subprocess_env() -> dict:
+    """The environment for `python -m uareme_fusion` in a child: this checkout first on the path, one thread."""
+    return {**os.environ, "PYTHONPATH": str(REPO), "OMP_NUM_THREADS": "1"}
+
+
+def error_lines(proc) -> list[str]:
+    assert "Traceback" not in proc.stderr, proc.stderr
+    return [ln for ln in proc.stderr.splitlines() if ln.startswith("error")]
+
+
+def assert_outputs_complete(out, frames: int, stopped: str) -> dict:
+    """trajectory.tum and estimates.csv hold `frames` whole rows; summary.json says why it stopped."""
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stopped"] == stopped and summary["frames"] == frames and summary["estimates"] == frames
+    lines = [ln for ln in (out / "trajectory.tum").read_text().splitlines() if not ln.startswith("#")]
+    rows = np.array([[float(v) for v in ln.split()] for ln in lines]).reshape(-1, 8)
+    assert len(rows) == frames and np.allclose(np.linalg.norm(rows[:, 4:], axis=1), 1.0)
+    assert np.all(np.diff(rows[:, 0]) > 0)
+    with open(out / "estimates.csv", newline="") as fh:
+        table = list(csv.reader(fh))
+    assert table[0] == ESTIMATE_COLUMNS and len(table) == frames + 1
+    assert all(len(r) == len(ESTIMATE_COLUMNS) for r in table[1:])
+    return summary
+
+
+@contextlib.contextmanager
+def tmpfs(mount: Path, options: str):
+    """A tmpfs mounted at `mount` (created) with mount `options` (e.g. "size=200k"), unmounted after;
+    skips the calling test where the machine does not allow mounting one (needs root)."""
+    mount.mkdir()
+    try:
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(mount)],
+                              capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        pytest.skip(f"cannot mount a tmpfs here ({exc})")
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.strip() or done.returncode})")
+    try:
+        yield mount
+    finally:
+        subprocess.run(["umount", str(mount)], capture_output=True, timeout=10)

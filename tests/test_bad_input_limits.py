@@ -23,7 +23,7 @@ from uareme_fusion.formats.images import read_rgb
 from uareme_fusion.pipeline.single_image import ANALYSIS_MAX_PIXELS
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.solver.manhattan import solve_manhattan
-from test_safe_outputs import _env, cli, error_lines  # pytest puts tests/ on sys.path
+from helpers import cli, error_lines, subprocess_env
 
 BILLION_LAUGHS = "a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
     f"{c}: &{c} [{', '.join([f'*{p}'] * 9)}]\n" for p, c in zip("abcdefgh", "bcdefghi"))
@@ -115,7 +115,7 @@ def test_a_process_substitution_imu_is_read(tmp_path, imu_csv):
     out = tmp_path / "out"
     proc = subprocess.run(["bash", "-c", f"{sys.executable} -m uareme_fusion run {imu_csv / 'rgb'} --imu "
                            f"<(cat {imu_csv / 'imu0' / 'data.csv'}) --normals {imu_csv / 'normals'} --out {out}"],
-                          capture_output=True, text=True, env=_env(), timeout=120)
+                          capture_output=True, text=True, env=subprocess_env(), timeout=120)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["source_info"]["has_imu"] and summary["imu_samples"] > 100 and summary["estimates"] == 20

@@ -8,11 +8,10 @@ from __future__ import annotations
 
 import os
 import re
-import subprocess
 
 import pytest
 
-from test_safe_outputs import cli, error_lines  # pytest puts tests/ on sys.path
+from helpers import cli, error_lines, tmpfs
 
 SOURCE_COMMANDS = ("run", "eval", "ground", "compare", "horizon")
 
@@ -89,17 +88,8 @@ def test_file_options(paths, args, pattern):
 @pytest.fixture
 def read_only(tmp_path):
     """A read-only tmpfs (needs root and mount); skips where the machine does not allow one."""
-    mount = tmp_path / "ro"
-    mount.mkdir()
-    try:
-        done = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(mount)],
-                              capture_output=True, text=True, timeout=10)
-    except (OSError, subprocess.TimeoutExpired) as exc:
-        pytest.skip(f"cannot mount a tmpfs here ({exc})")
-    if done.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.strip() or done.returncode})")
-    yield mount
-    subprocess.run(["umount", str(mount)], capture_output=True, timeout=10)
+    with tmpfs(tmp_path / "ro", "ro,size=64k") as mount:
+        yield mount
 
 
 @pytest.mark.parametrize("args, pattern", [

@@ -6,7 +6,6 @@ outputs written before a stop stay complete and parseable."""
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import os
@@ -26,11 +25,10 @@ from uareme_fusion.drivers.base import ImuBatch, Source
 from uareme_fusion.drivers.simulated import SimulatedSource
 from uareme_fusion.pipeline import RunConfig
 from uareme_fusion.pipeline.session import run_source
-from uareme_fusion.pipeline.sinks import ESTIMATE_COLUMNS
 from uareme_fusion.rotations import tilt_error_deg, up_in_camera
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.types import NormalMap, Status
-from helpers import FakeImgFrame, packets  # pytest puts tests/ on sys.path
+from helpers import FakeImgFrame, assert_outputs_complete, packets  # pytest puts tests/ on sys.path
 
 SECONDS = 8.0
 FAULT = (3.0, 5.0)
@@ -208,19 +206,7 @@ def normal_maps(folder, n: int):
     return folder
 
 
-def assert_outputs_complete(out, frames: int, stopped: str) -> dict:
-    """trajectory.tum and estimates.csv hold `frames` whole rows; summary.json says why it stopped."""
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["stopped"] == stopped and summary["frames"] == frames and summary["estimates"] == frames
-    lines = [ln for ln in (out / "trajectory.tum").read_text().splitlines() if not ln.startswith("#")]
-    rows = np.array([[float(v) for v in ln.split()] for ln in lines]).reshape(-1, 8)
-    assert len(rows) == frames and np.allclose(np.linalg.norm(rows[:, 4:], axis=1), 1.0)
-    assert np.all(np.diff(rows[:, 0]) > 0)
-    with open(out / "estimates.csv", newline="") as fh:
-        table = list(csv.reader(fh))
-    assert table[0] == ESTIMATE_COLUMNS and len(table) == frames + 1
-    assert all(len(r) == len(ESTIMATE_COLUMNS) for r in table[1:])
-    return summary
+
 
 
 def fake_oak_device(frames_before_disconnect: int, size=(12, 16)):

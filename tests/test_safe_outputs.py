@@ -5,7 +5,6 @@ Each test checks the message, the exit status and that the files written before 
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import signal
@@ -13,39 +12,14 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import cv2
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from uareme_fusion.cli import app
 from uareme_fusion.errors import InputError, OutputError
 from uareme_fusion.io.safe_files import RowFile, write_npz_atomic
-from test_faults import assert_outputs_complete  # pytest puts tests/ on sys.path
-
-REPO = Path(__file__).resolve().parents[1]
-
-
-def cli(*args, cwd: Path | None = None) -> SimpleNamespace:
-    """`uareme-fusion ARGS` in this process (typer's runner: the same error boundary as the console
-    script); `returncode`, `stdout`, `stderr` as from a subprocess."""
-    with contextlib.chdir(cwd or Path.cwd()):
-        result = CliRunner().invoke(app, [str(a) for a in args])
-    if result.exception is not None and not isinstance(result.exception, SystemExit):
-        raise result.exception
-    return SimpleNamespace(returncode=result.exit_code, stdout=result.stdout, stderr=result.stderr)
-
-
-def _env() -> dict:
-    return {**os.environ, "PYTHONPATH": str(REPO), "OMP_NUM_THREADS": "1"}
-
-
-def error_lines(proc) -> list[str]:
-    assert "Traceback" not in proc.stderr, proc.stderr
-    return [ln for ln in proc.stderr.splitlines() if ln.startswith("error")]
-
+from helpers import assert_outputs_complete, cli, error_lines, subprocess_env, tmpfs
 
 def write_video(path: Path, frames: int = 12, size=(64, 48)) -> Path:
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 10.0, size)
@@ -156,7 +130,7 @@ def test_an_interrupted_atomic_write_leaves_no_file(tmp_path, monkeypatch):
 def start(args, out_file: Path, rows: int = 6) -> subprocess.Popen:
     """Start the CLI and wait until `out_file` holds `rows` lines."""
     proc = subprocess.Popen([sys.executable, "-m", "uareme_fusion", *map(str, args)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=_env())
+                            stderr=subprocess.PIPE, text=True, env=subprocess_env())
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:
         if out_file.is_file() and out_file.read_text().count("\n") >= rows:
@@ -195,7 +169,7 @@ def test_ctrl_c_in_ground_video_counts_what_the_files_hold(tmp_path):
 def test_a_closed_stdout_after_a_completed_run_exits_0(tmp_path):
     proc = subprocess.run(["bash", "-c", f"{sys.executable} -m uareme_fusion run sim:room --max-frames 3 --out "
                            f"{tmp_path / 'out'} | head -c 0; exit ${{PIPESTATUS[0]}}"],
-                          capture_output=True, text=True, env=_env(), timeout=120)
+                          capture_output=True, text=True, env=subprocess_env(), timeout=120)
     assert proc.returncode == 0 and "Traceback" not in proc.stderr and "error" not in proc.stderr
     assert_outputs_complete(tmp_path / "out", 3, "max_frames")
 
@@ -204,18 +178,9 @@ def test_a_closed_stdout_after_a_completed_run_exits_0(tmp_path):
 @pytest.fixture
 def small_disk(tmp_path):
     """A 200 KiB tmpfs (needs root and mount); skips where the machine does not allow one."""
-    mount = tmp_path / "disk"
-    mount.mkdir()
-    try:
-        done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=200k", "tmpfs", str(mount)],
-                              capture_output=True, text=True, timeout=10)
-    except (OSError, subprocess.TimeoutExpired) as exc:
-        pytest.skip(f"cannot mount a tmpfs here ({exc})")
-    if done.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.strip() or done.returncode})")
-    (mount / "filler").write_bytes(bytes(170_000))  # leaves about 30 KiB
-    yield mount
-    subprocess.run(["umount", str(mount)], capture_output=True, timeout=10)
+    with tmpfs(tmp_path / "disk", "size=200k") as mount:
+        (mount / "filler").write_bytes(bytes(170_000))  # leaves about 30 KiB
+        yield mount
 
 
 def assert_rows_complete(out: Path) -> dict:
