@@ -13,7 +13,6 @@ import numpy as np
 
 from ..errors import InputError
 from ..sim.normal_maps import manhattan_normal_map
-from ..solver import solve_manhattan
 from ..types import NormalMap, VisualRotation
 
 
@@ -50,19 +49,14 @@ class ChainedSolver:
         self.R_prev, self.invalid, self.cues = None, 0, cues
 
     def solve(self, normal_map: NormalMap | None, frame=None) -> VisualRotation | None:
-        if self.cues is not None and frame is not None:
-            visual = self.cues.solve(frame, normal_map, R_init=self.R_prev)
-            if visual is None:  # no valid normals nor segments
-                self.invalid += 1
-                return None
-        elif normal_map is None:
+        from ..pipeline.cues import solve_frame
+
+        if normal_map is None and (self.cues is None or frame is None):
+            return None  # no map to solve: not counted as invalid
+        visual = solve_frame(self.cues, frame, normal_map, self.R_prev)
+        if visual is None:  # no valid normals nor segments: the frame gives no visual rotation
+            self.invalid += 1
             return None
-        else:
-            try:
-                visual = solve_manhattan(normal_map, R_init=self.R_prev)
-            except InputError:  # no valid normals in this map: the frame gives no visual rotation
-                self.invalid += 1
-                return None
         self.R_prev = visual.R_cm
         return visual
 

@@ -16,7 +16,6 @@ import numpy as np
 from ..drivers.base import ImuBatch, Source
 from ..errors import InputError
 from ..pipeline.config import RunConfig
-from ..pipeline.stages import CappedNormals, make_normal_estimator
 from .sequence import ChainedSolver, VisualSequence, solve_frames
 
 
@@ -25,13 +24,13 @@ def source_sequence(source: Source, cfg: RunConfig, progress=None) -> VisualSequ
     is called after each frame when given."""
     if not source.info.has_frames:
         raise InputError(f"{source.info.name}: 'compare' needs frames to compare visual backends (IMU only)")
-    from ..pipeline.cues import CueSolver, parse_cues
+    from ..pipeline.cues import parse_cues
+    from ..pipeline.session import visual_stages
 
     cues = parse_cues(cfg.cues)
-    normals = (CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
-               if "normals" in cues else None)
+    normals, cue_solver = visual_stages(cfg, source.info)
     t_frames, visuals, imu = [], [], []
-    solver = ChainedSolver(CueSolver(lines="lines" in cues))
+    solver = ChainedSolver(cue_solver)
     for event in source.events():
         if isinstance(event, ImuBatch):
             imu.append(event)

@@ -16,6 +16,7 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
 from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
                             unknown_centre_floor)
 from ..solver.joint import JointSolver
+from ..solver import solve_manhattan
 from ..types import Frame, NormalMap, VisualRotation
 
 VALID_CUES = ("normals", "lines")
@@ -92,3 +93,17 @@ def stream_focal(focal_px: list[float], height: int, width: int) -> FocalEstimat
     sigma = 1.4826 * float(np.median(np.abs(f - median)))
     return FocalEstimate(centred_K(median, height, width), "estimated", std_px=1.25 * sigma / np.sqrt(len(f)),
                          width=width)
+
+
+def solve_frame(cues: CueSolver | None, frame: Frame | None, normal_map: NormalMap | None,
+                R_init=None) -> VisualRotation | None:
+    """One frame's visual rotation: through `cues` (normals and segments jointly) when given with the
+    frame, else from the normal map alone; None when no cue is usable (no valid normals, no segments)."""
+    if cues is not None and frame is not None:
+        return cues.solve(frame, normal_map, R_init)
+    if normal_map is None:
+        return None
+    try:
+        return solve_manhattan(normal_map, R_init=R_init)
+    except InputError:  # a blank or black frame: no valid normals
+        return None

@@ -24,9 +24,9 @@ import numpy as np
 from ..backends.base import Backend
 from ..drivers.base import Source
 from ..errors import InputError, OutputError, SourceError
-from ..solver import solve_manhattan
 from ..types import Estimate, Estimates, Frame, ImuBatch, NormalMap, Status, VisualRotation
 from . import stop_signals
+from .cues import solve_frame
 
 STAGES = ("source", "normals", "solver", "backend", "sinks")
 IMU_ONLY_BULK_BATCHES = 256
@@ -132,14 +132,7 @@ class Pipeline:
     def visual_rotation(self, normal_map: NormalMap | None, t_s: float, frame: Frame | None = None) -> VisualRotation | None:
         """The solver's rotation for one frame, None when it has no usable cue (no valid normals, no lines)."""
         R_init = self.backend.predicted_R_cm(t_s)
-        R_init = R_init if R_init is not None else self._R_cm_prev
-        if self.cues is not None and frame is not None:
-            visual = self.cues.solve(frame, normal_map, R_init)
-        else:
-            try:
-                visual = solve_manhattan(normal_map, R_init=R_init)
-            except InputError:  # a blank or black frame: no valid normals
-                visual = None
+        visual = solve_frame(self.cues, frame, normal_map, R_init if R_init is not None else self._R_cm_prev)
         if visual is None:
             return None
         self._R_cm_prev = visual.R_cm

@@ -66,13 +66,17 @@ def make_output_folder(out_dir: str | Path) -> Path:
     return out
 
 
+def visual_stages(cfg: RunConfig, info) -> tuple[CappedNormals | None, CueSolver]:
+    """The normal estimator of `cfg` (None without the normals cue) and its cue solver, for a source
+    with frames described by `info` (`run` and `compare` build them here alike)."""
+    chosen = parse_cues(cfg.cues)
+    normals = (CappedNormals(make_normal_estimator(cfg.normals, info, cfg.threads), cfg.kappa_cap)
+               if "normals" in chosen else None)
+    return normals, CueSolver(lines="lines" in chosen, assumed_fov_deg=cfg.assumed_fov_deg)
+
+
 def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipeline:
-    normals, cues = None, None
-    if source.info.has_frames:
-        chosen = parse_cues(cfg.cues)
-        if "normals" in chosen:
-            normals = CappedNormals(make_normal_estimator(cfg.normals, source.info, cfg.threads), cfg.kappa_cap)
-        cues = CueSolver(lines="lines" in chosen, assumed_fov_deg=cfg.assumed_fov_deg)
+    normals, cues = visual_stages(cfg, source.info) if source.info.has_frames else (None, None)
     backend = make_backend(cfg, source.info)
     if cfg.offline:
         from ..backends.mekf.offline import offline_backend
