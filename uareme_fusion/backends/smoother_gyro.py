@@ -11,9 +11,9 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, X
 
-from ..errors import InputError
 from ..rotations import WORLD_UP
 from ..types import VisualRotation
+from .imu_stream import check_imu_arrays
 from .smoother import MANHATTAN_KEY, Smoother, _robust, label_up_as_z
 
 
@@ -41,14 +41,8 @@ class GyroSmoother(Smoother):
         `t_s` (N,), `gyro_rad_s` (N, 3), `accel_m_s2` (N, 3) in the IMU frame, rotated to the camera
         by `R_ci`. Non-finite or out-of-order samples are dropped and counted (`Status.IMU_DROPPED`).
         """
-        t_s = np.atleast_1d(np.asarray(t_s, dtype=float)) + self.config.imu_time_offset_s
-        gyro = np.atleast_2d(np.asarray(gyro_rad_s, dtype=float))
-        accel = np.atleast_2d(np.asarray(accel_m_s2, dtype=float))
-        if t_s.ndim != 1 or gyro.shape != (len(t_s), 3) or accel.shape != (len(t_s), 3):
-            raise InputError(
-                f"Expected IMU arrays t_s (N,), gyro_rad_s (N, 3), accel_m_s2 (N, 3), got "
-                f"{t_s.shape}, {gyro.shape}, {accel.shape}"
-            )
+        t_s, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
+        t_s = t_s + self.config.imu_time_offset_s
         finite = np.isfinite(t_s) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1)
         gyro_c, accel_c = gyro @ self._R_ci.T, accel @ self._R_ci.T
         for t, w_c, a_c, ok in zip(t_s, gyro_c, accel_c, finite):

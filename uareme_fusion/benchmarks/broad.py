@@ -17,6 +17,7 @@ from ..drivers import open_source
 from ..errors import InputError
 from ..pipeline import RunConfig
 from ..pipeline.session import run_source
+from ..evaluation.statistics import rmse
 from ..rotations import tilt_error_deg, up_in_camera
 from .peers import vqf_6d_R_wi
 
@@ -30,7 +31,7 @@ def vqf_tilt_rmse_deg(source, t_s: np.ndarray) -> float:
     R_ref, ok = source.ground_truth().at(t_s)
     idx = np.clip(np.searchsorted(trial.t_s, t_s), 0, len(trial.t_s) - 1)
     error = tilt_error_deg(up_in_camera(R_wi[idx][ok]), up_in_camera(R_ref[ok]))
-    return float(np.sqrt(np.mean(error**2)))
+    return rmse(error)
 
 
 def trial_figures(path: Path) -> dict:

@@ -1,7 +1,7 @@
 """16-bit depth PNGs: one channel, uint16, `units_per_m` stored units per metre, 0 = no depth.
 
-    depth_m = read_depth_png(path, TUM_DEPTH_UNIT_M)        # float32 metres
-    write_depth_png(path, depth_m, TUM_DEPTH_SCALE)         # atomic write
+    depth_m = read_depth_png(path, ICL_NUIM_DEPTH_UNIT_M)    # float32 metres
+    png, n_dropped = depth_png_units(depth_m, TUM_DEPTH_SCALE)  # uint16 to write (0 = no depth)
 
 Units in use: TUM RGB-D, ICL-NUIM and the simulator store 1/5000 m (`TUM_DEPTH_SCALE`); Asus Xtion,
 Kinect v2, OAK, the ICSL corridor and this project's recordings store millimetres
@@ -17,7 +17,6 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.images import read_image
-from ..io.safe_files import write_image_atomic
 
 TUM_DEPTH_SCALE = 5000.0
 """Depth PNG units per metre in TUM RGB-D, ICL-NUIM and the simulator's output."""
@@ -64,9 +63,3 @@ def depth_png_units(depth_m: np.ndarray, units_per_m: float, far: str = "clip") 
         raise ValueError(f"far must be 'clip' or 'drop', got {far!r}")
     png = np.clip(np.rint(np.where(bad, 0.0, units)), 0, 65535).astype(np.uint16)
     return png, int(bad.sum())
-
-
-def write_depth_png(path: Path, depth_m: np.ndarray, units_per_m: float) -> None:
-    """Write depth (H, W) metres as a 16-bit PNG of `units_per_m` units per metre (atomically; far
-    depth clipped)."""
-    write_image_atomic(Path(path), depth_png_units(depth_m, units_per_m)[0])

@@ -107,8 +107,9 @@ def export_normals(input_path: Path, out_dir: Path, estimator, kappa_cap: float,
 
     `estimator.estimate(rgb_uint8) -> NormalMap`; `progress(done, total)` after each frame; `camera`
     (`drivers.intrinsics.CameraModel`) undistorts each frame first. Returns the number of frames written."""
-    from ..drivers.intrinsics import undistorted_image
+    from ..drivers.intrinsics import Undistorter, check_camera
 
+    undistort: dict[tuple, Callable] = {}  # per image size: the maps are computed once, not per frame
     total, frames = list_frames(input_path)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -116,7 +117,12 @@ def export_normals(input_path: Path, out_dir: Path, estimator, kappa_cap: float,
     out.mkdir(parents=True, exist_ok=True)
     done = 0
     for stem, rgb in frames:
-        rgb = rgb if camera is None else undistorted_image(camera, rgb)
+        if camera is not None:
+            size = rgb.shape[:2]
+            if size not in undistort:
+                check_camera(camera, camera.origin, size)
+                undistort[size] = Undistorter(camera, size).image if camera.distorted else (lambda image: image)
+            rgb = undistort[size](rgb)
         write_normal_map(out, stem, estimator.estimate(rgb, source=stem), kappa_cap)
         done += 1
         if progress is not None:

@@ -146,7 +146,7 @@ class Pipeline:
         visual = self.visual_rotation(normal_map, frame.t, frame)
         t2 = time.perf_counter()
         estimate = self.backend.process_frame(frame.t, visual)
-        if normal_map is None and frame.depth is None and self.normals is not None and self.normals.name == "depth":
+        if normal_map is None and frame.depth is None and getattr(self.normals, "needs_depth", False):
             estimate = dataclasses.replace(estimate, status=estimate.status | Status.DEPTH_MISSING)
             self.stats.frames_without_depth += 1
         t3 = time.perf_counter()

@@ -64,6 +64,10 @@ class CappedNormals:
     def name(self) -> str:
         return getattr(self.estimator, "name", type(self.estimator).__name__)
 
+    @property
+    def needs_depth(self) -> bool:
+        return getattr(self.estimator, "needs_depth", False)
+
     def estimate_frame(self, frame: Frame) -> NormalMap | None:
         nm = self.estimator.estimate_frame(frame)
         if nm is None:
@@ -93,6 +97,8 @@ class DepthWhereAvailable:
     cues, and the pipeline flags it `DEPTH_MISSING`) for frames without one."""
 
     name = "depth"
+    needs_depth = True
+    """A frame without depth gets no normals from it (the runner flags it `DEPTH_MISSING`)."""
 
     def __init__(self, estimator):
         self.estimator = estimator

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
-from ..rotations import R_CM_UPRIGHT, is_rotation, nearest_symmetric
+from ..rotations import R_CM_UPRIGHT, nearest_symmetric, rotation_problem
 from ..types import NormalMap, VisualRotation
 from .levenberg import levenberg_marquardt_so3
 from .moments import NormalMoments, normal_moments
@@ -156,12 +156,10 @@ def _scaled_kappa(kappa) -> np.ndarray:
 
 
 def _check_rotation(R) -> np.ndarray:
-    R = np.asarray(R, dtype=float)
-    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
-        raise InputError(f"Expected R_init as a finite (3, 3) rotation matrix, got shape {R.shape}")
-    if not is_rotation(R, atol=1e-5):
-        raise InputError("Expected R_init to be a rotation matrix (orthonormal, det +1)")
-    return R
+    problem = rotation_problem(R, atol=1e-5)
+    if problem is not None:
+        raise InputError(f"Expected R_init as a rotation matrix: {problem}")
+    return np.asarray(R, dtype=float)
 
 
 _DEFAULT_SOLVER = ManhattanSolver()

@@ -28,7 +28,7 @@ from ... import jit
 from .accel import chunk_bounds
 from .matrix3 import exp3_into, inv3, matmul3_into
 from .measurements import gravity_model, zero_rate_model
-from .state import orthonormal, reset_jacobian, skew3
+from .state import orthonormal, reset_jacobian
 
 # Layout of the float64 state vector `s` that `integrate_batch` reads and updates in place.
 S_T_STATE, S_ACC_TIME, S_ACC_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
@@ -360,7 +360,7 @@ SEGMENTS = None
 """`integrate_segments` compiled, or None."""
 if jit.available():
     try:
-        _pure = (skew3, reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into, exp3,
+        _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into, exp3,
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
                  zero_rate_measurement, kalman_update, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks)
         for _f in _pure:

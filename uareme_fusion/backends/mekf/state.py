@@ -5,7 +5,7 @@ Error state (12,): `[dtheta_c, db_c, dtheta_m, domega_c]` with RIGHT perturbatio
 camera frame), `omega_c = omega_c_hat + domega_c` (rad/s, visual-only constant-rate model).
 After an update the estimated error `dx` is injected into the nominal state and reset to zero; the
 covariance then takes the reset Jacobian `G = I - skew(dtheta)/2` on each rotation block.
-`skew3` and `reset_jacobian` are plain-array functions that the compiled kernels share.
+`reset_jacobian` and `orthonormal` are plain-array functions that the compiled kernels share.
 """
 
 from __future__ import annotations
@@ -31,14 +31,6 @@ def orthonormal(R: np.ndarray) -> np.ndarray:
     """One Newton step of the polar decomposition, `R (3 I - R^T R) / 2`, of a (3, 3) near-rotation:
     removes the rounding drift of a product of rotations (exact rotations are fixed points)."""
     return 0.5 * R @ (3.0 * I3 - R.T @ R)
-
-
-def skew3(v):
-    """(3, 3) cross-product matrix of a (3,) vector: `skew3(a) @ b = a x b`."""
-    out = np.zeros((3, 3))
-    out[0, 1], out[0, 2], out[1, 2] = -v[2], v[1], -v[0]
-    out[1, 0], out[2, 0], out[2, 1] = v[2], -v[1], v[0]
-    return out
 
 
 def reset_jacobian(dx, with_manhattan):
