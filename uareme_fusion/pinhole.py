@@ -33,6 +33,11 @@ def intrinsics_from_fov(width: int, height: int, hfov_deg: float,
         raise InputError(f"field of view fov_deg must be within {lo:g} to {hi:g} degrees (exclusive of 0 and 180), "
                          f"got {hfov_deg}")
     f_px = (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
+    return centred_K(f_px, height, width)
+
+
+def centred_K(f_px: float, height: int, width: int) -> np.ndarray:
+    """Square pixels, focal `f_px`, principal point at the image centre ((W-1)/2, (H-1)/2)."""
     return pinhole(f_px, f_px, (width - 1) / 2.0, (height - 1) / 2.0)
 
 

@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from uareme_fusion.errors import InputError, SourceError
-from uareme_fusion.rotations import is_rotation
+from uareme_fusion.rotations import is_rotation, project_to_so3
 from uareme_fusion.types import Frame, ImuBatch
 
 from .base import Source, SourceInfo
@@ -112,8 +112,7 @@ def rotation_from_extrinsics(T, what: str = "IMU-to-camera extrinsics") -> np.nd
     R = T[:3, :3]
     if not is_rotation(R, atol=1e-3):
         raise InputError(f"oak: {what} hold no rotation (device not IMU-calibrated?): {R.round(4).tolist()}")
-    U, _, Vt = np.linalg.svd(R)
-    return U @ Vt
+    return project_to_so3(R)
 
 
 @dataclass

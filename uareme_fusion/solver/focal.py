@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lines.detect import LineSegments
-from ..pinhole import DEFAULT_FOV_DEG, assumed_K
+from ..pinhole import DEFAULT_FOV_DEG, assumed_K, centred_K
 from ..rotations import log_so3
 from ..types import NormalMap, VisualRotation
 from .joint import JointSolver
@@ -68,11 +68,6 @@ class FocalEstimate:
     def as_dict(self) -> dict:
         return {"K": self.K.tolist(), "hfov_deg": self.hfov_deg, "focal_source": self.source,
                 "f_px": self.f_px, "f_std_px": None if not np.isfinite(self.std_px) else self.std_px}
-
-
-def centred_K(f_px: float, height: int, width: int) -> np.ndarray:
-    """Square pixels, focal `f_px`, principal point at the image centre ((W-1)/2, (H-1)/2)."""
-    return np.array([[f_px, 0.0, (width - 1) / 2.0], [0.0, f_px, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
 
 
 def segment_moments(segments: LineSegments, K: np.ndarray) -> LineMoments:
