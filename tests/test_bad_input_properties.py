@@ -125,7 +125,7 @@ def test_mekf_any_visual_rotation_covariance_and_timing(mode, events, gyro):
             cov = covariance_from(cov_values, log_scale)
             assume(np.all(np.isfinite(cov)))
             visual = VisualRotation(R_cm=Rotation.from_quat(quat).as_matrix(), cov=cov, cost=0.05, iterations=3,
-                                    n_valid=100, t=t)
+                                    n_valid=100, t_s=t)
         est = filt.process_frame(t, visual)
         assert_rotation(est.R_wc)
         assert_covariance(est.cov)

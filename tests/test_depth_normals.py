@@ -182,12 +182,12 @@ def test_stride_repeats_the_strided_fit():
 def test_frame_interface_and_bad_input(tmp_path):
     depth, _ = render_planes(K, np.array([[0.0, 0.0, 1.0]]), [2.0])
     est = DepthNormals()
-    nm = est.estimate_frame(Frame(t=1.5, depth=depth.astype(np.float32), K=K, index=7))
-    assert nm.t == 1.5 and np.all(nm.kappa[4:-4] > 0)
+    nm = est.estimate_frame(Frame(t_s=1.5, depth=depth.astype(np.float32), K=K, index=7))
+    assert nm.t_s == 1.5 and np.all(nm.kappa[4:-4] > 0)
     with pytest.raises(InputError, match="frame 7.*intrinsics"):
-        est.estimate_frame(Frame(t=1.5, depth=depth.astype(np.float32), K=None, index=7))
+        est.estimate_frame(Frame(t_s=1.5, depth=depth.astype(np.float32), K=None, index=7))
     with pytest.raises(InputError, match="frame 3.*no"):
-        est.estimate_frame(Frame(t=0.0, K=K, index=3))
+        est.estimate_frame(Frame(t_s=0.0, K=K, index=3))
     with pytest.raises(InputError, match="fy = -480.*OpenCV"):
         est.estimate(depth, ICL_NUIM_K_PUBLISHED)
     with pytest.raises(InputError, match=r"\(3, 3\)"):

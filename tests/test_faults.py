@@ -71,10 +71,10 @@ class FaultySource(Source):
                 keep = ~_inside(ev.t_s, self.imu_gap)
                 if keep.any():
                     yield ImuBatch(ev.t_s[keep], gyro[keep], ev.accel_m_s2[keep])
-            elif not _inside(ev.t, self.frame_gap):
-                if _inside(ev.t, self.blank):
+            elif not _inside(ev.t_s, self.frame_gap):
+                if _inside(ev.t_s, self.blank):
                     ev = dataclasses.replace(ev, normals=NormalMap(ev.normals.normals, np.zeros_like(ev.normals.kappa),
-                                                                   t=ev.t))
+                                                                   t_s=ev.t_s))
                 yield ev
 
 

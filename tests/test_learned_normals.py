@@ -96,10 +96,10 @@ def test_kappa_is_capped_and_non_negative(rendered_views):
 
 
 def test_estimate_frame_keeps_time_and_names_missing_rgb(shipped, rendered_views):
-    nm = shipped.estimate_frame(Frame(t=2.5, rgb=rendered_views[0][0], index=4))
-    assert nm.t == 2.5
+    nm = shipped.estimate_frame(Frame(t_s=2.5, rgb=rendered_views[0][0], index=4))
+    assert nm.t_s == 2.5
     with pytest.raises(InputError, match="frame 4.*RGB"):
-        shipped.estimate_frame(Frame(t=2.5, index=4))
+        shipped.estimate_frame(Frame(t_s=2.5, index=4))
 
 
 def test_bad_images(shipped):

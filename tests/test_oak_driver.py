@@ -25,7 +25,7 @@ def test_frame_conversion_rgb_order_depth_units_and_device_time():
     depth_mm = np.array([[0, 1000, 65535] * 4] * 8, np.uint16)
     K = np.array([[500.0, 0, 6], [0, 500, 4], [0, 0, 1]])
     frame = frame_from_messages(rgb_msg, 7, K, FakeImgFrame(depth_mm, 12.345678))
-    assert frame.t == pytest.approx(12.345678, abs=1e-6) and frame.index == 7 and frame.K is K
+    assert frame.t_s == pytest.approx(12.345678, abs=1e-6) and frame.index == 7 and frame.K is K
     np.testing.assert_array_equal(frame.rgb, rgb_msg.image[..., ::-1])
     assert frame.depth.dtype == np.float32
     np.testing.assert_allclose(frame.depth[0, :3], [0.0, 1.0, 65.535], rtol=1e-6)
@@ -75,7 +75,7 @@ def test_sync_releases_frames_after_the_imu_passes_them():
     for i, t in enumerate((0.066, 0.100, 0.133)):
         out += sync.push_frame(frame_from_messages(fake_rgb(t, i), i + 1))
     assert [type(e).__name__ for e in out] == ["ImuBatch", "Frame"]
-    assert out[0].t_s[-1] == pytest.approx(0.065) and out[1].t == 0.066
+    assert out[0].t_s[-1] == pytest.approx(0.065) and out[1].t_s == 0.066
     # Late IMU (older than a released frame) is dropped and counted, never reordered.
     out = sync.push_imu(ImuBatch(np.array([0.060, 0.110]), np.zeros((2, 3)), np.zeros((2, 3))))
     assert sync.late_imu == 1
@@ -118,7 +118,7 @@ def test_recording_of_a_fake_session_replays_exactly(tmp_path):
             np.testing.assert_array_equal(b.gyro_rad_s, a.gyro_rad_s)
             np.testing.assert_array_equal(b.accel_m_s2, a.accel_m_s2)
         else:
-            assert b.t == a.t
+            assert b.t_s == a.t_s
             np.testing.assert_array_equal(b.rgb, a.rgb)
             np.testing.assert_array_equal(b.depth, a.depth)  # millimetres are stored exactly
 
@@ -141,4 +141,4 @@ def test_live_oak_device_streams_frames_and_imu():
         seen = [next(events) for _ in range(40)]
     frames = [e for e in seen if not isinstance(e, ImuBatch)]
     assert frames and frames[0].rgb.shape[:2] == src.info.image_size and src.info.K is not None
-    assert np.all(np.diff([f.t for f in frames]) > 0)
+    assert np.all(np.diff([f.t_s for f in frames]) > 0)

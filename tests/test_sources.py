@@ -41,8 +41,8 @@ def assert_time_ordered(events, offset_s=0.0):
             assert np.all(np.diff(t) > 0) and t[0] > last_imu_t and t[0] >= last_frame_t - 1e-9
             last_imu_t = t[-1]
         else:
-            assert e.t > last_frame_t and e.t >= last_imu_t - 1e-9
-            last_frame_t = e.t
+            assert e.t_s > last_frame_t and e.t_s >= last_imu_t - 1e-9
+            last_frame_t = e.t_s
 
 
 def write_imu_csv(path, t_s, gyro, accel):
@@ -74,7 +74,7 @@ def test_video_file_frames_times_and_rgb_order(video):
         assert src.info.image_size == (48, 64) and not src.info.has_imu
         frames = list(src.events())
     assert [f.index for f in frames] == list(range(20))
-    np.testing.assert_allclose([f.t for f in frames], np.arange(20) / 25.0, atol=1e-6)
+    np.testing.assert_allclose([f.t_s for f in frames], np.arange(20) / 25.0, atol=1e-6)
     rgb = frames[7].rgb
     assert rgb.dtype == np.uint8 and rgb.shape == (48, 64, 3)
     assert abs(int(rgb[..., 2].mean()) - 200) < 6 and abs(int(rgb[..., 1].mean()) - 70) < 6 and rgb[..., 0].mean() < 6
@@ -82,7 +82,7 @@ def test_video_file_frames_times_and_rgb_order(video):
 
 def test_video_explicit_fps_overrides_container_clock(video):
     with open_source(str(video), fps=10.0) as src:
-        times = [f.t for f in src.events()]
+        times = [f.t_s for f in src.events()]
     np.testing.assert_allclose(times, np.arange(20) / 10.0)
 
 
@@ -130,13 +130,13 @@ def test_image_folder_natural_order_frame_number_times_and_conversions(tmp_path)
         assert isinstance(src, ImageSource)
         frames = list(src.events())
     assert [p.name for p in src.paths] == ["1.png", "2.png", "10.png"]
-    np.testing.assert_allclose([f.t for f in frames], np.array([1, 2, 10]) / 30.0)
+    np.testing.assert_allclose([f.t_s for f in frames], np.array([1, 2, 10]) / 30.0)
     assert all(f.rgb.shape == (6, 8, 3) and f.rgb.dtype == np.uint8 for f in frames)
     assert np.all(frames[0].rgb == 90)
     assert np.all(frames[1].rgb[..., 0] == 250) and np.all(frames[1].rgb[..., 2] == 0)
     assert np.all(frames[2].rgb == 255)
     with open_source(str(tmp_path / "*.png"), fps=10.0) as src:
-        np.testing.assert_allclose([f.t for f in src.events()], [0.0, 0.1, 0.2])
+        np.testing.assert_allclose([f.t_s for f in src.events()], [0.0, 0.1, 0.2])
 
 
 def test_image_names_in_seconds_and_nanoseconds(tmp_path):
@@ -300,7 +300,7 @@ def test_simulated_normals_only_are_exact_and_imu_continuous():
     events = list(src.events())
     assert_time_ordered(events)
     frames = frames_of(events)
-    R_cm = src.trajectory.R_cm(np.array([f.t for f in frames]))
+    R_cm = src.trajectory.R_cm(np.array([f.t_s for f in frames]))
     for f, R in zip(frames[::11], R_cm[::11]):
         n = f.normals.normals.reshape(-1, 3).astype(float)
         assert f.rgb is None and np.all(f.normals.kappa > 0)
@@ -325,7 +325,7 @@ def test_record_then_replay_is_exact(tmp_path):
         truth = replay.ground_truth()
     assert [type(e) for e in replayed] == [type(e) for e in original]
     for a, b in zip(frames_of(original), frames_of(replayed)):
-        assert a.t == b.t and a.index == b.index
+        assert a.t_s == b.t_s and a.index == b.index
         np.testing.assert_array_equal(a.rgb, b.rgb)
         np.testing.assert_array_equal(a.normals.normals, b.normals.normals)
         np.testing.assert_array_equal(a.normals.kappa, b.normals.kappa)
@@ -369,8 +369,8 @@ def test_icl_nuim_opencv_axes_keep_the_manhattan_frame_fixed(shared_data):
     R_wm = []
     for i in (0, 99):
         frame = src.read_frame(i)
-        assert frame.t == pytest.approx((i + 1) / 30.0)
-        R_wc, ok = truth.at(np.array([frame.t]))
+        assert frame.t_s == pytest.approx((i + 1) / 30.0)
+        R_wc, ok = truth.at(np.array([frame.t_s]))
         assert ok[0]
         R_wm.append(R_wc[0] @ solve_manhattan(DepthNormals().estimate_frame(frame)).R_cm)
     R_aligned, _ = nearest_symmetric(R_wm[1], R_wm[0])
@@ -413,7 +413,7 @@ def test_euroc_camera_calibration_and_ground_truth(tmp_path, shared_data):
         assert src.info.K[0, 0] == 458.6 and src.info.fps == pytest.approx(20.0)
         frames = list(src.events())
         truth = src.ground_truth()
-    assert frames[0].t == pytest.approx(1403715525.0) and frames[0].rgb.shape == (24, 32, 3)
+    assert frames[0].t_s == pytest.approx(1403715525.0) and frames[0].rgb.shape == (24, 32, 3)
     q = np.loadtxt(gt, delimiter=",", skiprows=1, max_rows=1)[4:8]
     np.testing.assert_allclose(truth.R_wc[0], Rotation.from_quat(q, scalar_first=True).as_matrix() @ R_BS,
                                atol=1e-12)

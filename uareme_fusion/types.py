@@ -21,7 +21,7 @@ class Frame:
     """One camera image. `rgb` (H, W, 3) uint8 in RGB order; `depth` (H, W) float32 metres with 0 or
     NaN where missing; `K` (3, 3) intrinsics in pixels, None when unknown."""
 
-    t: float
+    t_s: float
     rgb: np.ndarray | None = None
     depth: np.ndarray | None = None
     K: np.ndarray | None = None
@@ -102,7 +102,7 @@ class NormalMap:
 
     normals: np.ndarray
     kappa: np.ndarray
-    t: float = float("nan")
+    t_s: float = float("nan")
     independent_regions: float | None = None
     """How many independent errors a fully valid map of this source carries (errors are spatially
     correlated); the solver's covariance shrinks with it. None: the solver's default, fitted for
@@ -129,7 +129,7 @@ class VisualRotation:
     quality: float = 0.0
     """1 - cost / 0.4, clipped to [0, 1]: how Manhattan the view looks."""
     converged: bool = True
-    t: float = float("nan")
+    t_s: float = float("nan")
     timing_ms: dict = field(default_factory=dict)
     cues: dict = field(default_factory=dict)
     """Per visual cue ("normals", "lines") that took part: its share of the information (trace of
@@ -184,7 +184,7 @@ def visual_R_wc_covariance(visual: VisualRotation) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Estimate:
-    """A backend's output at time `t`.
+    """A backend's output at time `t_s` (s).
 
     `R_wc` maps camera coordinates to the world (z up); `cov` (3, 3, rad^2) is the covariance of the
     right perturbation of `R_wc`. `up_c` is world up in the camera frame. `R_wm` is the Manhattan
@@ -192,7 +192,7 @@ class Estimate:
     them.
     """
 
-    t: float
+    t_s: float
     R_wc: np.ndarray
     cov: np.ndarray
     status: Status = Status.OK
@@ -234,7 +234,7 @@ class Estimates:
                 return None
             return np.array([np.full(shape, np.nan) if v is None else v for v in values], float).reshape(-1, *shape)
         n = len(estimates)
-        return cls(np.array([e.t for e in estimates], float), np.array([e.R_wc for e in estimates], float).reshape(n, 3, 3),
+        return cls(np.array([e.t_s for e in estimates], float), np.array([e.R_wc for e in estimates], float).reshape(n, 3, 3),
                    np.array([e.cov for e in estimates], float).reshape(n, 3, 3),
                    np.array([int(e.status) for e in estimates], np.int64),
                    column([e.R_wm for e in estimates], (3, 3)), column([e.gyro_bias_rad_s for e in estimates], (3,)))

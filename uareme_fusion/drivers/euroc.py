@@ -133,7 +133,7 @@ class EurocSource(Source):
             raise SourceError(str(exc)) from None
         if self._undistorter is not None:
             image = self._undistorter.image(image)
-        return Frame(t=float(self.frame_t_s[i]), rgb=to_rgb8(image), K=self.K, index=i)
+        return Frame(t_s=float(self.frame_t_s[i]), rgb=to_rgb8(image), K=self.K, index=i)
 
     def events(self) -> Iterator[Frame | ImuBatch]:
         if self.imu is None:

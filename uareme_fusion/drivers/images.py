@@ -135,7 +135,7 @@ class ImageSource(Source):
             rgb = to_rgb8(image)
         except InputError as exc:
             raise SourceError(f"{self.paths[i]}: {exc}") from None
-        return Frame(t=float(self.t_s[i]), rgb=rgb, K=self.info.K, index=i)
+        return Frame(t_s=float(self.t_s[i]), rgb=rgb, K=self.info.K, index=i)
 
     def events(self) -> Iterator[Frame]:
         for i in range(len(self.paths)):

@@ -106,7 +106,7 @@ class MergedSource(Source):
         checked = False
         for event in self.camera.events():
             if not checked and not isinstance(event, ImuBatch):
-                self._check_overlap(float(event.t))
+                self._check_overlap(float(event.t_s))
                 checked = True
             yield event
 

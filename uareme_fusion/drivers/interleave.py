@@ -2,7 +2,7 @@
 
     imu = ImuInterleaver(batches, time_offset_s=info.imu_time_offset_s)
     for frame in frames:
-        batch = imu.until(frame.t)          # every sample no later than the frame (camera clock)
+        batch = imu.until(frame.t_s)          # every sample no later than the frame (camera clock)
         if batch is not None:
             yield batch
         yield frame
@@ -102,7 +102,7 @@ def interleave(frames: Iterable, imu_batches: Iterable[ImuBatch] | None, time_of
         return
     imu = ImuInterleaver(imu_batches, time_offset_s)
     for frame in frames:
-        batch = imu.until(frame.t)
+        batch = imu.until(frame.t_s)
         if batch is not None:
             yield batch
         yield frame

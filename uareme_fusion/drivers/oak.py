@@ -72,7 +72,7 @@ def frame_from_messages(rgb_msg, index: int, K: np.ndarray | None = None, depth_
         if raw.shape[:2] != rgb.shape[:2]:
             raise SourceError(f"oak: depth of size {raw.shape[:2]} is not aligned to RGB of size {rgb.shape[:2]}")
         depth = raw.astype(np.float32) / np.float32(depth_units_per_m)  # as the TUM reader divides: replays match
-    return Frame(t=timestamp_s(rgb_msg.getTimestampDevice()), rgb=rgb, depth=depth, K=K, index=index)
+    return Frame(t_s=timestamp_s(rgb_msg.getTimestampDevice()), rgb=rgb, depth=depth, K=K, index=index)
 
 
 @dataclass
@@ -146,7 +146,7 @@ class FrameImuSync:
 
     def push_frame(self, frame: Frame) -> list:
         if not self.use_imu:
-            self._released_t_s = max(self._released_t_s, frame.t)
+            self._released_t_s = max(self._released_t_s, frame.t_s)
             return [frame]
         self._frames.append(frame)
         return self._release()
@@ -156,12 +156,12 @@ class FrameImuSync:
 
     def _release(self, force: bool = False) -> list:
         out = []
-        while self._frames and (force or self._newest_imu_s() > self._frames[0].t
+        while self._frames and (force or self._newest_imu_s() > self._frames[0].t_s
                                 or len(self._frames) > self.max_pending_frames):
             frame = self._frames.popleft()
-            out.extend(self._imu_until(frame.t))
+            out.extend(self._imu_until(frame.t_s))
             out.append(frame)
-            self._released_t_s = max(self._released_t_s, frame.t)
+            self._released_t_s = max(self._released_t_s, frame.t_s)
         return out
 
     def _imu_until(self, t_s: float) -> list:

@@ -94,7 +94,7 @@ class Recorder:
         return json.dumps(meta, indent=1) + "\n"
 
     def write_frame(self, frame: Frame) -> None:
-        n, stamp = self.n_frames, repr(float(frame.t))
+        n, stamp = self.n_frames, repr(float(frame.t_s))
         rgb = frame.rgb
         if rgb is None:
             shape = frame.normals.normals.shape[:2] if frame.normals is not None else (1, 1)

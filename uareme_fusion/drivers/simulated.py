@@ -118,8 +118,8 @@ class SimulatedSource(Source):
             R_cm = self.trajectory.R_cm(t)
             for i, (ti, R) in enumerate(zip(t, R_cm)):
                 nm = manhattan_normal_map(R, rng, o.height, o.width, noise_deg=self.normals_noise_deg)
-                nm = dataclasses.replace(nm, kappa=nm.kappa * np.float32(GT_KAPPA), t=float(ti))
-                yield Frame(t=float(ti), K=self.K, index=a + i, normals=nm)
+                nm = dataclasses.replace(nm, kappa=nm.kappa * np.float32(GT_KAPPA), t_s=float(ti))
+                yield Frame(t_s=float(ti), K=self.K, index=a + i, normals=nm)
 
     def _rendered_frames(self) -> Iterator[Frame]:
         o, spec, world = self.options, self.spec, self.world
@@ -140,8 +140,8 @@ class SimulatedSource(Source):
                 rgb[:] = 0
                 depth = np.zeros_like(depth)
                 kappa[:] = 0
-            yield Frame(t=t, rgb=rgb, depth=depth.astype(np.float32), K=self.K, index=i,
-                        normals=NormalMap(normals_c.astype(np.float32), kappa, t=t))
+            yield Frame(t_s=t, rgb=rgb, depth=depth.astype(np.float32), K=self.K, index=i,
+                        normals=NormalMap(normals_c.astype(np.float32), kappa, t_s=t))
 
     # ----- IMU ----------------------------------------------------------------------------------
     def imu_batches(self) -> Iterator[ImuBatch]:

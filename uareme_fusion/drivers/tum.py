@@ -120,7 +120,7 @@ def read_frame_normals(path: Path, t: float | None = None) -> NormalMap:
         raise InputError(f"{path}: expected normals (H, W, 3) and kappa (H, W), got {normals.shape}, {kappa.shape}")
     if dropped:
         kappa = np.zeros_like(kappa)
-    return NormalMap(normals, kappa, t=t)
+    return NormalMap(normals, kappa, t_s=t)
 
 
 class TumSource(Source):
@@ -214,7 +214,7 @@ class TumSource(Source):
         if self._undistorter is not None:
             frame = self._undistorter.frame(frame)
         t = float(self.t_s[i])
-        return dataclasses.replace(frame, t=t, normals=self._normals(i, t))
+        return dataclasses.replace(frame, t_s=t, normals=self._normals(i, t))
 
     def _frames(self) -> Iterator[Frame]:
         for i in range(len(self.seq)):

@@ -115,7 +115,7 @@ class VideoSource(Source):
                 now = time.monotonic()
                 t0 = now if t0 is None else t0
                 t = now - t0
-            yield Frame(t=float(t), rgb=to_rgb8(image), index=index)
+            yield Frame(t_s=float(t), rgb=to_rgb8(image), index=index)
             last_t = t
             index += 1
 

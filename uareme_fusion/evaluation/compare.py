@@ -165,7 +165,7 @@ def plot_errors(runs: dict, seq: VisualSequence, path: Path) -> None:
     FigureCanvasAgg(fig)
     ax_are, ax_tilt = fig.subplots(2, 1, sharex=True)
     for name, run in runs.items():
-        t = np.array([e.t for e in run.estimates])
+        t = np.array([e.t_s for e in run.estimates])
         if seq.R_wc_true is not None:
             err = errors_over_time(run, seq.R_wc_true)
             ax_are.plot(t, err["are_deg"], label=name, lw=1)

@@ -35,7 +35,7 @@ def source_sequence(source: Source, cfg: RunConfig, progress=None) -> VisualSequ
         if isinstance(event, ImuBatch):
             imu.append(event)
             continue
-        t_frames.append(event.t)
+        t_frames.append(event.t_s)
         visuals.append(solver.solve(normals.estimate_frame(event) if normals is not None else None, event))
         if progress is not None:
             progress(len(t_frames), source.info.n_frames)

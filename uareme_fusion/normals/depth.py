@@ -144,11 +144,11 @@ class DepthNormals:
 
     def estimate_frame(self, frame: Frame) -> NormalMap:
         """Normals of a `Frame`'s depth with its own K; `InputError` if either is missing."""
-        source = f"frame {frame.index} (t = {frame.t:g} s)"
+        source = f"frame {frame.index} (t = {frame.t_s:g} s)"
         if frame.depth is None:
             raise InputError(f"{source}: depth normals need a depth map, the frame has none")
         result = self.estimate(frame.depth, frame.K, source=source)
-        return dataclasses.replace(result, t=frame.t)
+        return dataclasses.replace(result, t_s=frame.t_s)
 
     def estimate(self, depth_m, K, source: str = "depth map") -> NormalMap:
         """Unit normals (H, W, 3) float32 in the OpenCV camera frame, facing the camera, and kappa

@@ -204,10 +204,10 @@ class LearnedNormals:
 
     def estimate_frame(self, frame: Frame) -> NormalMap:
         """Normals of a `Frame`'s RGB image; `InputError` if it has none."""
-        source = f"frame {frame.index} (t = {frame.t:g} s)"
+        source = f"frame {frame.index} (t = {frame.t_s:g} s)"
         if frame.rgb is None:
             raise InputError(f"{source}: learned normals need an RGB image, the frame has none")
-        return dataclasses.replace(self.estimate(frame.rgb, source=source), t=frame.t)
+        return dataclasses.replace(self.estimate(frame.rgb, source=source), t_s=frame.t_s)
 
     def estimate(self, rgb_uint8, source: str = "image") -> NormalMap:
         """Unit normals (H, W, 3) float32 in the OpenCV camera frame and kappa (H, W) float32 in

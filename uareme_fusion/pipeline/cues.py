@@ -67,10 +67,10 @@ class CueSolver:
         if frame.K is not None:
             self.focal = FocalEstimate(np.asarray(frame.K, float), "given", width=frame.rgb.shape[1]
                                        if frame.rgb is not None else 0)
-            return solve_given_K(self.solver, normal_map, segments, frame.K, R_init, t=frame.t)
+            return solve_given_K(self.solver, normal_map, segments, frame.K, R_init, t_s=frame.t_s)
         if segments is not None and len(segments) and self._attempts < FOCAL_ATTEMPTS:
             self._attempts += 1
-            visual, focal = solve_with_focal(self.solver, normal_map, segments, R_init, self.focal_config, t=frame.t)
+            visual, focal = solve_with_focal(self.solver, normal_map, segments, R_init, self.focal_config, t_s=frame.t_s)
             if focal.source == "estimated":
                 self._focal_px.append(focal.f_px)
             if len(self._focal_px) >= 3:
@@ -81,7 +81,7 @@ class CueSolver:
         if self.focal is None:
             h, w = (segments.height, segments.width) if segments is not None else normal_map.normals.shape[:2]
             self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
-        visual = solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t=frame.t)
+        visual = solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t_s=frame.t_s)
         return unknown_centre_floor(visual, self.focal, self.focal_config, self.solver)
 
 

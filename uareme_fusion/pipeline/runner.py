@@ -143,9 +143,9 @@ class Pipeline:
         t0 = time.perf_counter()
         normal_map = self.normals.estimate_frame(frame) if self.normals is not None else None
         t1 = time.perf_counter()
-        visual = self.visual_rotation(normal_map, frame.t, frame)
+        visual = self.visual_rotation(normal_map, frame.t_s, frame)
         t2 = time.perf_counter()
-        estimate = self.backend.process_frame(frame.t, visual)
+        estimate = self.backend.process_frame(frame.t_s, visual)
         if normal_map is None and frame.depth is None and getattr(self.normals, "needs_depth", False):
             estimate = dataclasses.replace(estimate, status=estimate.status | Status.DEPTH_MISSING)
             self.stats.frames_without_depth += 1
@@ -157,7 +157,7 @@ class Pipeline:
         self.stats.frames_without_visual += visual is None
         focal = getattr(self.cues, "focal", None)
         K = focal.K if focal is not None and focal.source != "assumed" else frame.K
-        return self._emit(FrameResult(frame.t, estimate, frame, normal_map, visual, K))
+        return self._emit(FrameResult(frame.t_s, estimate, frame, normal_map, visual, K))
 
     def _emit(self, result: FrameResult) -> FrameResult:
         t0 = time.perf_counter()

@@ -73,7 +73,7 @@ class CappedNormals:
         if nm is None:
             return None
         if nm.kappa is not None and np.nanmax(nm.kappa, initial=0.0) > self.cap:
-            nm = NormalMap(nm.normals, np.minimum(nm.kappa, self.cap), nm.t, nm.independent_regions)
+            nm = NormalMap(nm.normals, np.minimum(nm.kappa, self.cap), nm.t_s, nm.independent_regions)
         return nm
 
 

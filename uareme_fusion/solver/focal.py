@@ -77,18 +77,18 @@ def segment_moments(segments: LineSegments, K: np.ndarray) -> LineMoments:
 
 
 def solve_given_K(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments | None,
-                  K: np.ndarray, R_init=None, t: float | None = None) -> VisualRotation:
+                  K: np.ndarray, R_init=None, t_s: float | None = None) -> VisualRotation:
     """The joint solve with known intrinsics (segments may be None or empty)."""
     lines = segment_moments(segments, K) if segments is not None and len(segments) else None
-    return solver.solve(normal_map, lines, R_init, t=t)
+    return solver.solve(normal_map, lines, R_init, t_s=t_s)
 
 
 def solve_with_focal(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments, R_init=None,
-                     config: FocalConfig | None = None, t: float | None = None) -> tuple[VisualRotation, FocalEstimate]:
+                     config: FocalConfig | None = None, t_s: float | None = None) -> tuple[VisualRotation, FocalEstimate]:
     """Rotation and focal length together (see the module docstring); `segments` sets the image size.
     The rotation's covariance includes `unknown_centre_floor`."""
     cfg = config or FocalConfig()
-    visual, focal = _solve_with_focal(solver, normal_map, segments, R_init, cfg, t)
+    visual, focal = _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s)
     return unknown_centre_floor(visual, focal, cfg, solver), focal
 
 
@@ -102,10 +102,10 @@ def unknown_centre_floor(visual: VisualRotation, focal: FocalEstimate, config: F
     return _replace_cov(visual, solver, visual.cov + std_rad**2 * np.eye(3))
 
 
-def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t) -> tuple[VisualRotation, FocalEstimate]:
+def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s) -> tuple[VisualRotation, FocalEstimate]:
     h, w = segments.height, segments.width
     K_assumed = assumed_K(h, w, cfg.assumed_fov_deg)
-    reference = solve_given_K(solver, normal_map, segments, K_assumed, R_init, t)
+    reference = solve_given_K(solver, normal_map, segments, K_assumed, R_init, t_s)
     if "lines" not in reference.cues:
         return reference, FocalEstimate(K_assumed, "assumed", width=w)
     lo, hi = (w / 2.0 / math.tan(math.radians(a) / 2.0) for a in cfg.hfov_range_deg[::-1])
@@ -113,7 +113,7 @@ def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t) -> tuple[Vis
     profile, rotations = [], []
     for lf in log_f:
         K = centred_K(math.exp(lf), h, w)
-        v = solve_given_K(solver, normal_map, segments, K, None, t)
+        v = solve_given_K(solver, normal_map, segments, K, None, t_s)
         rotations.append(v.R_cm)
         profile.append(pixel_consistency(segments, K, v.R_cm, cfg.endpoint_noise_px))
     i = best_interior_peak(np.array(profile))
@@ -131,8 +131,8 @@ def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t) -> tuple[Vis
         return reference, FocalEstimate(K_assumed, "assumed", width=w)
     f = math.exp(lf_best)
     K = centred_K(f, h, w)
-    visual = solve_given_K(solver, normal_map, segments, K, rotations[i], t)
-    slope = _rotation_slope(solver, normal_map, segments, f, visual.R_cm, t)
+    visual = solve_given_K(solver, normal_map, segments, K, rotations[i], t_s)
+    slope = _rotation_slope(solver, normal_map, segments, f, visual.R_cm, t_s)
     visual = _replace_cov(visual, solver, visual.cov + std_log_f**2 * np.outer(slope, slope))
     return visual, FocalEstimate(K, "estimated", std_px=f * std_log_f, width=w)
 
@@ -163,11 +163,11 @@ def pixel_consistency(segments: LineSegments, K: np.ndarray, R_cm: np.ndarray, n
     return float((w * np.exp(-0.5 * (c / s) ** 2)).sum() / max(w.sum(), 1e-300))
 
 
-def _rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, f_px: float, R_cm, t,
+def _rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, f_px: float, R_cm, t_s,
                     h: float = 0.02) -> np.ndarray:
     """d delta / d log f: how the solved rotation moves (right perturbation, rad) as f changes."""
     ends = [solve_given_K(solver, normal_map, segments, centred_K(f_px * math.exp(s * h), segments.height,
-                                                                   segments.width), R_cm, t).R_cm for s in (1, -1)]
+                                                                   segments.width), R_cm, t_s).R_cm for s in (1, -1)]
     return log_so3(R_cm.T @ ends[0]) / (2 * h) - log_so3(R_cm.T @ ends[1]) / (2 * h)
 
 

@@ -151,9 +151,9 @@ class JointSolver:
         return lines is not None and lines.n_effective >= self.line_config.min_effective_segments
 
     def solve(self, normal_map: NormalMap | None, lines: LineMoments | None, R_init=None,
-              t: float | None = None) -> VisualRotation:
+              t_s: float | None = None) -> VisualRotation:
         """`R_cm` and its covariance from the cues present. Raises `InputError` when neither is usable."""
-        t = (normal_map.t if normal_map is not None else float("nan")) if t is None else t
+        t_s = (normal_map.t_s if normal_map is not None else float("nan")) if t_s is None else t_s
         use_lines = self.line_cue_present(lines)
         if not use_lines:
             if normal_map is None:
@@ -169,7 +169,7 @@ class JointSolver:
         R_cm, iterations, converged = self._solve_cues(cues, R_init)
         cov = self._covariance(cues, R_cm)
         t2 = time.perf_counter()
-        return self._result(cues, R_cm, cov, iterations, converged, t, {"moments": 1e3 * (t1 - t0),
+        return self._result(cues, R_cm, cov, iterations, converged, t_s, {"moments": 1e3 * (t1 - t0),
                                                                          "optimise": 1e3 * (t2 - t1)})
 
     # --- cues -------------------------------------------------------------------------------------
@@ -241,7 +241,7 @@ class JointSolver:
             c.info = (vec * (c.alpha * c.discount * np.maximum(val, 0.0))) @ vec.T
         return information_to_covariance(sum(c.info for c in cues), self.config)
 
-    def _result(self, cues, R_cm, cov, iterations, converged, t, timing_ms) -> VisualRotation:
+    def _result(self, cues, R_cm, cov, iterations, converged, t_s, timing_ms) -> VisualRotation:
         total = sum(float(np.trace(c.info)) for c in cues)
         summary = {}
         for c in cues:
@@ -254,7 +254,7 @@ class JointSolver:
             R_cm=R_cm, cov=cov, cost=cost, iterations=iterations,
             n_valid=normals.moments.n_valid if normals else 0,
             n_invalid=normals.moments.n_invalid if normals else 0,
-            quality=float(np.clip(1.0 - cost / main.random_cost, 0.0, 1.0)), converged=converged, t=t,
+            quality=float(np.clip(1.0 - cost / main.random_cost, 0.0, 1.0)), converged=converged, t_s=t_s,
             timing_ms=timing_ms, cues=summary)
 
 

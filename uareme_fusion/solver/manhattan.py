@@ -64,10 +64,10 @@ class ManhattanSolver:
 
     def solve(self, normal_map: NormalMap, R_init: np.ndarray | None = None) -> VisualRotation:
         """Rotation and covariance for one normal map; `R_init` (3, 3) is an `R_cm` guess or None."""
-        return self.solve_arrays(normal_map.normals, normal_map.kappa, R_init, t=normal_map.t,
+        return self.solve_arrays(normal_map.normals, normal_map.kappa, R_init, t_s=normal_map.t_s,
                                  independent_regions=normal_map.independent_regions)
 
-    def solve_arrays(self, normals, kappa=None, R_init=None, t: float = float("nan"),
+    def solve_arrays(self, normals, kappa=None, R_init=None, t_s: float = float("nan"),
                      independent_regions: float | None = None) -> VisualRotation:
         """As `solve`, on arrays; `independent_regions` overrides the config's (see NormalMap)."""
         t0 = time.perf_counter()
@@ -98,7 +98,7 @@ class ManhattanSolver:
             n_invalid=moments.n_invalid,
             quality=float(np.clip(1.0 - cost / RANDOM_NORMALS_COST, 0.0, 1.0)),
             converged=converged,
-            t=t,
+            t_s=t_s,
             timing_ms={"moments": 1e3 * (t1 - t0), "optimise": 1e3 * (t2 - t1)},
         )
 
