@@ -24,13 +24,11 @@ import cv2
 import numpy as np
 
 from uareme_fusion.errors import InputError, SourceError
-from uareme_fusion.io.images import read_image
 from uareme_fusion.types import Frame
 
-from ..formats.images import to_rgb8
+from ..formats.images import IMAGE_SUFFIXES, images_in_folder, natural_key, read_rgb
 from .base import Source, SourceInfo
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm", ".jp2")
 DEFAULT_FPS = 30.0
 EPOCH_UNITS = {"ns": (1e-9, 10**17, 10**19), "us": (1e-6, 10**14, 10**16), "ms": (1e-3, 10**11, 10**13)}
 """Integer names in [lo, hi) are epoch times in this unit (seconds per unit, lo, hi): 1973 to 2286."""
@@ -40,17 +38,12 @@ RELATIVE_UNITS = {"ms": (1e-3, 10, 1000), "us": (1e-6, 10_000, 1_000_000)}
 _NUMBER = re.compile(r"^\d+(\.\d+)?$")
 
 
-def natural_key(path: Path) -> list:
-    """Sort key ordering numbers inside names by value: `img2` before `img10`."""
-    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
-
-
 def list_images(spec: str | Path) -> list[Path]:
     """The image files a folder, a single file or a glob pattern names, in natural order."""
     text = str(spec)
     path = Path(text)
     if path.is_dir():
-        files = [p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES]
+        files = images_in_folder(path)
         if not files:
             raise InputError(f"image folder {path}: holds no image files ({', '.join(IMAGE_SUFFIXES)})")
     elif path.is_file():
@@ -128,13 +121,9 @@ class ImageSource(Source):
     def read_frame(self, i: int) -> Frame:
         """Frame i, RGB uint8; `SourceError` naming the file when it cannot be decoded."""
         try:
-            image = read_image(self.paths[i], cv2.IMREAD_UNCHANGED, what=f"image {i} of {self.info.name}")
+            rgb = read_rgb(self.paths[i])
         except InputError as exc:
             raise SourceError(str(exc)) from None
-        try:
-            rgb = to_rgb8(image)
-        except InputError as exc:
-            raise SourceError(f"{self.paths[i]}: {exc}") from None
         return Frame(t_s=float(self.t_s[i]), rgb=rgb, K=self.info.K, index=i)
 
     def events(self) -> Iterator[Frame]:

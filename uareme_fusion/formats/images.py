@@ -6,6 +6,7 @@ the same way for every source (image files, folders, videos, EuRoC, the single-i
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import cv2
@@ -13,6 +14,21 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.images import read_image
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm", ".jp2")
+"""File endings read as images wherever a folder or a file is given (lower case)."""
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg")
+
+
+def natural_key(path: Path) -> list:
+    """Sort key ordering numbers inside names by value: `img2` before `img10`."""
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
+
+
+def images_in_folder(folder: Path) -> list[Path]:
+    """The image files (`IMAGE_SUFFIXES`) directly in `folder`, in natural order; [] when none."""
+    return sorted((p for p in Path(folder).iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES),
+                  key=natural_key)
 
 
 def to_rgb8(image: np.ndarray) -> np.ndarray:

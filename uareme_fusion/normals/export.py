@@ -22,20 +22,18 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
-from ..formats.images import read_rgb
+from ..formats.images import IMAGE_SUFFIXES, VIDEO_SUFFIXES, images_in_folder, read_rgb
 from ..io.normal_maps import normals_to_rgb
 from ..io.safe_files import write_image_atomic, write_npz_atomic
 from ..types import NormalMap
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
-VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg")
 
 
 def list_frames(input_path: Path) -> tuple[int, Iterator[tuple[str, np.ndarray]]]:
     """(frame count, iterator of (stem, RGB uint8 image)) for an image, a folder of images or a video."""
     path = Path(input_path)
     if path.is_dir():
-        files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+        files = images_in_folder(path)
         if not files:
             raise InputError(f"{path}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder")
         return len(files), ((stem, read_rgb(p)) for stem, p in zip(unique_stems(files), files))

@@ -20,7 +20,7 @@ import numpy as np
 from ..drivers.base import SourceInfo
 from ..drivers.intrinsics import scaled_camera, undistorted_image
 from ..errors import InputError
-from ..formats.images import read_rgb
+from ..formats.images import IMAGE_SUFFIXES, images_in_folder, read_rgb
 from ..io.images import image_size, reduction_for
 from ..lines.detect import LineSegments, SegmentDetector
 from ..overlay import side_by_side
@@ -36,7 +36,6 @@ from ..types import Frame, NormalMap, VisualRotation
 from .cues import DEFAULT_CUES, parse_cues
 from .stages import CappedNormals, make_normal_estimator
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 IMAGE_DETECT_WIDTH_PX = 640
 """Single images are not time-critical: LSD at 640 px wide scores ECD AUC 63.4% against 60.5% at
 the stream's 320 px (lines only), for 4x the detection time (12 vs 3.3 ms at 640x480)."""
@@ -95,7 +94,7 @@ def image_paths(inputs: list[str | Path]) -> list[Path]:
     paths: list[Path] = []
     for item in map(Path, inputs):
         if item.is_dir():
-            found = sorted(p for p in item.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+            found = images_in_folder(item)
             if not found:
                 raise InputError(f"{item}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder")
             paths.extend(found)
