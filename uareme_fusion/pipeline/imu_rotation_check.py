@@ -127,35 +127,25 @@ class ImuRotationCheck:
         if len(self.pairs) >= MAX_PAIRS:
             return
         t, prev = result.t_s, self._prev
+        imu_t, imu_w = self._buffered_imu()
         if result.visual is None:
             self._prev = None
         else:
             R_cm = result.visual.R_cm if prev is None else result.visual.symmetric_to(prev[1]).R_cm
             if prev is not None and 0 < t - prev[0] <= MAX_PAIR_GAP_S:
                 phi_c = Rotation.from_matrix(prev[1] @ R_cm.T).as_rotvec()
-                phi_i = self._gyro_rotvec(prev[0], t)
+                phi_i = _gyro_rotvec(imu_t, imu_w, prev[0], t)
                 if phi_i is not None and np.degrees(np.linalg.norm(phi_c)) < MAX_VISUAL_STEP_DEG:
                     self.pairs.append((phi_i, phi_c, t - prev[0]))
             self._prev = (t, R_cm)
-        self._keep_imu_after(t)  # memory stays bounded by the samples of one frame interval
+        keep = imu_t > t  # memory stays bounded by the samples of one frame interval
+        self._imu_t, self._imu_w = [imu_t[keep]], [imu_w[keep]]
 
-    def _gyro_rotvec(self, t0: float, t1: float) -> np.ndarray | None:
-        """Rotation vector of the gyro integrated over camera time (t0, t1] (zero-order hold)."""
+    def _buffered_imu(self) -> tuple[np.ndarray, np.ndarray]:
+        """The gyro samples since the last frame as (t (N,) s on the camera clock, w (N, 3) rad/s)."""
         if not self._imu_t:
-            return None
-        t, w = np.concatenate(self._imu_t), np.concatenate(self._imu_w)
-        inside = (t > t0) & (t <= t1)
-        if not inside.any():
-            return None
-        edges = np.concatenate([[t0], t[inside]])
-        dt = np.diff(edges)  # each sample holds over the interval before it
-        return _compose_rotvecs(w[inside] * dt[:, None])
-
-    def _keep_imu_after(self, t_s: float) -> None:
-        if self._imu_t:
-            t_all, w_all = np.concatenate(self._imu_t), np.concatenate(self._imu_w)
-            keep = t_all > t_s
-            self._imu_t, self._imu_w = [t_all[keep]], [w_all[keep]]
+            return np.zeros(0), np.zeros((0, 3))
+        return np.concatenate(self._imu_t), np.concatenate(self._imu_w)
 
     def close(self) -> None:
         pass
@@ -196,6 +186,16 @@ class ImuRotationCheck:
             hint = f"estimated from the data: --imu-rotation {q} (quaternion x,y,z,w)"
         return (f"vision and the IMU disagree by {report['angle_to_used_deg']:.0f} deg about the camera-IMU "
                 f"rotation; {hint}")
+
+
+def _gyro_rotvec(t: np.ndarray, w: np.ndarray, t0: float, t1: float) -> np.ndarray | None:
+    """Rotation vector of the gyro samples (t (N,) s, w (N, 3) rad/s) integrated over camera time
+    (t0, t1] (zero-order hold: each sample holds over the interval before it); None without samples."""
+    inside = (t > t0) & (t <= t1)
+    if not inside.any():
+        return None
+    dt = np.diff(np.concatenate([[t0], t[inside]]))
+    return _compose_rotvecs(w[inside] * dt[:, None])
 
 
 def _compose_rotvecs(steps: np.ndarray) -> np.ndarray:
