@@ -13,23 +13,17 @@ convention as `--imu-time-offset-s`).
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
 from ..formats.euroc import read_euroc_ground_truth
 from ..formats.tum import read_tum_trajectory
+from ..io.text_tables import sniff_delimiter
 from .base import GroundTruth
-
-
-def _is_euroc(path: Path) -> bool:
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for line in fh:
-            if line.strip() and not line.lstrip().startswith("#"):
-                return "," in line
-    raise InputError(f"{path}: the ground-truth file holds no rows")
+from .tum import ground_truth_from_tum
 
 
 def read_ground_truth_file(path: str | Path, time_offset_s: float = 0.0, R_ci: np.ndarray | None = None) -> GroundTruth:
@@ -39,15 +33,15 @@ def read_ground_truth_file(path: str | Path, time_offset_s: float = 0.0, R_ci: n
         raise InputError(f"--gt {path}: no such file")
     if not np.isfinite(time_offset_s):
         raise InputError(f"--gt-time-offset-s must be a finite number of seconds, got {time_offset_s}")
-    if _is_euroc(path):
+    if sniff_delimiter(path) == ",":
         t_s, R_wi = read_euroc_ground_truth(path)
-        R_wc = R_wi @ (np.eye(3) if R_ci is None else np.asarray(R_ci, float)).T
+        truth = GroundTruth(np.asarray(t_s, float), R_wi @ (np.eye(3) if R_ci is None else np.asarray(R_ci, float)).T,
+                            gravity_aligned=True)
     else:
-        t_s, _, quat_xyzw = read_tum_trajectory(path)
-        R_wc = Rotation.from_quat(quat_xyzw).as_matrix()
-    if len(t_s) == 0:
+        truth = ground_truth_from_tum(read_tum_trajectory(path), gravity_aligned=True)
+    if len(truth.t_s) == 0:
         raise InputError(f"{path}: the ground-truth file holds no rows")
-    return GroundTruth(np.asarray(t_s, float) + time_offset_s, R_wc, gravity_aligned=True)
+    return dataclasses.replace(truth, t_s=truth.t_s + time_offset_s)
 
 
 def with_ground_truth_file(source, path: str | Path, time_offset_s: float = 0.0):
