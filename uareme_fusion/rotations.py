@@ -177,8 +177,8 @@ def quat_xyzw(R: np.ndarray, assume_valid: bool = False) -> np.ndarray:
     """Rotation matrix (..., 3, 3) to unit quaternion (..., 4), order x y z w, w >= 0;
     `assume_valid`: the matrices are rotations (scipy skips its checks, ~7x faster)."""
     R = np.asarray(R, float)
-    if R.shape == (3, 3):  # one matrix, as file sinks write per estimate: scipy costs ~100 us here
-        return _quat_xyzw_one(R)
+    if R.size == 9:  # one matrix (3, 3) or (1, 3, 3), as sinks write per estimate: scipy costs ~100 us here
+        return _quat_xyzw_one(R.reshape(3, 3)).reshape(R.shape[:-2] + (4,))
     return Rotation.from_matrix(R, assume_valid=assume_valid).as_quat(canonical=True)
 
 

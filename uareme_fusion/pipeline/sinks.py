@@ -39,11 +39,6 @@ def status_names(status: Status) -> str:
     return "|".join(f.name for f in Status if f and f in status)
 
 
-def _quats_xyzw(R_wc: np.ndarray) -> np.ndarray:
-    """(M, 4) quaternions x y z w of (M, 3, 3) rotations (one matrix without scipy's overhead)."""
-    return quat_xyzw(R_wc[0])[None] if R_wc.shape[0] == 1 else quat_xyzw(R_wc, assume_valid=True)
-
-
 
 
 class TumTrajectoryWriter:
@@ -58,7 +53,7 @@ class TumTrajectoryWriter:
 
     def write_many(self, estimates: Estimates) -> None:
         """The rows of many estimates, written (and, on a full disk, taken back) together."""
-        values = np.concatenate([estimates.t_s[:, None], _quats_xyzw(estimates.R_wc)], axis=1)
+        values = np.concatenate([estimates.t_s[:, None], quat_xyzw(estimates.R_wc, assume_valid=True)], axis=1)
         self._rows.write_row((TUM_ROW * len(estimates)) % tuple(values.ravel().tolist()), counts=len(estimates))
 
     def undo_last(self) -> None:
@@ -103,7 +98,7 @@ class EstimatesCsvWriter:
         """csv rows (\\r\\n ends, as `csv_line`) of M estimates: `t_s` (M,), `R_wc` and `cov` (M, 3, 3),
         `bias` (M, 3) or None (a NaN row: empty cells), visual quality cells and status ints."""
         n = t_s.shape[0]
-        numbers = np.concatenate([t_s[:, None], _quats_xyzw(R_wc), cov.reshape(n, 9), R_wc[:, 2, :]], axis=1)
+        numbers = np.concatenate([t_s[:, None], quat_xyzw(R_wc, assume_valid=True), cov.reshape(n, 9), R_wc[:, 2, :]], axis=1)
         with_bias = bias is not None and bool(np.isfinite(bias).all())
         row = _CSV_NUMBERS + (",%.6e,%.6e,%.6e" if with_bias else ",,,") + "\0"
         values = np.concatenate([numbers, bias], axis=1) if with_bias else numbers
