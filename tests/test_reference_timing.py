@@ -1,4 +1,5 @@
-"""The IMU's delay against an optical reference, measured from gyro and reference alone (benchmarks)."""
+"""The IMU's delay against an optical reference, measured from gyro and reference alone, and the
+BROAD benchmark's pairing of estimate times with samples (benchmarks)."""
 
 from __future__ import annotations
 
@@ -38,3 +39,12 @@ def test_retimed_reference_reads_earlier_and_keeps_gaps():
     R = retimed_reference(t, R_ref, 2.0 / RATE_HZ)
     assert np.isnan(R[50]).all()
     np.testing.assert_allclose(R[200], R_ref[198], atol=1e-9)
+
+
+def test_broad_bench_pairs_rounded_times_with_their_own_samples():
+    from uareme_fusion.benchmarks.broad import nearest_sample
+
+    t = np.arange(5000) / RATE_HZ
+    rounded = np.array([float("%.9f" % x) for x in t])
+    assert (np.searchsorted(t, rounded) != np.arange(t.size)).any()  # what the benchmark did
+    np.testing.assert_array_equal(nearest_sample(t, rounded, RATE_HZ), np.arange(t.size))
