@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from uareme_fusion import jit
+from uareme_fusion.solver.lines import line_moments, sextic_tensor_reference
 from uareme_fusion.solver.moments import BLOCK_PIXELS, check_normal_map, fused_moments, normal_moments_reference
 
 pytestmark = pytest.mark.skipif(not jit.available(), reason="numba not installed: no compiled path to test")
@@ -86,3 +87,22 @@ def test_every_sequence_of_block_paths_sums_and_counts_like_the_reference():
         ref = normal_moments_reference(n32.astype(np.float64), k32.astype(np.float64))  # exact sums
         np.testing.assert_allclose(fused.G, ref.G, rtol=0, atol=1e-12 * np.abs(ref.G).max())
         assert (fused.n_valid, fused.n_invalid) == (ref.n_valid, ref.n_invalid)
+
+
+@pytest.mark.parametrize("n_segments", [0, 1, 7, 2500])
+def test_compiled_line_moments_match_the_cube_product(n_segments):
+    """The line cue's sixth-order tensor from its 28 distinct sums (compiled) equals the (N, 27) cube
+    product, for any number of segments; NaN planes and weights <= 0 are left out of both."""
+    rng = np.random.default_rng(n_segments)
+    p = rng.normal(size=(n_segments, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    w = rng.uniform(0.1, 30.0, size=n_segments)
+    if n_segments > 5:
+        p[2, 1] = np.nan
+        w[3] = 0.0
+        w[4] = -1.0
+    m = line_moments(p, w)
+    assert m.n_segments == n_segments - (3 if n_segments > 5 else 0)
+    ref = sextic_tensor_reference(m.planes, m.weights)
+    np.testing.assert_allclose(m.T, ref, rtol=0, atol=1e-12 * max(np.abs(ref).max(), 1e-300))
+    np.testing.assert_array_equal(m.T, m.T.T)

@@ -10,9 +10,10 @@ monomials q(n) = (x^2, y^2, z^2, xy, xz, yz) / |n|^2 (dividing by |n|^2 makes ev
 length at no extra pass). Only 15 entries are distinct.
 
 Two implementations of the same sums: `fused_moments`, one compiled pass (numba) that reads each
-normal and kappa once and accumulates in float64, and `normal_moments_reference`, the vectorised
-numpy one (about ten passes over the pixels), kept as the reference that tests and the benchmark
-compare against and used when numba is missing.
+normal and kappa from memory once and accumulates in float64 (blocks of 1024 pixels; a block with
+holes is summed again from cache with selects, see `_fused_sums`), and `normal_moments_reference`,
+the vectorised numpy one (about ten passes over the pixels), kept as the reference that tests and
+the benchmark compare against and used when numba is missing.
 """
 
 from __future__ import annotations
