@@ -211,33 +211,12 @@ def _clean_block_sums(n, k, unit_weights, largest, min_sq_norm, out):
     return _CLEAN
 
 
-def _weight_select_block_sums(n, k, unit_weights, largest, min_sq_norm, out):
-    """Any block whose vectors are finite: an invalid vector's weight is set to 0, which zeroes its
-    terms. Adds the sums and counts to `out` and returns `_CLEAN` when every vector was valid with a
-    weight > 0, else `_WEIGHT_SELECT`; when the sums are not finite (a NaN or Inf vector: 0 * Inf),
-    adds nothing and returns `_FULL_SELECT`."""
-    s = _ZERO_MOMENTS
-    n_positive = 0.0
-    n_invalid = 0.0
-    m = n.shape[0] // 3
-    for i in range(m):
-        x, y, z, w, sq = _vector(n, k, unit_weights, i)
-        valid = _is_valid(sq, w, largest, min_sq_norm)
-        n_invalid += 0.0 if valid else 1.0
-        n_positive += 1.0 if valid and w > 0.0 else 0.0
-        s = _add_moments(s, w if valid else 0.0, x, y, z)
-    total = 0.0
-    for j in range(15):
-        total += s[j]
-    if not math.isfinite(total):
-        return _FULL_SELECT
-    _add_to(out, s, n_positive, n_invalid)
-    return _CLEAN if n_positive == m else _WEIGHT_SELECT
-
-
-def _full_select_block_sums(n, k, unit_weights, largest, min_sq_norm, out):
-    """Any block: an invalid vector is replaced by zeros (weight and coordinates). Adds the sums and
-    counts to `out` and returns the cheapest path this block would have allowed (for the next one)."""
+def _selected_block_sums(n, k, unit_weights, largest, min_sq_norm, out, zero_coordinates):
+    """Any block, with selects: an invalid vector's weight is set to 0, which zeroes its terms when
+    its coordinates are finite; with `zero_coordinates` (NaN or Inf normals) they are set to 0 too.
+    Adds the sums and counts to `out` and returns the cheapest path this block would have allowed,
+    for the next one. Without `zero_coordinates`, a block whose sums are not finite (0 * Inf) adds
+    nothing and returns `_FULL_SELECT`: it must be summed again."""
     s = _ZERO_MOMENTS
     n_positive = 0.0
     n_invalid = 0.0
@@ -249,8 +228,15 @@ def _full_select_block_sums(n, k, unit_weights, largest, min_sq_norm, out):
         n_invalid += 0.0 if valid else 1.0
         n_positive += 1.0 if valid and w > 0.0 else 0.0
         sq_total += sq
-        # Selects, not branches: LLVM vectorises the loop.
-        s = _add_moments(s, w if valid else 0.0, x if valid else 0.0, y if valid else 0.0, z if valid else 0.0)
+        if zero_coordinates:  # selects, not branches: LLVM vectorises the loop
+            x, y, z = (x, y, z) if valid else (0.0, 0.0, 0.0)
+        s = _add_moments(s, w if valid else 0.0, x, y, z)
+    if not zero_coordinates:
+        total = 0.0
+        for j in range(15):
+            total += s[j]
+        if not math.isfinite(total):
+            return _FULL_SELECT
     _add_to(out, s, n_positive, n_invalid)
     if n_positive == m:
         return _CLEAN
@@ -263,8 +249,8 @@ def _fused_sums(n, k, unit_weights, largest, min_sq_norm, out):
     valid vectors with weight > 0, out[16] invalid vectors; `k` is ignored with `unit_weights`.
 
     Each block takes the cheapest path that the block before it allowed (holes come in patches):
-    no selects (`_clean_block_sums`), a select on the weight (`_weight_select_block_sums`), or
-    selects on weight and coordinates (`_full_select_block_sums`, NaN or Inf normals); a path that
+    no selects (`_clean_block_sums`), a select on the weight (`_selected_block_sums`), or
+    selects on weight and coordinates (the same with `zero_coordinates`, NaN or Inf normals); a path that
     finds its block needs a stricter one adds nothing, and the block is summed again from cache."""
     out[:] = 0.0
     m = n.shape[0] // 3
@@ -278,10 +264,10 @@ def _fused_sums(n, k, unit_weights, largest, min_sq_norm, out):
             if path == _CLEAN:
                 continue
         if path == _WEIGHT_SELECT:
-            path = _weight_select_block_sums(block, weights, unit_weights, largest, min_sq_norm, out)
+            path = _selected_block_sums(block, weights, unit_weights, largest, min_sq_norm, out, False)
             if path != _FULL_SELECT:
                 continue
-        path = _full_select_block_sums(block, weights, unit_weights, largest, min_sq_norm, out)
+        path = _selected_block_sums(block, weights, unit_weights, largest, min_sq_norm, out, True)
 
 
 _ZERO_MOMENTS = (0.0,) * 15
@@ -294,8 +280,7 @@ if jit.available():  # the kernel calls these as compiled functions
     _is_valid = jit.compiled(_is_valid, inline="always")
     _add_to = jit.compiled(_add_to, inline="always")
     _clean_block_sums = jit.compiled(_clean_block_sums, fastmath=_FASTMATH, error_model="numpy")
-    _weight_select_block_sums = jit.compiled(_weight_select_block_sums, fastmath=_FASTMATH, error_model="numpy")
-    _full_select_block_sums = jit.compiled(_full_select_block_sums, fastmath=_FASTMATH, error_model="numpy")
+    _selected_block_sums = jit.compiled(_selected_block_sums, fastmath=_FASTMATH, error_model="numpy")
 _fused_kernel = jit.compiled(_fused_sums, fastmath=_FASTMATH, error_model="numpy")
 
 
