@@ -141,7 +141,7 @@ def _sextic_sums(p, w, exponents, out):
         out[m] = s
 
 
-_sextic_kernel = jit.compiled(_sextic_sums, fastmath={"reassoc", "contract"})
+_sextic_kernel = jit.compiled(_sextic_sums, cache=True, fastmath={"reassoc", "contract"})
 
 
 def _sextic_tensor(p: np.ndarray, w: np.ndarray) -> np.ndarray:

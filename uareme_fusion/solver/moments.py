@@ -274,14 +274,15 @@ _ZERO_MOMENTS = (0.0,) * 15
 _FASTMATH = {"reassoc", "contract"}
 """Sums may be regrouped (vectorised partial sums) and a * b + s fused: float64 rounding either way.
 No flag that assumes finite values: NaN and Inf must still fail the validity tests."""
+# Machine code cached on disk (`jit.compiled`): compiling takes about 5 s per dtype.
 if jit.available():  # the kernel calls these as compiled functions
-    _add_moments = jit.compiled(_add_moments, inline="always", fastmath=_FASTMATH)
-    _vector = jit.compiled(_vector, inline="always", fastmath=_FASTMATH, error_model="numpy")
-    _is_valid = jit.compiled(_is_valid, inline="always")
-    _add_to = jit.compiled(_add_to, inline="always")
-    _clean_block_sums = jit.compiled(_clean_block_sums, fastmath=_FASTMATH, error_model="numpy")
-    _selected_block_sums = jit.compiled(_selected_block_sums, fastmath=_FASTMATH, error_model="numpy")
-_fused_kernel = jit.compiled(_fused_sums, fastmath=_FASTMATH, error_model="numpy")
+    _add_moments = jit.compiled(_add_moments, cache=True, inline="always", fastmath=_FASTMATH)
+    _vector = jit.compiled(_vector, cache=True, inline="always", fastmath=_FASTMATH, error_model="numpy")
+    _is_valid = jit.compiled(_is_valid, cache=True, inline="always")
+    _add_to = jit.compiled(_add_to, cache=True, inline="always")
+    _clean_block_sums = jit.compiled(_clean_block_sums, cache=True, fastmath=_FASTMATH, error_model="numpy")
+    _selected_block_sums = jit.compiled(_selected_block_sums, cache=True, fastmath=_FASTMATH, error_model="numpy")
+_fused_kernel = jit.compiled(_fused_sums, cache=True, fastmath=_FASTMATH, error_model="numpy")
 
 
 _LARGEST = {np.dtype(t): float(np.finfo(t).max) for t in (np.float32, np.float64)}
