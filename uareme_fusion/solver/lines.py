@@ -84,9 +84,7 @@ def line_moments(planes: np.ndarray, weights: np.ndarray) -> LineMoments:
     w = np.asarray(weights, float)
     finite = np.isfinite(p[:, 0]) & np.isfinite(p[:, 1]) & np.isfinite(p[:, 2])  # 5x faster than np.all(axis=1)
     ok = np.isfinite(w) & (w > 0) & finite
-    if not ok.all():
-        p, w = p[ok], w[ok]
-    p = np.ascontiguousarray(p)
+    p, w = (p.copy(), w.copy()) if ok.all() else (p[ok], w[ok])  # own C-contiguous copies either way
     T = _sextic_tensor(p, w)
     s2 = float(np.dot(w, w))
     return LineMoments(T=T, total_weight=float(w.sum()), n_segments=int(len(w)),

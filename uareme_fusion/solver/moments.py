@@ -188,6 +188,7 @@ def _is_valid(sq, w, largest, min_sq_norm):
 
 
 def _add_to(out, s, n_positive, n_invalid):
+    """Add a block's 15 sums and its two counts to the kernel's output (layout of `_fused_sums`)."""
     for j in range(15):
         out[j] += s[j]
     out[15] += n_positive
@@ -203,6 +204,7 @@ def _clean_block_sums(n, k, unit_weights, largest, min_sq_norm, out):
     m = n.shape[0] // 3
     for i in range(m):
         x, y, z, w, sq = _vector(n, k, unit_weights, i)
+        # `_is_valid` and w > 0 (which also rules out -0.0), in four comparisons.
         clean += 1.0 if (sq > min_sq_norm) & (sq <= largest) & (w > 0.0) & (w <= largest) else 0.0
         s = _add_moments(s, w, x, y, z)
     if clean != m:
