@@ -7,7 +7,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from uareme_fusion import jit
-from uareme_fusion.solver.moments import check_normal_map, fused_moments, normal_moments_reference
+from uareme_fusion.solver.lines import line_moments, sextic_tensor_reference
+from uareme_fusion.solver.moments import BLOCK_PIXELS, check_normal_map, fused_moments, normal_moments_reference
 
 pytestmark = pytest.mark.skipif(not jit.available(), reason="numba not installed: no compiled path to test")
 
@@ -53,3 +54,55 @@ def test_float32_map_matches_a_float64_reference_to_float64_rounding():
        arrays(np.float64, (7,), elements=st.one_of(st.floats(-10, 1e6), st.sampled_from([np.nan, np.inf, -0.0]))))
 def test_any_small_float64_map_counts_and_sums_like_the_reference(n, k):
     assert_same(n, k)
+
+
+def test_every_sequence_of_block_paths_sums_and_counts_like_the_reference():
+    """Blocks without holes, with finite holes (weight select) and with NaN/Inf (full select), in
+    random orders and a last partial block: the path a block takes must not change its sums."""
+    B = BLOCK_PIXELS
+    defects = {
+        "none": lambda n, k, i: None,
+        "zero normal": lambda n, k, i: n.__setitem__(i, 0.0),
+        "tiny normal": lambda n, k, i: n.__setitem__(i, 1e-7),
+        "NaN normal": lambda n, k, i: n.__setitem__((i, 1), np.nan),
+        "Inf normal": lambda n, k, i: n.__setitem__((i, 2), -np.inf),
+        "zero kappa": lambda n, k, i: k.__setitem__(i, 0.0),
+        "-0 kappa": lambda n, k, i: k.__setitem__(i, -0.0),
+        "negative kappa": lambda n, k, i: k.__setitem__(i, -2.0),
+        "Inf kappa": lambda n, k, i: k.__setitem__(i, np.inf),
+    }
+    names = list(defects)
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        size = 6 * B + int(rng.integers(1, B))
+        n = rng.normal(size=(size, 3))
+        k = rng.uniform(0.5, 40.0, size=size)
+        for block in range(7):
+            kind = names[int(rng.integers(len(names)))] if rng.random() < 0.6 else "none"
+            for i in rng.integers(block * B, min((block + 1) * B, size), size=int(rng.integers(1, 4))):
+                defects[kind](n, k, i)
+        assert_same(n, k)
+        n32, k32 = n.astype(np.float32), k.astype(np.float32)
+        fused = fused_moments(*check_normal_map(n32, k32))
+        ref = normal_moments_reference(n32.astype(np.float64), k32.astype(np.float64))  # exact sums
+        np.testing.assert_allclose(fused.G, ref.G, rtol=0, atol=1e-12 * np.abs(ref.G).max())
+        assert (fused.n_valid, fused.n_invalid) == (ref.n_valid, ref.n_invalid)
+
+
+@pytest.mark.parametrize("n_segments", [0, 1, 7, 2500])
+def test_compiled_line_moments_match_the_cube_product(n_segments):
+    """The line cue's sixth-order tensor from its 28 distinct sums (compiled) equals the (N, 27) cube
+    product, for any number of segments; NaN planes and weights <= 0 are left out of both."""
+    rng = np.random.default_rng(n_segments)
+    p = rng.normal(size=(n_segments, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    w = rng.uniform(0.1, 30.0, size=n_segments)
+    if n_segments > 5:
+        p[2, 1] = np.nan
+        w[3] = 0.0
+        w[4] = -1.0
+    m = line_moments(p, w)
+    assert m.n_segments == n_segments - (3 if n_segments > 5 else 0)
+    ref = sextic_tensor_reference(m.planes, m.weights)
+    np.testing.assert_allclose(m.T, ref, rtol=0, atol=1e-12 * max(np.abs(ref).max(), 1e-300))
+    np.testing.assert_array_equal(m.T, m.T.T)

@@ -30,5 +30,20 @@ def time_ms(fn: Callable[[], object], repeats: int, warmup: int = 3) -> np.ndarr
     return out
 
 
+def time_ms_interleaved(fns: dict[str, Callable[[], object]], repeats: int, warmup: int = 3) -> dict[str, np.ndarray]:
+    """As `time_ms` for several functions, called in turn within each repeat: a ratio between them
+    is not skewed by a change of load on a shared machine during the run."""
+    for fn in fns.values():
+        for _ in range(warmup):
+            fn()
+    out = {name: np.empty(repeats) for name in fns}
+    for i in range(repeats):
+        for name, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            out[name][i] = (time.perf_counter() - t0) * 1e3
+    return out
+
+
 def summary(values: np.ndarray) -> str:
     return f"median {np.median(values):7.3f}  p90 {np.percentile(values, 90):7.3f}  min {values.min():7.3f}"

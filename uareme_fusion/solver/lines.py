@@ -10,7 +10,8 @@ which is zero when each segment runs along some axis. It is bounded (prod_k c_k^
 c on the unit sphere), so a clutter segment pulls with at most a fixed force, and it is a
 homogeneous sextic in p: E_L depends on the segments only through the symmetric tensor
 T6 = sum_j w_j p_j^(x6), held as the 27x27 matrix T = sum_j w_j (p^(x3))(p^(x3))^T. One pass
-(one matrix product) builds T; each solver iteration then rotates it (T' = K3^T T K3 with
+builds T from its 28 distinct sums (compiled, as the normals' moments; the (N, 27) cube product is
+the reference); each solver iteration then rotates it (T' = K3^T T K3 with
 K3 = R (x) R (x) R, the tensor seen in Manhattan coordinates) and reads off the cost, gradient and
 Hessian as fixed linear functionals of T'. Those functionals come from the per-segment formulas of
 `segment_derivatives` (exact polynomials) evaluated on generic points: one place for the maths.
@@ -27,6 +28,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from .. import jit
 from ..errors import InputError
 from ..rotations import skew
 
@@ -65,10 +67,12 @@ def interpretation_planes(endpoints_px: np.ndarray, K: np.ndarray) -> tuple[np.n
     if ends.ndim != 3 or ends.shape[1:] != (2, 2):
         raise InputError(f"Expected segment end points of shape (N, 2, 2), got {ends.shape}")
     K_inv = np.linalg.inv(np.asarray(K, float))
-    ones = np.ones(ends.shape[:2] + (1,))
-    rays = np.concatenate([ends, ones], axis=2) @ K_inv.T  # (N, 2, 3)
-    p = np.cross(rays[:, 0], rays[:, 1])
-    norm = np.linalg.norm(p, axis=1)
+    # K^-1 (u, v, 1) for both end points as one (2N, 2) x (2, 3) product (a stack of small
+    # products is 20x slower), then the cross product by components (np.cross is 3x slower).
+    rays = (ends.reshape(-1, 2) @ K_inv[:, :2].T + K_inv[:, 2]).reshape(-1, 2, 3)
+    (ax, ay, az), (bx, by, bz) = np.moveaxis(rays[:, 0], 1, 0), np.moveaxis(rays[:, 1], 1, 0)
+    p = np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=1)
+    norm = np.sqrt(np.einsum("ij,ij->i", p, p))
     ok = np.isfinite(norm) & (norm > _MIN_PLANE_NORM)
     p = np.divide(p, norm[:, None], out=np.zeros_like(p), where=ok[:, None])
     return p, ok
@@ -78,10 +82,10 @@ def line_moments(planes: np.ndarray, weights: np.ndarray) -> LineMoments:
     """The weighted sixth-order moments (as `LineMoments`) of unit plane normals (N, 3)."""
     p = np.asarray(planes, float)
     w = np.asarray(weights, float)
-    ok = np.isfinite(w) & (w > 0) & np.all(np.isfinite(p), axis=1)
-    p, w = p[ok], w[ok]
-    P3 = _cubes(p)
-    T = (P3 * w[:, None]).T @ P3
+    finite = np.isfinite(p[:, 0]) & np.isfinite(p[:, 1]) & np.isfinite(p[:, 2])  # 5x faster than np.all(axis=1)
+    ok = np.isfinite(w) & (w > 0) & finite
+    p, w = (p.copy(), w.copy()) if ok.all() else (p[ok], w[ok])  # own C-contiguous copies either way
+    T = _sextic_tensor(p, w)
     s2 = float(np.dot(w, w))
     return LineMoments(T=T, total_weight=float(w.sum()), n_segments=int(len(w)),
                        n_effective=float(w.sum() ** 2 / s2) if s2 > 0 else 0.0, planes=p, weights=w)
@@ -90,6 +94,67 @@ def line_moments(planes: np.ndarray, weights: np.ndarray) -> LineMoments:
 def _cubes(p: np.ndarray) -> np.ndarray:
     """p (x) p (x) p flattened, (N, 27)."""
     return np.einsum("na,nb,nc->nabc", p, p, p).reshape(len(p), 27)
+
+
+def sextic_tensor_reference(p: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """T = sum_j w_j (p_j^(x3))(p_j^(x3))^T, (27, 27), by one matrix product over (N, 27) cubes
+    (the reference that the compiled pass of `_sextic_tensor` is tested against)."""
+    P3 = _cubes(p)
+    return (P3 * w[:, None]).T @ P3
+
+
+def _sextic_exponents() -> tuple[np.ndarray, np.ndarray]:
+    """The 28 distinct monomials x^i y^j z^k of degree 6 as exponents (28, 3), and the (27, 27)
+    index of each entry of T in them (entry (abc, def) is the monomial p_a p_b p_c p_d p_e p_f)."""
+    exponents = np.array([(i, j, 6 - i - j) for i in range(7) for j in range(7 - i)])
+    number = {tuple(e): m for m, e in enumerate(exponents)}
+    axes = np.stack(np.unravel_index(np.arange(27), (3, 3, 3)), axis=1)  # (27, 3): a, b, c of row abc
+    counts = (axes[:, :, None] == np.arange(3)).sum(axis=1)  # (27, 3): how often x, y, z occur
+    index = np.array([[number[tuple(ca + cb)] for cb in counts] for ca in counts])
+    for a in (exponents, index):
+        a.setflags(write=False)
+    return exponents, index
+
+
+_SEXTIC_EXPONENTS, _SEXTIC_INDEX = _sextic_exponents()
+
+
+def _sextic_sums(p, w, exponents, out):
+    """out[m] = sum_j w_j p_jx^i p_jy^k p_jz^l for the exponents (i, k, l) in row m: powers of each
+    coordinate in (7, N) tables (one read of `p`), then one vectorised pass per monomial over them."""
+    n = p.shape[0]
+    wx, y, z = np.empty((7, n)), np.empty((7, n)), np.empty((7, n))
+    for j in range(n):
+        wx[0, j], y[0, j], z[0, j] = w[j], 1.0, 1.0
+    for e in range(1, 7):
+        for j in range(n):
+            wx[e, j] = wx[e - 1, j] * p[j, 0]
+            y[e, j] = y[e - 1, j] * p[j, 1]
+            z[e, j] = z[e - 1, j] * p[j, 2]
+    for m in range(exponents.shape[0]):
+        a, b, c = wx[exponents[m, 0]], y[exponents[m, 1]], z[exponents[m, 2]]
+        s = 0.0
+        for j in range(n):
+            s += a[j] * b[j] * c[j]
+        out[m] = s
+
+
+_sextic_kernel = jit.compiled(_sextic_sums, cache=True, fastmath={"reassoc", "contract"})
+
+
+def _sextic_tensor(p: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """`sextic_tensor_reference` from its 28 distinct sums, in one compiled pass (the reference
+    without numba). `p` (N, 3) float64 C-contiguous, `w` (N,)."""
+    global _sextic_kernel
+    if _sextic_kernel is not None:
+        sums = np.empty(len(_SEXTIC_EXPONENTS))
+        try:
+            _sextic_kernel(p, w, _SEXTIC_EXPONENTS, sums)
+            return sums[_SEXTIC_INDEX]
+        except Exception as exc:  # noqa: BLE001 -- a compiler failure falls back to the reference
+            jit.disable(exc)
+            _sextic_kernel = None
+    return sextic_tensor_reference(p, w)
 
 
 def normalised_line_cost(moments: LineMoments, R_cm: np.ndarray) -> np.ndarray:

@@ -10,9 +10,10 @@ monomials q(n) = (x^2, y^2, z^2, xy, xz, yz) / |n|^2 (dividing by |n|^2 makes ev
 length at no extra pass). Only 15 entries are distinct.
 
 Two implementations of the same sums: `fused_moments`, one compiled pass (numba) that reads each
-normal and kappa once and accumulates in float64, and `normal_moments_reference`, the vectorised
-numpy one (about ten passes over the pixels), kept as the reference that tests and the benchmark
-compare against and used when numba is missing.
+normal and kappa from memory once and accumulates in float64 (blocks of 1024 pixels; a block with
+holes is summed again from cache with selects, see `_fused_sums`), and `normal_moments_reference`,
+the vectorised numpy one (about ten passes over the pixels), kept as the reference that tests and
+the benchmark compare against and used when numba is missing.
 """
 
 from __future__ import annotations
@@ -131,69 +132,163 @@ def _reference_moments(n: np.ndarray, k: np.ndarray | None) -> NormalMoments:
     return _from_distinct(distinct, int(np.count_nonzero(weight > 0)), n_invalid)
 
 
+def _gram_index() -> np.ndarray:
+    """(6, 6) index of each Gram entry in the 15 distinct moments (`_DISTINCT_PAIRS` order)."""
+    index = np.empty((6, 6), dtype=np.intp)
+    for j, (a, b) in enumerate(_DISTINCT_PAIRS):
+        index[a, b] = index[b, a] = j
+    for (a, b), (c, d) in _REPEATED_PAIRS:
+        index[a, b] = index[b, a] = index[c, d]
+    index.setflags(write=False)
+    return index
+
+
+_GRAM_INDEX = _gram_index()
+
+
 def _from_distinct(distinct, n_valid: int, n_invalid: int) -> NormalMoments:
     """`NormalMoments` from the 15 distinct moments in `_DISTINCT_PAIRS` order."""
-    G = np.empty((6, 6))
-    for value, (a, b) in zip(distinct, _DISTINCT_PAIRS):
-        G[a, b] = G[b, a] = value
-    for (a, b), (c, d) in _REPEATED_PAIRS:
-        G[a, b] = G[b, a] = G[c, d]
+    G = np.asarray(distinct, dtype=np.float64)[_GRAM_INDEX]
     # sum_i w_i = sum_i w_i (|n_i|^2)^2 = sum of the squared-monomial block (a, b < 3) of G.
     return NormalMoments(G=G, total_weight=float(G[:3, :3].sum()), n_valid=n_valid, n_invalid=n_invalid)
 
 
+BLOCK_PIXELS = 1024
+"""Pixels per block of the compiled pass (12-24 KB of normals: a block summed again stays in cache)."""
+
+# How a block is summed, cheapest first (`_fused_sums`).
+_CLEAN, _WEIGHT_SELECT, _FULL_SELECT = 0, 1, 2
+
+
+def _add_moments(s, w, x, y, z):
+    """The 15-tuple `s` of distinct moments (`_DISTINCT_PAIRS` order) plus one vector's terms
+    w q_a q_b, from the squared monomials (a < 3) weighted once: 9 products and 15 fused adds."""
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    a, b, c = w * xx, w * yy, w * zz
+    return (s[0] + a * xx, s[1] + b * yy, s[2] + c * zz, s[3] + a * yy, s[4] + a * zz, s[5] + b * zz,
+            s[6] + a * xy, s[7] + a * xz, s[8] + a * yz, s[9] + b * xy, s[10] + b * xz, s[11] + b * yz,
+            s[12] + c * xy, s[13] + c * xz, s[14] + c * yz)
+
+
+def _vector(n, k, unit_weights, i):
+    """Vector i of a block in float64 (read once), its weight kappa / |n|^4 and |n|^2. Computed in
+    float64, they cannot overflow for float32 input."""
+    x, y, z = np.float64(n[3 * i]), np.float64(n[3 * i + 1]), np.float64(n[3 * i + 2])
+    sq = x * x + y * y + z * z
+    return x, y, z, (1.0 if unit_weights else np.float64(k[i])) / (sq * sq), sq
+
+
+def _is_valid(sq, w, largest, min_sq_norm):
+    """Validity as in `_reference_moments`, where |n|^2 and kappa/|n|^4 are computed in the input's
+    dtype and must be finite: here they must not exceed `largest` (that dtype's largest finite
+    value), which differs only within one rounding of the overflow threshold. NaN fails every
+    comparison; -0.0 (a negative kappa that underflowed) counts as negative."""
+    return (sq > min_sq_norm) & (sq <= largest) & (w <= largest) & (math.copysign(1.0, w) > 0.0)
+
+
+def _add_to(out, s, n_positive, n_invalid):
+    """Add a block's 15 sums and its two counts to the kernel's output (layout of `_fused_sums`)."""
+    for j in range(15):
+        out[j] += s[j]
+    out[15] += n_positive
+    out[16] += n_invalid
+
+
+def _clean_block_sums(n, k, unit_weights, largest, min_sq_norm, out):
+    """Block `n` (3M,: x y z of each vector in turn) and `k` (M,) when every vector is valid with a
+    weight > 0: adds its sums to `out` and returns `_CLEAN`. Otherwise adds nothing and returns
+    `_WEIGHT_SELECT`. No selects: one test per vector (the path of a map without holes)."""
+    s = _ZERO_MOMENTS
+    clean = 0.0
+    m = n.shape[0] // 3
+    for i in range(m):
+        x, y, z, w, sq = _vector(n, k, unit_weights, i)
+        # `_is_valid` and w > 0 (which also rules out -0.0), in four comparisons.
+        clean += 1.0 if (sq > min_sq_norm) & (sq <= largest) & (w > 0.0) & (w <= largest) else 0.0
+        s = _add_moments(s, w, x, y, z)
+    if clean != m:
+        return _WEIGHT_SELECT
+    _add_to(out, s, m, 0.0)
+    return _CLEAN
+
+
+def _selected_block_sums(n, k, unit_weights, largest, min_sq_norm, out, zero_coordinates):
+    """Any block, with selects: an invalid vector's weight is set to 0, which zeroes its terms when
+    its coordinates are finite; with `zero_coordinates` (NaN or Inf normals) they are set to 0 too.
+    Adds the sums and counts to `out` and returns the cheapest path this block would have allowed,
+    for the next one. Without `zero_coordinates`, a block whose sums are not finite (0 * Inf) adds
+    nothing and returns `_FULL_SELECT`: it must be summed again."""
+    s = _ZERO_MOMENTS
+    n_positive = 0.0
+    n_invalid = 0.0
+    sq_total = 0.0  # finite when every vector is (an add, cheaper than a count)
+    m = n.shape[0] // 3
+    for i in range(m):
+        x, y, z, w, sq = _vector(n, k, unit_weights, i)
+        valid = _is_valid(sq, w, largest, min_sq_norm)
+        n_invalid += 0.0 if valid else 1.0
+        n_positive += 1.0 if valid and w > 0.0 else 0.0
+        sq_total += sq
+        if zero_coordinates:  # selects, not branches: LLVM vectorises the loop
+            x, y, z = (x, y, z) if valid else (0.0, 0.0, 0.0)
+        s = _add_moments(s, w if valid else 0.0, x, y, z)
+    if not zero_coordinates:
+        total = 0.0
+        for j in range(15):
+            total += s[j]
+        if not math.isfinite(total):
+            return _FULL_SELECT
+    _add_to(out, s, n_positive, n_invalid)
+    if n_positive == m:
+        return _CLEAN
+    return _WEIGHT_SELECT if math.isfinite(sq_total) else _FULL_SELECT
+
+
 def _fused_sums(n, k, unit_weights, largest, min_sq_norm, out):
-    """One pass over `n` (3N,: x y z of each vector in turn) and `k` (N,): out[:15] the distinct
-    moments in `_DISTINCT_PAIRS` order (float64 sums), out[15] valid pixels with weight > 0, out[16]
-    invalid pixels; `k` is ignored with `unit_weights`. All in float64; validity as in
-    `_reference_moments`, where |n|^2 and kappa/|n|^4 are computed in the input's dtype and must be
-    finite: here they must not exceed `largest` (that dtype's largest finite value), which differs
-    only within one rounding of the overflow threshold. Flat indexing and selects instead of
-    branches let LLVM vectorise the loop."""
-    s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = s9 = s10 = s11 = s12 = s13 = s14 = 0.0
-    n_pos = 0.0
-    n_bad = 0.0
-    for i in range(n.shape[0] // 3):
-        x, y, z = np.float64(n[3 * i]), np.float64(n[3 * i + 1]), np.float64(n[3 * i + 2])
-        kk = 1.0 if unit_weights else np.float64(k[i])
-        xx, yy, zz = x * x, y * y, z * z
-        sq = xx + yy + zz
-        w = kk / (sq * sq)  # float64: no overflow for float32 input
-        # NaN fails every comparison; -0.0 (a negative kappa that underflowed) counts as negative.
-        valid = (sq > min_sq_norm) & (sq <= largest) & (w <= largest) & (math.copysign(1.0, w) > 0.0)
-        n_bad += 0.0 if valid else 1.0
-        n_pos += 1.0 if valid and w > 0.0 else 0.0
-        w = w if valid else 0.0
-        x = x if valid else 0.0
-        y = y if valid else 0.0
-        z = z if valid else 0.0
-        xx, yy, zz = x * x, y * y, z * z
-        xy, xz, yz = x * y, x * z, y * z
-        wd = w
-        a, b, c = wd * xx, wd * yy, wd * zz
-        s0 += a * xx
-        s1 += b * yy
-        s2 += c * zz
-        s3 += a * yy
-        s4 += a * zz
-        s5 += b * zz
-        s6 += a * xy
-        s7 += a * xz
-        s8 += a * yz
-        s9 += b * xy
-        s10 += b * xz
-        s11 += b * yz
-        s12 += c * xy
-        s13 += c * xz
-        s14 += c * yz
-    out[0], out[1], out[2], out[3], out[4] = s0, s1, s2, s3, s4
-    out[5], out[6], out[7], out[8], out[9] = s5, s6, s7, s8, s9
-    out[10], out[11], out[12], out[13], out[14] = s10, s11, s12, s13, s14
-    out[15] = n_pos
-    out[16] = n_bad
+    """One pass over `n` (3N,: x y z of each vector in turn) and `k` (N,) in blocks of
+    `BLOCK_PIXELS`: out[:15] the distinct moments in `_DISTINCT_PAIRS` order (float64 sums), out[15]
+    valid vectors with weight > 0, out[16] invalid vectors; `k` is ignored with `unit_weights`.
+
+    Each block takes the cheapest path that the block before it allowed (holes come in patches):
+    no selects (`_clean_block_sums`), a select on the weight (`_selected_block_sums`), or
+    selects on weight and coordinates (the same with `zero_coordinates`, NaN or Inf normals); a path that
+    finds its block needs a stricter one adds nothing, and the block is summed again from cache."""
+    out[:] = 0.0
+    m = n.shape[0] // 3
+    path = _CLEAN
+    for start in range(0, m, BLOCK_PIXELS):
+        stop = min(start + BLOCK_PIXELS, m)
+        block = n[3 * start:3 * stop]
+        weights = k if unit_weights else k[start:stop]
+        if path == _CLEAN:
+            path = _clean_block_sums(block, weights, unit_weights, largest, min_sq_norm, out)
+            if path == _CLEAN:
+                continue
+        if path == _WEIGHT_SELECT:
+            path = _selected_block_sums(block, weights, unit_weights, largest, min_sq_norm, out, False)
+            if path != _FULL_SELECT:
+                continue
+        path = _selected_block_sums(block, weights, unit_weights, largest, min_sq_norm, out, True)
 
 
-_fused_kernel = jit.compiled(_fused_sums, fastmath={"reassoc", "contract"}, error_model="numpy")
+_ZERO_MOMENTS = (0.0,) * 15
+_FASTMATH = {"reassoc", "contract"}
+"""Sums may be regrouped (vectorised partial sums) and a * b + s fused: float64 rounding either way.
+No flag that assumes finite values: NaN and Inf must still fail the validity tests."""
+# Machine code cached on disk (`jit.compiled`): compiling takes about 5 s per dtype.
+if jit.available():  # the kernel calls these as compiled functions
+    _add_moments = jit.compiled(_add_moments, cache=True, inline="always", fastmath=_FASTMATH)
+    _vector = jit.compiled(_vector, cache=True, inline="always", fastmath=_FASTMATH, error_model="numpy")
+    _is_valid = jit.compiled(_is_valid, cache=True, inline="always")
+    _add_to = jit.compiled(_add_to, cache=True, inline="always")
+    _clean_block_sums = jit.compiled(_clean_block_sums, cache=True, fastmath=_FASTMATH, error_model="numpy")
+    _selected_block_sums = jit.compiled(_selected_block_sums, cache=True, fastmath=_FASTMATH, error_model="numpy")
+_fused_kernel = jit.compiled(_fused_sums, cache=True, fastmath=_FASTMATH, error_model="numpy")
+
+
+_LARGEST = {np.dtype(t): float(np.finfo(t).max) for t in (np.float32, np.float64)}
+_NO_WEIGHTS = {np.dtype(t): np.empty(0, t) for t in (np.float32, np.float64)}
 
 
 def fused_moments(vectors: np.ndarray, weights: np.ndarray | None) -> NormalMoments | None:
@@ -206,9 +301,9 @@ def fused_moments(vectors: np.ndarray, weights: np.ndarray | None) -> NormalMome
     out = np.empty(17)
     n = np.ascontiguousarray(vectors).reshape(-1)
     unit = weights is None
-    k = np.ones(1, n.dtype)[:0] if unit else np.ascontiguousarray(weights, dtype=n.dtype)
+    k = _NO_WEIGHTS[n.dtype] if unit else np.ascontiguousarray(weights, dtype=n.dtype)
     try:
-        _fused_kernel(n, k, unit, float(np.finfo(n.dtype).max), _MIN_SQUARED_NORM, out)
+        _fused_kernel(n, k, unit, _LARGEST[n.dtype], _MIN_SQUARED_NORM, out)
     except Exception as exc:  # noqa: BLE001 -- a compiler failure falls back to the reference
         jit.disable(exc)
         _fused_kernel = None
