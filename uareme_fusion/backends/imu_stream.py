@@ -134,9 +134,18 @@ class ImuStream:
             self.counts.duplicate += int((~unique).sum())
             self._held = rows[unique]
 
+    @property
+    def saturation_seen(self) -> bool:
+        """Whether any sample so far reached the gyro range (else no release holds a saturated one)."""
+        return self._saturation_seen
+
     def release_until(self, t_s: float, move_watermark: bool = True) -> ImuBatch:
         """Release every held sample stamped at or before `t_s`; later arrivals older than `t_s`
         then count as late when `move_watermark`."""
+        return ImuBatch.from_rows(self.release_rows_until(t_s, move_watermark))
+
+    def release_rows_until(self, t_s: float, move_watermark: bool = True) -> np.ndarray:
+        """`release_until`'s samples as rows (N, 8) (`types.IMU_COLUMNS`)."""
         held = self._held
         if not held.shape[0]:
             k = 0
@@ -152,7 +161,7 @@ class ImuStream:
                 self.counts.saturated += int(np.count_nonzero(out[:, 7]))
         if move_watermark and math.isfinite(t_s):
             self.watermark_s = max(self.watermark_s, float(t_s))
-        return ImuBatch.from_rows(out)
+        return out
 
     def flush(self) -> ImuBatch:
         """Release everything held."""
