@@ -89,7 +89,10 @@ def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoi
                 S[i, j] += dt * C[i, j]
         T += dt
         rate_var += (r0 * r0 + r1 * r1 + r2 * r2) * dt
-    A_bias = C.T @ S
+    A_bias = np.empty((3, 3))  # C^T S, written out (a BLAS call costs more than these 27 products)
+    for i in range(3):
+        for j in range(3):
+            A_bias[i, j] = C[0, i] * S[0, j] + C[1, i] * S[1, j] + C[2, i] * S[2, j]
     P_pred = P.copy()
     gyro_predict_in_place(P_pred, C, A_bias)
     q_th = q_gyro * T + q_bias * T**3 / 3.0 + q_rate * rate_var
