@@ -202,6 +202,12 @@ class ImuStream:
             self.watermark_s = max(self.watermark_s, float(t_s))
         return out
 
+    def released_elsewhere(self, t_s: float) -> None:
+        """Samples up to `t_s`, checked as `add` checks them (finite, in order, later than the
+        watermark, below the gyro range), went to their consumer without this buffer (nothing held):
+        later stamps at or before `t_s` now count as late, as after `release_until(t_s)`."""
+        self.watermark_s = max(self.watermark_s, float(t_s))
+
     def flush(self) -> ImuBatch:
         """Release everything held."""
         return self.release_until(np.inf, move_watermark=False)

@@ -112,6 +112,29 @@ def integrate_compiled(filt, rows: np.ndarray, extra_s: float, defer: bool) -> b
     return True
 
 
+def integrate_frame_batch_compiled(filt, t, gyro_c, accel_c, t_frame_s: float, defer: bool) -> bool:
+    """A batch that `process_imu` held unchecked (`t` (n,) s, `gyro_c` (n, 3) rad/s, `accel_c` (n, 3)
+    m/s^2, camera frame), nothing else in the reorder buffer: checked as `ImuStream.add` checks it
+    and integrated to the frame at `t_frame_s`, in one kernel call (`kernels.integrate_frame_batch`).
+    False, changing nothing, unless every sample is clean (finite, in order, later than the stream's
+    watermark, below the gyro range) and at or before the frame, with no IMU gap."""
+    stream = filt.stream
+    record_R, record_P = _record_buffers(filt, t.shape[0])
+    code = K.FRAME_BATCH(filt.x, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s, t_frame_s,
+                         _parameters(filt, defer), record_R, record_P)
+    if code < 0:
+        return False
+    stream.released_elsewhere(t_frame_s)
+    if record_R.shape[0]:
+        filt.record_t.append(t.copy())
+        filt.record_R.append(record_R)
+        filt.record_P.append(record_P)
+    filt.imu_t_s = float(t[-1])
+    if code:
+        _flag(filt, code)
+    return True
+
+
 def integrate_segments_compiled(filt, t, gyro_c, accel_c, ends: np.ndarray):
     """An IMU-only stream (camera frame, clean: see `kernels.integrate_segments`) integrated with an
     estimate after each segment `ends` (M,) (exclusive sample ends), in the filter's state buffer;

@@ -16,7 +16,7 @@ from ...config import load_config, preset_names
 from ...errors import InputError
 from ...types import Estimate, Estimates, ImuBatch, Status, VisualRotation
 from ..base import Backend
-from ..imu_stream import ImuStream
+from ..imu_stream import ImuStream, check_imu_arrays
 from .accel import AccelPeriod
 from .compiled import KERNEL, accel_update_compiled, harvest_kernel_counters
 from .config import GyroSampling, MekfConfig, MekfMode
@@ -89,7 +89,8 @@ class Mekf(Backend):
         self.manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_sqrt_s or cfg.manhattan_tilt_rw_rad_sqrt_s)
         self.trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
         self.compiled = cfg.compiled and KERNEL is not None
-        self.stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
+        self._stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
+        self._deferred: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # see `process_imu`
         self.motion = motion_for(cfg.mode)
         self._mode_resolved = cfg.mode != MekfMode.AUTO
         self.x = new_state_buffer()  # R_wc = R_wm = I, b_c = 0, P = 0, t_state None
@@ -142,7 +143,23 @@ class Mekf(Backend):
             return
         if self.config.imu_time_offset_s:
             t_s = np.asarray(t_s, float) + self.config.imu_time_offset_s
-        stream = self.stream
+        if self._deferred is not None:
+            self._add_deferred()
+        if self.compiled and self.initialised and self.motion.fuses_visual and self.imu_is_camera:
+            t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
+            n = t.shape[0]
+            # A frame's worth, nothing else waiting: held as it is until the frame checks and integrates
+            # it in one compiled call (`GyroMotion.propagate_to`); any other use of the stream adds it
+            # first, as below (a batch this short releases nothing on its own).
+            if (n and not self.pending and self._stream.held_count == 0
+                    and t[n - 1] - t[0] < self.config.accel_update_period_s + self._stream.reorder_window_s):
+                self._deferred = (t.copy(), gyro.copy(), accel.copy())  # the caller may reuse its arrays
+                return
+        self._add(t_s, gyro_rad_s, accel_m_s2)
+
+    def _add(self, t_s, gyro_rad_s, accel_m_s2) -> None:
+        """`process_imu`'s samples into the reorder buffer, released once they span an update period."""
+        stream = self._stream
         stream.add(t_s, gyro_rad_s, accel_m_s2)
         # Samples wait in the reorder buffer; a frame's `propagate_to` releases them, or, in an
         # IMU-only stream, this does once an accelerometer period's worth is older than the window.
@@ -150,6 +167,27 @@ class Mekf(Backend):
             self.queue(stream.release_until(stream.newest_s - stream.reorder_window_s, move_watermark=False))
             if self.pending_span_s >= self.config.accel_update_period_s:
                 self.motion.integrate_pending(self)
+
+    def _add_deferred(self) -> None:
+        deferred, self._deferred = self._deferred, None
+        self._add(*deferred)
+
+    def take_deferred(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The batch `process_imu` holds unchecked, `(t_s, gyro_rad_s, accel_m_s2)`, or None; the caller
+        integrates it, or hands it back to `add_taken`."""
+        deferred, self._deferred = self._deferred, None
+        return deferred
+
+    def add_taken(self, t_s, gyro_rad_s, accel_m_s2) -> None:
+        """A batch from `take_deferred` that its caller did not integrate: added as `process_imu` adds."""
+        self._add(t_s, gyro_rad_s, accel_m_s2)
+
+    @property
+    def stream(self) -> ImuStream:
+        """The IMU reorder buffer, with the batch `process_imu` may hold for the next frame added first."""
+        if self._deferred is not None:
+            self._add_deferred()
+        return self._stream
 
     def flush(self) -> None:
         """Release and integrate every buffered IMU sample (end of an IMU-only stream)."""

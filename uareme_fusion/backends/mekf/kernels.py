@@ -30,6 +30,7 @@ from ... import jit
 from .accel import chunk_bounds
 from .matrix3 import exp3_into, inv3, matmul3_into
 from .measurements import gravity_model, zero_rate_model
+from ..imu_stream import rows_if_clean
 from .state import orthonormal, reset_jacobian
 from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED,
                            S_ACCEL_UPDATES, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE, S_REST_UPDATES,
@@ -237,6 +238,20 @@ def integrate_batch(x, rows, extra_s, p, record_R, record_P):
     return code + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
 
 
+def integrate_frame_batch(x, t, gyro, accel, watermark_s, gyro_range_rad_s, t_frame_s, p, record_R, record_P):
+    """`integrate_batch` for a batch not yet checked (`t` (n,) s, `gyro` (n, 3) rad/s, `accel` (n, 3)
+    m/s^2, camera frame), propagated to a frame at `t_frame_s` s: -2, changing nothing, unless all its
+    samples are clean (`imu_stream.rows_if_clean` against `watermark_s` and `gyro_range_rad_s`) and at
+    or before the frame, with the frame no further than `P_GAP_LIMIT` past the last one."""
+    n = t.shape[0]
+    if n == 0 or not t[n - 1] <= t_frame_s or not t_frame_s - t[n - 1] <= p[P_GAP_LIMIT]:
+        return -2
+    rows = np.empty((n, 8))
+    if not rows_if_clean(t, gyro, accel, watermark_s, gyro_range_rad_s, rows):
+        return -2
+    return integrate_batch(x, rows, t_frame_s - t[n - 1], p, record_R, record_P)
+
+
 def has_gap(t, t_state, gap_limit_s):
     """Whether a step between samples `t` (from `t_state` on) exceeds `gap_limit_s` (an IMU gap)."""
     t_prev = t_state
@@ -383,17 +398,20 @@ ACCEL_UPDATE = None
 """`accel_update_in_place` compiled, or None."""
 SEGMENTS = None
 """`integrate_segments` compiled, or None."""
+FRAME_BATCH = None
+"""`integrate_frame_batch` compiled, or None."""
 if jit.available():
     try:
         _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into, exp3,
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
                  zero_rate_measurement, kalman_update, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks,
-                 state_views)
+                 state_views, rows_if_clean, integrate_batch)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
-        KERNEL = jit.compiled(integrate_batch, cache=True, error_model="numpy")
+        KERNEL = integrate_batch
+        FRAME_BATCH = jit.compiled(integrate_frame_batch, cache=True, error_model="numpy")
         ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
         SEGMENTS = jit.compiled(integrate_segments, cache=True, error_model="numpy")
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)
-        KERNEL = ACCEL_UPDATE = SEGMENTS = None
+        KERNEL = ACCEL_UPDATE = SEGMENTS = FRAME_BATCH = None
