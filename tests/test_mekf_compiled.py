@@ -140,3 +140,27 @@ def test_without_numba_the_reference_runs_after_one_warning_line():
     warnings = [line for line in out.stderr.splitlines() if "compiled kernels unavailable" in line]
     assert len(warnings) == 1
 
+
+
+@needs_numba
+def test_frame_batch_held_for_its_frame_is_a_copy_and_counted_when_read():
+    """`process_imu` holds a frame's batch for the frame's single compiled call: the caller may reuse
+    its arrays at once, and the stream's counts are current whenever they are read."""
+    traj, t, gyro, accel = stream(3, duration_s=6.0)
+    gyro = gyro.copy()
+    gyro[400, 1] = np.nan
+    filt, ref = (Mekf(c) for c in both(load_config("handheld", MekfConfig)))
+    buf_t, buf_g, buf_a = np.empty(7), np.empty((7, 3)), np.empty((7, 3))
+    for i in range(0, t.size - 7, 7):  # one reused buffer; a frame after one batch or after two
+        buf_t[:], buf_g[:], buf_a[:] = t[i:i + 7], gyro[i:i + 7], accel[i:i + 7]
+        filt.process_imu(buf_t, buf_g, buf_a)
+        ref.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
+        if i % 21 == 14:  # read before the frame: the held batch counted like any other
+            assert filt.stream.counts == ref.stream.counts
+        buf_t[:] = np.nan  # reused before the frame
+        if i % 21 != 7:
+            t_f = float(t[i + 6]) + 0.001
+            e, e_ref = filt.process_frame(t_f, None), ref.process_frame(t_f, None)
+            assert e.status == e_ref.status
+    assert filt.stream.counts.nonfinite == 1
+    assert_same_filters(filt, ref)

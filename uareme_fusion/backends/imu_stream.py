@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import jit
 from ..errors import InputError
 from ..types import IMU_COLUMNS as COLUMNS
 from ..types import ImuBatch
@@ -43,8 +44,38 @@ class ImuStreamCounts:
 _EMPTY_ROWS = np.zeros((0, COLUMNS))
 
 
+def rows_if_clean(t, gyro, accel, newest_s, gyro_range_rad_s, rows) -> bool:
+    """Whether samples `t` (n,) s, `gyro` (n, 3) rad/s, `accel` (n, 3) m/s^2 are all finite, strictly
+    later than `newest_s` and each other, with every gyro axis below `gyro_range_rad_s`; if so they
+    are written into `rows` (n, 8) (`types.IMU_COLUMNS`, not saturated). One pass, for
+    `ImuStream.add`'s common case (numba-compiled as `_ROWS_IF_CLEAN` when available)."""
+    t_prev = newest_s
+    for k in range(t.shape[0]):
+        if not (t[k] > t_prev and abs(t[k]) < np.inf):  # False for NaN
+            return False
+        t_prev = t[k]
+        rows[k, 0] = t[k]
+        for i in range(3):
+            g, a = gyro[k, i], accel[k, i]
+            if not (abs(g) < gyro_range_rad_s and abs(a) < np.inf):
+                return False
+            rows[k, 1 + i], rows[k, 4 + i] = g, a
+        rows[k, 7] = 0.0
+    return True
+
+
+_ROWS_IF_CLEAN = jit.compiled(rows_if_clean, cache=True) if jit.available() else None
+
+
+_FLOAT64 = np.dtype(np.float64)
+
+
 def check_imu_arrays(t_s, gyro_rad_s, accel_m_s2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shapes `(N,)`, `(N, 3)`, `(N, 3)` as float arrays, or an `InputError` naming what is wrong."""
+    if (type(t_s) is np.ndarray and type(gyro_rad_s) is np.ndarray and type(accel_m_s2) is np.ndarray
+            and t_s.dtype is _FLOAT64 and gyro_rad_s.dtype is _FLOAT64 and accel_m_s2.dtype is _FLOAT64
+            and t_s.ndim == 1 and gyro_rad_s.shape == accel_m_s2.shape == (t_s.shape[0], 3)):
+        return t_s, gyro_rad_s, accel_m_s2  # already what is asked for: no conversion
     t = np.atleast_1d(np.asarray(t_s, dtype=float))
     gyro = np.asarray(gyro_rad_s, dtype=float)
     accel = np.asarray(accel_m_s2, dtype=float)
@@ -101,8 +132,16 @@ class ImuStream:
         """Add samples to the buffer (dropping and counting non-finite, duplicate and late ones)
         without releasing any."""
         t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
-        if not t.shape[0]:
+        n = t.shape[0]
+        if not n:
             return
+        held = self._held
+        if _ROWS_IF_CLEAN is not None:  # the common case in one compiled pass: clean samples, in order
+            rows = np.empty((n, COLUMNS))
+            if _ROWS_IF_CLEAN(t, gyro, accel, held[-1, 0] if held.shape[0] else self.watermark_s,
+                              self.gyro_range_rad_s, rows):
+                self._held = np.concatenate([held, rows]) if held.shape[0] else rows
+                return
         rows = np.concatenate((t[:, None], gyro, accel, np.zeros((t.shape[0], 1))), axis=1)
         # One pass for both checks: the largest |value| per column (NaN propagates, inf is not finite).
         largest = np.abs(rows).max(axis=0).tolist()
@@ -134,9 +173,18 @@ class ImuStream:
             self.counts.duplicate += int((~unique).sum())
             self._held = rows[unique]
 
+    @property
+    def saturation_seen(self) -> bool:
+        """Whether any sample so far reached the gyro range (else no release holds a saturated one)."""
+        return self._saturation_seen
+
     def release_until(self, t_s: float, move_watermark: bool = True) -> ImuBatch:
         """Release every held sample stamped at or before `t_s`; later arrivals older than `t_s`
         then count as late when `move_watermark`."""
+        return ImuBatch.from_rows(self.release_rows_until(t_s, move_watermark))
+
+    def release_rows_until(self, t_s: float, move_watermark: bool = True) -> np.ndarray:
+        """`release_until`'s samples as rows (N, 8) (`types.IMU_COLUMNS`)."""
         held = self._held
         if not held.shape[0]:
             k = 0
@@ -152,7 +200,13 @@ class ImuStream:
                 self.counts.saturated += int(np.count_nonzero(out[:, 7]))
         if move_watermark and math.isfinite(t_s):
             self.watermark_s = max(self.watermark_s, float(t_s))
-        return ImuBatch.from_rows(out)
+        return out
+
+    def released_elsewhere(self, t_s: float) -> None:
+        """Samples up to `t_s`, checked as `add` checks them (finite, in order, later than the
+        watermark, below the gyro range), went to their consumer without this buffer (nothing held):
+        later stamps at or before `t_s` now count as late, as after `release_until(t_s)`."""
+        self.watermark_s = max(self.watermark_s, float(t_s))
 
     def flush(self) -> ImuBatch:
         """Release everything held."""

@@ -25,13 +25,22 @@ IMU_ONLY_BATCH_S = 1.0 / 30.0
 """Span of the batches IMU-only sources yield: the pipeline reports one estimate per batch."""
 
 
+SPLIT_BLOCK_BATCHES = 256
+"""`split_by_span` copies the arrays into batch rows this many batches at a time (one copy per block,
+batches are views of it): bounded memory, and no per-batch copy."""
+
+
 def split_by_span(t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray,
                   span_s: float = IMU_ONLY_BATCH_S) -> Iterator[ImuBatch]:
-    """In-memory IMU arrays as consecutive batches each covering about `span_s` seconds (views, no
-    copies); the stream IMU-only sources yield."""
-    cuts = _span_cuts(t_s, span_s)
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        yield ImuBatch(t_s[a:b], gyro_rad_s[a:b], accel_m_s2[a:b])
+    """In-memory IMU arrays as consecutive batches each covering about `span_s` seconds; the stream
+    IMU-only sources yield."""
+    cuts = _span_cuts(t_s, span_s).tolist()
+    for first in range(0, max(len(cuts) - 1, 0), SPLIT_BLOCK_BATCHES):
+        block = cuts[first:first + SPLIT_BLOCK_BATCHES + 1]
+        start = block[0]
+        rows = ImuBatch(t_s[start:block[-1]], gyro_rad_s[start:block[-1]], accel_m_s2[start:block[-1]]).rows
+        for a, b in zip(block[:-1], block[1:]):
+            yield ImuBatch.from_rows(rows[a - start:b - start])
 
 
 def count_spans(t_s: np.ndarray, span_s: float = IMU_ONLY_BATCH_S) -> int:

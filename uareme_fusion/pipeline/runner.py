@@ -252,10 +252,10 @@ class Pipeline:
 
     def _estimates_of(self, batches: list[ImuBatch]) -> Estimates:
         t0 = time.perf_counter()
-        t_s = np.concatenate([b.t_s for b in batches])
-        ends = np.cumsum([len(b) for b in batches])
-        estimates = self.backend.process_imu_segments(t_s, np.concatenate([b.gyro_rad_s for b in batches]),
-                                                      np.concatenate([b.accel_m_s2 for b in batches]), ends)
+        rows = np.concatenate([b.rows for b in batches])
+        ends = np.cumsum([b.rows.shape[0] for b in batches])
+        t_s = rows[:, 0]
+        estimates = self.backend.process_imu_segments(t_s, rows[:, 1:4], rows[:, 4:7], ends)
         self.stats.imu_samples += t_s.size
         self.stats.times.add("backend", time.perf_counter() - t0)
         # No camera: "no visual rotation" is no news, so the flag is dropped.

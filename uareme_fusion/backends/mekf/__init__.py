@@ -3,7 +3,8 @@
 Modules: `config` (MekfConfig), `state` (error state, injection, reset), `propagation` (gyro and
 constant-rate process models), `motion` (the motion strategy of a mode), `measurements` (visual,
 vertical, gravity and zero-rate models), `accel` (averaging, low-pass, rest detection), `filter`
-(`Mekf`, the scheduler), `kernels`/`compiled` (numba IMU path), `offline` (forward-backward).
+(`Mekf`, the scheduler), `kernels`/`compiled` (numba IMU path), `state_buffer` (the one array
+holding the state, which the kernels update in place), `offline` (forward-backward).
 
 See DESIGN.md "Backends: mekf". Conventions:
 - Nominal state: `R_wc` (camera to world, world z up), gyro bias `b_c` (rad/s, held in the camera

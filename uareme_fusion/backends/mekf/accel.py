@@ -13,6 +13,8 @@ import numpy as np
 
 from ...rotations import skew
 from .measurements import zero_rate_model
+from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DUE, S_LP_VALID, S_REST_N, S_REST_SINCE, BufferArray,
+                           BufferScalar, field_views, new_state_buffer)
 
 PERIOD_TOLERANCE_S = 1e-9
 """An accelerometer period counts as complete this close to its length (sums of sample steps round)."""
@@ -44,21 +46,36 @@ class AccelPeriod:
     `sum_c` (3,) m/s^2*s time-weighted specific force; `time_s` the time its samples cover;
     `elapsed_s` the time since the last update (frame extrapolations too); `due` a completed period
     waits for a frame's visual update; `lp_c` (2, 3) m/s^2 the low-pass stages (None until the first
-    update) and `lp_J` (2, 3, 3) their sensitivity to the gyro-bias error: with the true bias they
-    would read `lp + lp_J @ db`; `rest_sums` (8,) gyro, |gyro|^2, accel, |accel|^2 sums over
-    `rest_n` samples; `rest_since_s` when rest began (None when moving).
+    update) and `lp_J` (2, 3, 3) their sensitivity to the gyro-bias error (zeros until then): with the
+    true bias they would read `lp + lp_J @ db`; `rest_sums` (8,) gyro, |gyro|^2, accel, |accel|^2 sums
+    over `rest_n` samples; `rest_since_s` when rest began (None when moving).
+
+    All of it lives in the filter's state buffer `x` (`state_buffer.py`), which the compiled kernels
+    update in place; without `x` the period has a buffer of its own.
     """
 
-    def __init__(self):
-        self.sum_c = np.zeros(3)
-        self.time_s = 0.0
-        self.elapsed_s = 0.0
-        self.due = False
-        self.lp_c: np.ndarray | None = None
-        self.lp_J: np.ndarray | None = None
-        self.rest_sums = np.zeros(8)
-        self.rest_n = 0
-        self.rest_since_s: float | None = None
+    sum_c = BufferArray("acc_sum")
+    lp_J = BufferArray("lp_J")
+    rest_sums = BufferArray("rest_sums")
+    time_s = BufferScalar(S_ACC_TIME)
+    elapsed_s = BufferScalar(S_ACC_ELAPSED)
+    due = BufferScalar(S_ACCEL_DUE, bool)
+    rest_n = BufferScalar(S_REST_N, int)
+    rest_since_s = BufferScalar(S_REST_SINCE, optional=True)
+
+    def __init__(self, x: np.ndarray | None = None):
+        self.x = new_state_buffer() if x is None else x
+        self.views = field_views(self.x)
+
+    @property
+    def lp_c(self) -> np.ndarray | None:
+        return self.views["lp"] if self.x[S_LP_VALID] else None
+
+    @lp_c.setter
+    def lp_c(self, value) -> None:
+        self.x[S_LP_VALID] = value is not None
+        if value is not None:
+            self.views["lp"][...] = value
 
     def add_chunk(self, C: np.ndarray, accel_c: np.ndarray, dt_s: np.ndarray, time_s: float,
                   elapsed_s: float) -> None:
@@ -105,8 +122,8 @@ class AccelPeriod:
     def take_mean(self) -> tuple[np.ndarray, float]:
         """`(mean specific force (3,) m/s^2, time it covers s)` of the period, which restarts."""
         T = self.time_s
-        acc_c = self.sum_c / T if T > 0 else self.sum_c
-        self.sum_c, self.time_s, self.elapsed_s = np.zeros(3), 0.0, 0.0
+        acc_c = self.sum_c / T if T > 0 else self.sum_c.copy()
+        self.sum_c, self.time_s, self.elapsed_s = 0.0, 0.0, 0.0
         return acc_c, T
 
     def lowpass(self, acc_c: np.ndarray, T_s: float, tau_s: float) -> np.ndarray:
@@ -132,8 +149,8 @@ class AccelPeriod:
         """Rest detection over the period just completed (`T_s` s, ending at `t_state_s`): after
         `cfg.rest_min_duration_s` of rest, the zero-rate measurement `(residual (3,), R (3, 3), H (3, 12))`
         of the bias `b_c` (3,) rad/s; None otherwise. Consumes the rest sums."""
-        sums, n = self.rest_sums, self.rest_n
-        self.rest_sums, self.rest_n = np.zeros(8), 0
+        sums, n = self.rest_sums.copy(), self.rest_n
+        self.rest_sums, self.rest_n = 0.0, 0
         if n < 2 or T_s <= 0:
             return None
         at_rest, r, var, H = zero_rate_model(sums, n, T_s, b_c, q_gyro, cfg.rest_gyro_max_rad_s,

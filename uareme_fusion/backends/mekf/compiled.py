@@ -1,4 +1,5 @@
-"""`Mekf`'s compiled IMU path: packs the filter's state for `kernels.integrate_batch` and back.
+"""`Mekf`'s compiled IMU path: calls the kernels on the filter's state buffer (`state_buffer.py`),
+which they update in place, and turns their result bits into status flags.
 
 Used for released batches without gaps, saturated samples or a resumed stream (those keep the
 reference path in `motion.GyroMotion`, which handles them); tests check both paths agree.
@@ -6,15 +7,14 @@ reference path in `motion.GyroMotion`, which handles them); tests check both pat
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ...types import Status
 from . import kernels as K
-from .accel import PERIOD_TOLERANCE_S, chunk_bounds
+from .accel import PERIOD_TOLERANCE_S
 from .kernels import KERNEL
 from .state import ORTHONORMALISE_EVERY
+from .state_buffer import S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_NONFINITE, S_REST_UPDATES
 
 
 def compiled_path_applies(filt, t: np.ndarray, saturated: np.ndarray, extra_s: float) -> bool:
@@ -66,106 +66,102 @@ def parameter_vector(filt, defer: bool) -> np.ndarray:
     return p
 
 
-_COUNTERS = ((K.S_ACCEL_UPDATES, "accel_updates"), (K.S_ACCEL_SKIPPED, "accel_skipped"),
-             (K.S_ACCEL_DOWNWEIGHTED, "accel_downweighted"), (K.S_REST_UPDATES, "rest_updates"),
-             (K.S_NONFINITE, "nonfinite_updates"))
+_COUNTERS = ((S_ACCEL_UPDATES, "accel_updates"), (S_ACCEL_SKIPPED, "accel_skipped"),
+             (S_ACCEL_DOWNWEIGHTED, "accel_downweighted"), (S_REST_UPDATES, "rest_updates"),
+             (S_NONFINITE, "nonfinite_updates"))
+_NO_RECORD = np.empty((0, 3, 3))  # record buffers when nothing is recorded (writable: the kernels' type)
 
 
-def _pack(filt):
-    """The filter's state as the kernels' arguments: (s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp,
-    lp_J, rest_sums), fresh float64 arrays that the kernels update in place."""
-    acc = filt.accel
-    s = np.zeros(K.S_SIZE)
-    s[K.S_T_STATE] = filt.t_state
-    s[K.S_ACC_TIME], s[K.S_ACC_ELAPSED] = acc.time_s, acc.elapsed_s
-    s[K.S_PRODUCTS] = filt.products_unnormalised
-    s[K.S_LP_VALID] = float(acc.lp_c is not None)
-    s[K.S_REST_N] = acc.rest_n
-    s[K.S_REST_SINCE] = np.nan if acc.rest_since_s is None else acc.rest_since_s
-    lp = np.array(acc.lp_c, float) if acc.lp_c is not None else np.zeros((2, 3))
-    lp_J = np.array(acc.lp_J, float) if acc.lp_J is not None else np.zeros((2, 3, 3))
-    return (s, np.array(filt.R_wc, float), np.array(filt.R_wm, float), np.array(filt.b_c, float),
-            np.array(filt.P, float), np.array(filt.last_gyro_c, float), np.array(acc.sum_c, float),
-            lp, lp_J, np.array(acc.rest_sums, float))
-
-
-def _unpack(filt, state, downweighted: bool) -> None:
-    """Write the kernels' results back into the filter (counters and flags included)."""
-    s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums = state
-    acc = filt.accel
-    filt.R_wc, filt.R_wm, filt.b_c, filt.P = R_wc, R_wm, b_c, P
-    filt.last_gyro_c, acc.sum_c, acc.rest_sums = last_gyro, acc_sum, rest_sums
-    filt.t_state = float(s[K.S_T_STATE])
-    acc.time_s, acc.elapsed_s = float(s[K.S_ACC_TIME]), float(s[K.S_ACC_ELAPSED])
-    filt.products_unnormalised = int(s[K.S_PRODUCTS])
-    acc.rest_n = int(s[K.S_REST_N])
-    acc.rest_since_s = None if math.isnan(s[K.S_REST_SINCE]) else float(s[K.S_REST_SINCE])
-    if s[K.S_LP_VALID] > 0:
-        acc.lp_c, acc.lp_J = lp, lp_J
+def harvest_kernel_counters(x: np.ndarray, counters: dict[str, int]) -> None:
+    """Move the update counts the kernels keep in the state buffer `x` into `counters` (by name)."""
     for index, name in _COUNTERS:
-        filt.counters[name] += int(s[index])
-    if downweighted:
+        if x[index]:
+            counters[name] += int(x[index])
+            x[index] = 0.0
+
+
+def _flag(filt, code: int) -> None:
+    """The status flags of a kernel's result bits (`kernels.DOWNWEIGHTED`, `kernels.NONFINITE`)."""
+    if code & K.DOWNWEIGHTED:
         filt.flags |= Status.ACCEL_DOWNWEIGHTED
-    if s[K.S_NONFINITE] > 0:
+    if code & K.NONFINITE:
         filt.flags |= Status.UPDATE_NONFINITE
-    if s[K.S_ACCEL_DUE] > 0:
-        acc.due = True
 
 
-def integrate_compiled(filt, t, gyro_c, accel_c, extra_s: float, defer: bool) -> bool:
-    """Integrate a batch (camera frame) with the kernel and write the state back into `filt`; False
-    (nothing changed) when the batch holds an IMU gap, which the reference path then handles."""
-    state = _pack(filt)
-    record = filt.config.record_imu_estimates
-    record_R = np.empty((t.size if record else 0, 3, 3))
-    record_P = np.empty_like(record_R)
-    bounds = chunk_bounds(t, filt.t_state, filt.accel.elapsed_s, filt.config.accel_update_period_s)
-    done = KERNEL(*state, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
-                  np.ascontiguousarray(accel_c, float), bounds, float(extra_s), _parameters(filt, defer),
-                  record_R, record_P)
-    if done < 0:
+def _record_buffers(filt, n: int) -> tuple[np.ndarray, np.ndarray]:
+    if not filt.config.record_imu_estimates:
+        return _NO_RECORD, _NO_RECORD
+    return np.empty((n, 3, 3)), np.empty((n, 3, 3))
+
+
+def integrate_compiled(filt, rows: np.ndarray, extra_s: float, defer: bool) -> bool:
+    """Integrate a batch `rows` (n, 8) (`types.IMU_COLUMNS`, camera frame) with the kernel, which
+    updates the filter's state buffer in place; False (nothing changed) when the batch holds an IMU
+    gap, which the reference path then handles."""
+    record_R, record_P = _record_buffers(filt, rows.shape[0])
+    code = KERNEL(filt.x, rows, extra_s, _parameters(filt, defer), record_R, record_P)
+    if code < 0:
         return False  # a step longer than the gap limit: nothing was changed
-    if record:
-        filt.record_t.append(np.array(t, float))
+    if record_R.shape[0]:
+        filt.record_t.append(rows[:, 0].copy())
+        filt.record_R.append(record_R)
+        filt.record_P.append(record_P)
+    filt.imu_t_s = float(rows[-1, 0])
+    if code:
+        _flag(filt, code)
+    return True
+
+
+def integrate_frame_batch_compiled(filt, t, gyro_c, accel_c, t_frame_s: float, defer: bool) -> bool:
+    """A batch that `process_imu` held unchecked (`t` (n,) s, `gyro_c` (n, 3) rad/s, `accel_c` (n, 3)
+    m/s^2, camera frame), nothing else in the reorder buffer: checked as `ImuStream.add` checks it
+    and integrated to the frame at `t_frame_s`, in one kernel call (`kernels.integrate_frame_batch`).
+    False, changing nothing, unless every sample is clean (finite, in order, later than the stream's
+    watermark, below the gyro range) and at or before the frame, with no IMU gap."""
+    stream = filt.stream
+    record_R, record_P = _record_buffers(filt, t.shape[0])
+    code = K.FRAME_BATCH(filt.x, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s, t_frame_s,
+                         _parameters(filt, defer), record_R, record_P)
+    if code < 0:
+        return False
+    stream.released_elsewhere(t_frame_s)
+    if record_R.shape[0]:
+        filt.record_t.append(t.copy())
         filt.record_R.append(record_R)
         filt.record_P.append(record_P)
     filt.imu_t_s = float(t[-1])
-    _unpack(filt, state, done > 0)
+    if code:
+        _flag(filt, code)
     return True
 
 
 def integrate_segments_compiled(filt, t, gyro_c, accel_c, ends: np.ndarray):
     """An IMU-only stream (camera frame, clean: see `kernels.integrate_segments`) integrated with an
-    estimate after each segment `ends` (M,) (exclusive sample ends); writes the state back into `filt`
-    and returns `(R_wc (M, 3, 3), attitude cov (M, 3, 3), b_c (M, 3), flags (M,) Status bits)`, or
-    None (nothing changed) when the stream holds an IMU gap. `filt.flags` is left to the caller: the
+    estimate after each segment `ends` (M,) (exclusive sample ends), in the filter's state buffer;
+    returns `(R_wc (M, 3, 3), attitude cov (M, 3, 3), b_c (M, 3), flags (M,) Status bits)`, or None
+    (nothing changed) when the stream holds an IMU gap. `filt.flags` is left to the caller: the
     per-estimate flags already say what happened."""
-    state = _pack(filt)
     m = ends.shape[0]
-    record = filt.config.record_imu_estimates
-    record_R = np.empty((t.size if record else 0, 3, 3))
-    record_P = np.empty_like(record_R)
+    record_R, record_P = _record_buffers(filt, t.size)
     out_R, out_cov, out_b, out_flags = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3)), np.empty(m, np.int64)
-    done = K.SEGMENTS(*state, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
+    done = K.SEGMENTS(filt.x, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
                       np.ascontiguousarray(accel_c, float), ends, _parameters(filt, False), record_R, record_P,
                       out_R, out_cov, out_b, out_flags)
     if done < 0:
         return None
-    if record:
+    if record_R.shape[0]:
         filt.record_t.append(np.array(t, float))
         filt.record_R.append(record_R)
         filt.record_P.append(record_P)
     filt.imu_t_s = float(t[-1])
-    _unpack(filt, state, False)
-    flags = np.where(out_flags & 1, int(Status.ACCEL_DOWNWEIGHTED), 0) | np.where(
-        out_flags & 2, int(Status.UPDATE_NONFINITE), 0)
+    flags = np.where(out_flags & K.DOWNWEIGHTED, int(Status.ACCEL_DOWNWEIGHTED), 0) | np.where(
+        out_flags & K.NONFINITE, int(Status.UPDATE_NONFINITE), 0)
     return out_R, out_cov, out_b, flags
 
 
 def accel_update_compiled(filt) -> None:
-    """The accelerometer (and at-rest) update of the period just completed, compiled: as
-    `Mekf.accel_update`."""
-    state = _pack(filt)
-    s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state
-    downweighted = K.ACCEL_UPDATE(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, _parameters(filt, False))
-    _unpack(filt, state, downweighted)
+    """The accelerometer (and at-rest) update of the period just completed, compiled, in the filter's
+    state buffer: as `Mekf.accel_update`."""
+    code = K.ACCEL_UPDATE(filt.x, _parameters(filt, False))
+    if code:
+        _flag(filt, code)

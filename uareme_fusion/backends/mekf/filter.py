@@ -16,14 +16,15 @@ from ...config import load_config, preset_names
 from ...errors import InputError
 from ...types import Estimate, Estimates, ImuBatch, Status, VisualRotation
 from ..base import Backend
-from ..imu_stream import ImuStream
+from ..imu_stream import ImuStream, check_imu_arrays
 from .accel import AccelPeriod
-from .compiled import KERNEL, accel_update_compiled
+from .compiled import KERNEL, accel_update_compiled, harvest_kernel_counters
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import gravity_model, stack, vertical_model, visual_model
 from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
+from .state_buffer import S_PRODUCTS, S_T_STATE, BufferArray, BufferScalar, field_views, new_state_buffer
 
 
 def motion_for(mode: MekfMode):
@@ -62,6 +63,15 @@ class Mekf(Backend):
     """
 
     name = "mekf"
+    # The nominal state, covariance and accelerometer period live in one array, `x`, which the compiled
+    # kernels update in place (`state_buffer.py`); these attributes read and write it.
+    R_wc = BufferArray("R_wc")
+    R_wm = BufferArray("R_wm")
+    b_c = BufferArray("b_c")
+    P = BufferArray("P")
+    last_gyro_c = BufferArray("last_gyro")
+    t_state = BufferScalar(S_T_STATE, optional=True)
+    products_unnormalised = BufferScalar(S_PRODUCTS, int)
 
     def __init__(self, config: MekfConfig | str | None = None):
         """`config`: a `MekfConfig`, a preset name or YAML path (`Mekf("vehicle")`), or None for the defaults."""
@@ -79,24 +89,20 @@ class Mekf(Backend):
         self.manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_sqrt_s or cfg.manhattan_tilt_rw_rad_sqrt_s)
         self.trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
         self.compiled = cfg.compiled and KERNEL is not None
-        self.stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
+        self._stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
+        self._deferred: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # see `process_imu`
         self.motion = motion_for(cfg.mode)
         self._mode_resolved = cfg.mode != MekfMode.AUTO
-        self.R_wc = np.eye(3)
-        self.R_wm = np.eye(3)
-        self.b_c = np.zeros(3)
+        self.x = new_state_buffer()  # R_wc = R_wm = I, b_c = 0, P = 0, t_state None
+        self.views = field_views(self.x)
         self.omega_c = np.zeros(3)
-        self.P = np.zeros((N_STATE, N_STATE))
         self.F_buffer = np.eye(N_STATE)  # gyro transition: only its TH rows change between chunks
-        self.products_unnormalised = 0
-        self.t_state: float | None = None
         self.initialised = False
         self.manhattan_initialised = False
-        self.counters = dict(visual_rejected=0, reinitialised=0, accel_downweighted=0, accel_skipped=0,
-                             imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0,
-                             rest_updates=0, nonfinite_updates=0)
+        self._counters = dict(visual_rejected=0, reinitialised=0, accel_downweighted=0, accel_skipped=0,
+                              imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0,
+                              rest_updates=0, nonfinite_updates=0)
         self.flags = Status.OK  # flags gathered since the last estimate
-        self.last_gyro_c: np.ndarray | None = None
         self.imu_t_s = -np.inf  # time of the newest integrated IMU sample (camera clock), s
         self.in_imu_gap = False  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
         self.pending: list[ImuBatch] = []
@@ -104,10 +110,17 @@ class Mekf(Backend):
         self.init_samples: list[ImuBatch] = []
         self.rejections = 0
         self._dropped_reported = 0
-        self.accel = AccelPeriod()
+        self.accel = AccelPeriod(self.x)
         self.record_t: list[np.ndarray] = []
         self.record_R: list[np.ndarray] = []
         self.record_P: list[np.ndarray] = []
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """What happened so far, by name (updates applied, skipped, rejected, ...); the compiled
+        kernels' counts (kept in `x`) are added in when read."""
+        harvest_kernel_counters(self.x, self._counters)
+        return self._counters
 
     @property
     def mode(self) -> MekfMode:
@@ -130,7 +143,23 @@ class Mekf(Backend):
             return
         if self.config.imu_time_offset_s:
             t_s = np.asarray(t_s, float) + self.config.imu_time_offset_s
-        stream = self.stream
+        if self._deferred is not None:
+            self._add_deferred()
+        if self.compiled and self.initialised and self.motion.fuses_visual and self.imu_is_camera:
+            t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
+            n = t.shape[0]
+            # A frame's worth, nothing else waiting: held as it is until the frame checks and integrates
+            # it in one compiled call (`GyroMotion.propagate_to`); any other use of the stream adds it
+            # first, as below (a batch this short releases nothing on its own).
+            if (n and not self.pending and self._stream.held_count == 0
+                    and t[n - 1] - t[0] < self.config.accel_update_period_s + self._stream.reorder_window_s):
+                self._deferred = (t.copy(), gyro.copy(), accel.copy())  # the caller may reuse its arrays
+                return
+        self._add(t_s, gyro_rad_s, accel_m_s2)
+
+    def _add(self, t_s, gyro_rad_s, accel_m_s2) -> None:
+        """`process_imu`'s samples into the reorder buffer, released once they span an update period."""
+        stream = self._stream
         stream.add(t_s, gyro_rad_s, accel_m_s2)
         # Samples wait in the reorder buffer; a frame's `propagate_to` releases them, or, in an
         # IMU-only stream, this does once an accelerometer period's worth is older than the window.
@@ -138,6 +167,27 @@ class Mekf(Backend):
             self.queue(stream.release_until(stream.newest_s - stream.reorder_window_s, move_watermark=False))
             if self.pending_span_s >= self.config.accel_update_period_s:
                 self.motion.integrate_pending(self)
+
+    def _add_deferred(self) -> None:
+        deferred, self._deferred = self._deferred, None
+        self._add(*deferred)
+
+    def take_deferred(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The batch `process_imu` holds unchecked, `(t_s, gyro_rad_s, accel_m_s2)`, or None; the caller
+        integrates it, or hands it back to `add_taken`."""
+        deferred, self._deferred = self._deferred, None
+        return deferred
+
+    def add_taken(self, t_s, gyro_rad_s, accel_m_s2) -> None:
+        """A batch from `take_deferred` that its caller did not integrate: added as `process_imu` adds."""
+        self._add(t_s, gyro_rad_s, accel_m_s2)
+
+    @property
+    def stream(self) -> ImuStream:
+        """The IMU reorder buffer, with the batch `process_imu` may hold for the next frame added first."""
+        if self._deferred is not None:
+            self._add_deferred()
+        return self._stream
 
     def flush(self) -> None:
         """Release and integrate every buffered IMU sample (end of an IMU-only stream)."""
@@ -249,10 +299,9 @@ class Mekf(Backend):
                 self._kalman_update(*rows)
                 self.counters["rest_updates"] += 1
         acc_c = self.accel.lowpass(acc_c, T, cfg.accel_lowpass_tau_s)
-        lp_J = self.accel.lp_J
-        use_lp_J = lp_J is not None and cfg.accel_lowpass_tau_s > 0
+        use_lp_J = cfg.accel_lowpass_tau_s > 0
         ok, r, var, H, downweighted = gravity_model(
-            acc_c, T, self.R_wc, lp_J[1] if use_lp_J else np.zeros((3, 3)), use_lp_J, cfg.gravity_m_s2,
+            acc_c, T, self.R_wc, self.accel.lp_J[1], use_lp_J, cfg.gravity_m_s2,
             cfg.accel_tilt_noise_rad_sqrt_s, cfg.accel_norm_scale, cfg.accel_innovation_scale_rad,
             cfg.accel_downweight_flag_ratio)
         if not ok:

@@ -10,6 +10,8 @@ error reset are the very functions of `measurements` and `state`:
 - `kalman_update`: Joseph-form update of the zero-mean error state, injection and reset.
 `integrate_batch` runs them over a released batch, chunk by chunk, with the updates falling due.
 It covers batches without gaps or saturated samples; `Mekf` keeps those on the reference path.
+The drivers (`integrate_batch`, `integrate_segments`, `accel_update_in_place`) take the filter's
+state buffer `x` (`state_buffer.py`) and update it in place: one array crosses each call.
 
 Conventions as in `mekf`: right perturbations, error state `[dtheta_c, db_c, dtheta_m, domega_c]`,
 `R_wc` camera to world (z up), rates in rad/s in the camera frame, times in s.
@@ -28,12 +30,17 @@ from ... import jit
 from .accel import chunk_bounds
 from .matrix3 import exp3_into, inv3, matmul3_into
 from .measurements import gravity_model, zero_rate_model
+from ..imu_stream import rows_if_clean
 from .state import orthonormal, reset_jacobian
+from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED,
+                           S_ACCEL_UPDATES, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE, S_REST_UPDATES,
+                           S_T_STATE, X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S,
+                           X_SIZE)
 
-# Layout of the float64 state vector `s` that `integrate_batch` reads and updates in place.
-S_T_STATE, S_ACC_TIME, S_ACC_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
-S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE, S_NONFINITE = range(7, 13)
-S_SIZE = 13
+# The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place` return.
+DOWNWEIGHTED, NONFINITE = 1, 2
+"""An accelerometer update was down-weighted; an update's result was not finite (and dropped)."""
+
 # Layout of the float64 parameter vector `p`.
 (P_Q_GYRO, P_Q_BIAS, P_Q_RATE, P_TRAPEZOID, P_PERIOD, P_DUE, P_DEFER, P_LP_TAU, P_INV_G, P_GRAVITY,
  P_ACC_NOISE, P_NORM_SCALE, P_INNOV_SCALE, P_FLAG_RATIO, P_REST_GYRO, P_REST_ACCEL, P_REST_MIN_S,
@@ -83,7 +90,10 @@ def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoi
                 S[i, j] += dt * C[i, j]
         T += dt
         rate_var += (r0 * r0 + r1 * r1 + r2 * r2) * dt
-    A_bias = C.T @ S
+    A_bias = np.empty((3, 3))  # C^T S, written out (a BLAS call costs more than these 27 products)
+    for i in range(3):
+        for j in range(3):
+            A_bias[i, j] = C[0, i] * S[0, j] + C[1, i] * S[1, j] + C[2, i] * S[2, j]
     P_pred = P.copy()
     gyro_predict_in_place(P_pred, C, A_bias)
     q_th = q_gyro * T + q_bias * T**3 / 3.0 + q_rate * rate_var
@@ -199,21 +209,47 @@ def accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p
     return R_wc, R_wm, downweighted
 
 
-def integrate_batch(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
-                    extra_s, p, record_R, record_P):
-    """Integrate a released batch (camera frame, no gaps or saturated samples) chunk by chunk
-    between `bounds` (chunk k is samples bounds[k]:bounds[k+1]) as `Mekf._integrate_pending` does,
-    with the accelerometer updates that fall due, except one due at the end of a batch propagated
-    to a frame (`P_DEFER`): that one is left to the frame (`s[S_ACCEL_DUE]` = 1). The last chunk
-    is extrapolated by `extra_s`. Arrays are updated in place (R_wc, R_wm too); with `P_RECORD`,
-    `record_R` (n, 3, 3) receives R_wc after each sample and `record_P` the attitude covariance
-    predicted to the end of its chunk. Returns 1 when an update was down-weighted, 0 otherwise, and
-    -1, changing nothing, when a step (from `s[S_T_STATE]` on) exceeds `P_GAP_LIMIT` (an IMU gap).
-    """
+def state_views(x):
+    """The fields of the state buffer `x` (`state_buffer.py`) as views: (s, R_wc, R_wm, b_c, P,
+    last_gyro, acc_sum, lp, lp_J, rest_sums)."""
+    return (x[X_S:X_R_WC], x[X_R_WC:X_R_WM].reshape((3, 3)), x[X_R_WM:X_B_C].reshape((3, 3)), x[X_B_C:X_P],
+            x[X_P:X_LAST_GYRO].reshape((12, 12)), x[X_LAST_GYRO:X_ACC_SUM], x[X_ACC_SUM:X_LP],
+            x[X_LP:X_LP_J].reshape((2, 3)), x[X_LP_J:X_REST_SUMS].reshape((2, 3, 3)), x[X_REST_SUMS:X_SIZE])
+
+
+def integrate_batch(x, rows, extra_s, p, record_R, record_P):
+    """Integrate a released batch `rows` (n, 8) (`types.IMU_COLUMNS`: t s, gyro rad/s, accel m/s^2,
+    camera frame; no gaps or saturated samples) into the state buffer `x`, in place, as
+    `Mekf._integrate_pending` does: chunk by chunk (`accel.chunk_bounds`), with the accelerometer
+    updates that fall due, except one due at the end of a batch propagated to a frame (`P_DEFER`):
+    that one is left to the frame (`s[S_ACCEL_DUE]` = 1). The last chunk is extrapolated by `extra_s`.
+    With `P_RECORD`, `record_R` (n, 3, 3) receives R_wc after each sample and `record_P` the attitude
+    covariance predicted to the end of its chunk. Returns the `DOWNWEIGHTED` | `NONFINITE` bits of
+    what happened, or -1, changing nothing, when a step (from `s[S_T_STATE]` on) exceeds
+    `P_GAP_LIMIT` (an IMU gap)."""
+    s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums = state_views(x)
+    t, gyro, accel = rows[:, 0], rows[:, 1:4], rows[:, 4:7]
     if has_gap(t, s[S_T_STATE], p[P_GAP_LIMIT]):
         return -1
-    return integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
+    nonfinite_before = s[S_NONFINITE]
+    bounds = chunk_bounds(t, s[S_T_STATE], s[S_ACC_ELAPSED], p[P_PERIOD])
+    code = integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
                             extra_s, p, record_R, record_P)
+    return code + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
+
+
+def integrate_frame_batch(x, t, gyro, accel, watermark_s, gyro_range_rad_s, t_frame_s, p, record_R, record_P):
+    """`integrate_batch` for a batch not yet checked (`t` (n,) s, `gyro` (n, 3) rad/s, `accel` (n, 3)
+    m/s^2, camera frame), propagated to a frame at `t_frame_s` s: -2, changing nothing, unless all its
+    samples are clean (`imu_stream.rows_if_clean` against `watermark_s` and `gyro_range_rad_s`) and at
+    or before the frame, with the frame no further than `P_GAP_LIMIT` past the last one."""
+    n = t.shape[0]
+    if n == 0 or not t[n - 1] <= t_frame_s or not t_frame_s - t[n - 1] <= p[P_GAP_LIMIT]:
+        return -2
+    rows = np.empty((n, 8))
+    if not rows_if_clean(t, gyro, accel, watermark_s, gyro_range_rad_s, rows):
+        return -2
+    return integrate_batch(x, rows, t_frame_s - t[n - 1], p, record_R, record_P)
 
 
 def has_gap(t, t_state, gap_limit_s):
@@ -228,7 +264,7 @@ def has_gap(t, t_state, gap_limit_s):
 
 def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
                      extra_s, p, record_R, record_P):
-    """`integrate_batch` on a batch known to hold no gap: 1 when an update was down-weighted, else 0."""
+    """`integrate_batch` on a batch known to hold no gap: `DOWNWEIGHTED` when an update was, else 0."""
     n_chunks = bounds.shape[0] - 1
     downweighted_any = False
     C_buf = np.empty((t.shape[0], 3, 3))
@@ -294,7 +330,7 @@ def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_s
                 downweighted_any |= dw
     R_wc[:, :] = R_wc_cur
     R_wm[:, :] = R_wm_cur
-    return 1 if downweighted_any else 0
+    return DOWNWEIGHTED if downweighted_any else 0
 
 
 def carry_lowpass_in_place(lp, lp_J, C_N, A_bias):
@@ -316,14 +352,15 @@ def carry_lowpass_in_place(lp, lp_J, C_N, A_bias):
         lp_J[st, :, :] = J
 
 
-def integrate_segments(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, ends, p,
-                       record_R, record_P, out_R, out_cov, out_b, out_flags):
+def integrate_segments(x, t, gyro, accel, ends, p, record_R, record_P, out_R, out_cov, out_b, out_flags):
     """An IMU-only stream (camera frame, no gaps or saturated samples) in segments, segment i being
-    samples ends[i-1]:ends[i] (from 0): each is integrated as `integrate_batch` integrates one
-    released batch (chunks cut by `accel.chunk_bounds`, updates falling due applied, none deferred),
-    and the estimate after it written out: `out_R[i]` R_wc, `out_cov[i]` the attitude covariance
-    (symmetrised), `out_b[i]` b_c, `out_flags[i]` 1 when an update was down-weighted + 2 when one was
-    not finite. Returns -1, changing nothing, when a step exceeds `P_GAP_LIMIT`, else 0."""
+    samples ends[i-1]:ends[i] (from 0): each is integrated into the state buffer `x` as
+    `integrate_batch` integrates one released batch (chunks cut by `accel.chunk_bounds`, updates
+    falling due applied, none deferred), and the estimate after it written out: `out_R[i]` R_wc,
+    `out_cov[i]` the attitude covariance (symmetrised), `out_b[i]` b_c, `out_flags[i]` the
+    `DOWNWEIGHTED` | `NONFINITE` bits of what happened. Returns -1, changing nothing, when a step
+    exceeds `P_GAP_LIMIT`, else 0."""
+    s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums = state_views(x)
     if has_gap(t, s[S_T_STATE], p[P_GAP_LIMIT]):
         return -1
     start = 0
@@ -338,18 +375,21 @@ def integrate_segments(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest
         out_R[i] = R_wc
         out_cov[i] = 0.5 * (P[0:3, 0:3] + P[0:3, 0:3].T)
         out_b[i] = b_c
-        out_flags[i] = downweighted + (2 if s[S_NONFINITE] > nonfinite_before else 0)
+        out_flags[i] = downweighted + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
         start = end
     return 0
 
 
-def accel_update_in_place(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
-    """`accel_and_rest_update` with R_wc and R_wm updated in place; True when down-weighted."""
+def accel_update_in_place(x, p):
+    """`accel_and_rest_update` on the state buffer `x`, in place: the `DOWNWEIGHTED` | `NONFINITE`
+    bits of what happened."""
+    s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state_views(x)
+    nonfinite_before = s[S_NONFINITE]
     R_wc_new, R_wm_new, downweighted = accel_and_rest_update(s, R_wc.copy(), R_wm.copy(), b_c, P, acc_sum, lp,
                                                              lp_J, rest_sums, p)
     R_wc[:, :] = R_wc_new
     R_wm[:, :] = R_wm_new
-    return downweighted
+    return (DOWNWEIGHTED if downweighted else 0) + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
 
 
 KERNEL = None
@@ -358,16 +398,20 @@ ACCEL_UPDATE = None
 """`accel_update_in_place` compiled, or None."""
 SEGMENTS = None
 """`integrate_segments` compiled, or None."""
+FRAME_BATCH = None
+"""`integrate_frame_batch` compiled, or None."""
 if jit.available():
     try:
         _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into, exp3,
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
-                 zero_rate_measurement, kalman_update, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks)
+                 zero_rate_measurement, kalman_update, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks,
+                 state_views, rows_if_clean, integrate_batch)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
-        KERNEL = jit.compiled(integrate_batch, cache=True, error_model="numpy")
+        KERNEL = integrate_batch
+        FRAME_BATCH = jit.compiled(integrate_frame_batch, cache=True, error_model="numpy")
         ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
         SEGMENTS = jit.compiled(integrate_segments, cache=True, error_model="numpy")
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)
-        KERNEL = ACCEL_UPDATE = SEGMENTS = None
+        KERNEL = ACCEL_UPDATE = SEGMENTS = FRAME_BATCH = None

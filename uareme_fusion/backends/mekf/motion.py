@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from ...rotations import R_CM_UPRIGHT, WORLD_UP
 from ...types import IMU_COLUMNS as COLUMNS, ImuBatch, Status, VisualRotation, visual_R_wc_covariance
 from .accel import PERIOD_TOLERANCE_S, chunk_bounds, tilt_direction
-from .compiled import compiled_path_applies, integrate_compiled
+from .compiled import compiled_path_applies, integrate_compiled, integrate_frame_batch_compiled
 from .config import MekfMode
 from .propagation import constant_rate_model, gyro_chunk, gyro_process_noise, gyro_rates, gyro_transition
 from .propagation import manhattan_walk_noise
@@ -82,7 +82,21 @@ class GyroMotion:
 
     def propagate_to(self, filt, t_s: float) -> None:
         """Integrate IMU samples up to `t_s` (camera clock, s), then hold the last rate."""
-        filt.queue(filt.stream.release_until(t_s))
+        deferred = filt.take_deferred()
+        if deferred is not None:  # a frame's batch, held unchecked: checked and integrated in one call
+            if (not filt.in_imu_gap and not filt.stream.saturation_seen and not filt.accel.due
+                    and integrate_frame_batch_compiled(filt, *deferred, t_s, self.fuses_visual)):
+                return
+            filt.add_taken(*deferred)  # not clean, not all before the frame, or a gap: as any batch
+        rows = filt.stream.release_rows_until(t_s)
+        # The common case of a frame after its samples, in one kernel call: what `integrate_pending`
+        # decides for one clean batch when nothing else waits, without queueing it first.
+        if (filt.compiled and rows.shape[0] and filt.initialised and filt.imu_is_camera and not filt.pending
+                and not filt.in_imu_gap and not filt.stream.saturation_seen and not filt.accel.due):
+            extra_s = max(t_s - float(rows[-1, 0]), 0.0)
+            if extra_s <= filt.config.imu_gap_limit_s and integrate_compiled(filt, rows, extra_s, self.fuses_visual):
+                return
+        filt.queue(ImuBatch.from_rows(rows))
         self.integrate_pending(filt, extrapolate_to_s=t_s, force_init=True)
 
     def start_from_visual(self, filt, t_s: float, visual: VisualRotation) -> None:
@@ -98,20 +112,16 @@ class GyroMotion:
         """Integrate the released samples; with `extrapolate_to_s`, then hold the last gyro rate up
         to that time (a synthetic sample that carries no accelerometer weight)."""
         batches, filt.pending, filt.pending_span_s = filt.pending, [], 0.0
-        if len(batches) == 1:
-            batch = batches[0]
-        else:
-            batch = ImuBatch.from_rows(np.concatenate([b.rows for b in batches]) if batches else _NO_ROWS)
-        t, gyro_i, accel_i, saturated = batch.t_s, batch.gyro_rad_s, batch.accel_m_s2, batch.saturated
-        R_ci = filt.R_ci
-        gyro_c, accel_c = (gyro_i, accel_i) if filt.imu_is_camera else (gyro_i @ R_ci.T, accel_i @ R_ci.T)
+        rows = ImuBatch.concat(batches).rows if batches else _NO_ROWS
+        if not filt.imu_is_camera:
+            rows = rows_in_camera(rows, filt.R_ci)
         if not filt.initialised:
-            if t.size == 0:
+            if rows.shape[0] == 0:
                 return
-            t, gyro_c, accel_c, saturated = self._initialise_from_accel(filt, t, gyro_c, accel_c, saturated,
-                                                                        force_init)
+            rows = self._initialise_from_accel(filt, rows, force_init)
             if not filt.initialised:
                 return
+        t, gyro_c, accel_c, saturated = rows[:, 0], rows[:, 1:4], rows[:, 4:7], rows[:, 7]
         last_t = float(t[-1]) if t.size else filt.t_state
         extra_s = extrapolate_to_s - last_t if extrapolate_to_s is not None and extrapolate_to_s > last_t else 0.0
         if t.size == 0 and extra_s == 0.0:
@@ -125,7 +135,7 @@ class GyroMotion:
         # there is none: the frame would apply it at once, so it is applied here, in the same order).
         defer = extrapolate_to_s is not None and filt.motion.fuses_visual
         if (filt.compiled and compiled_path_applies(filt, t, saturated, extra_s)
-                and integrate_compiled(filt, t, gyro_c, accel_c, extra_s, defer)):
+                and integrate_compiled(filt, rows, extra_s, defer)):
             return
         bounds = chunk_bounds(t, filt.t_state, filt.accel.elapsed_s, period).tolist()
         # A long batch is split at accelerometer-update boundaries: every chunk but the last one
@@ -224,26 +234,35 @@ class GyroMotion:
         np.maximum.accumulate(index, out=index)
         return np.where((index >= 0)[:, None], gyro_c[np.maximum(index, 0)], last_gyro_c)
 
-    def _initialise_from_accel(self, filt, t, gyro_c, accel_c, saturated, force: bool = False):
-        """Tilt from the mean of the first `init_accel_window_s` of accelerometer samples; yaw is the
-        gauge (variance 0). Returns the samples still to integrate."""
+    def _initialise_from_accel(self, filt, rows: np.ndarray, force: bool = False) -> np.ndarray:
+        """Tilt from the mean of the first `init_accel_window_s` of accelerometer samples (`rows`
+        (n, 8), camera frame, as `ImuBatch.rows`); yaw is the gauge (variance 0). Returns the rows
+        still to integrate."""
         cfg = filt.config
-        filt.init_samples.append(ImuBatch(t, gyro_c, accel_c, saturated))
-        held = ImuBatch.from_rows(np.concatenate([b.rows for b in filt.init_samples]))
+        filt.init_samples.append(ImuBatch.from_rows(rows))
+        held = ImuBatch.concat(filt.init_samples)
         t_all = held.t_s
         if t_all[-1] - t_all[0] < cfg.init_accel_window_s and not force:
-            return t[:0], gyro_c[:0], accel_c[:0], saturated[:0]
-        g_all, a_all, s_all = held.gyro_rad_s, held.accel_m_s2, held.saturated
+            return rows[:0]
         filt.init_samples = []
         window = t_all <= t_all[0] + cfg.init_accel_window_s
-        up_c = tilt_direction(a_all[window].mean(axis=0))
+        up_c = tilt_direction(held.accel_m_s2[window].mean(axis=0))
         rot, _ = Rotation.align_vectors(WORLD_UP[None], up_c[None])
         filt.R_wc = rot.as_matrix()
         filt.P = np.zeros((N_STATE, N_STATE))
         filt.P[TH, TH] = cfg.initial_tilt_std_rad**2 * (I3 - np.outer(up_c, up_c))
         filt.P[BG, BG] = cfg.gyro_bias_initial_std_rad_s**2 * I3
         filt.t_state = filt.imu_t_s = float(t_all[0])
-        filt.last_gyro_c = g_all[0]
+        filt.last_gyro_c = held.gyro_rad_s[0]
         filt.initialised = True
         filt.resolve_mode(MekfMode.VISUAL_IMU)
-        return t_all[1:], g_all[1:], a_all[1:], s_all[1:]
+        return held.rows[1:]
+
+
+def rows_in_camera(rows: np.ndarray, R_ci: np.ndarray) -> np.ndarray:
+    """IMU rows (n, 8) (`types.IMU_COLUMNS`) with gyro and accelerometer turned into the camera frame
+    (`R_ci` (3, 3) maps IMU to camera): a copy."""
+    out = rows.copy()
+    out[:, 1:4] = rows[:, 1:4] @ R_ci.T
+    out[:, 4:7] = rows[:, 4:7] @ R_ci.T
+    return out

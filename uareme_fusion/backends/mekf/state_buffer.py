@@ -1,0 +1,79 @@
+"""The one float64 array `x` that holds `Mekf`'s nominal state, covariance and accelerometer period.
+
+Python reads and writes it through attributes (`Mekf.R_wc`, `AccelPeriod.lp_c`, ...: `BufferArray`
+gives a view into `x` and copies an assigned value into it, `BufferScalar` a float, int, bool or
+None), and the compiled kernels (`kernels.py`) update it in place: a kernel call passes this one
+array, and nothing is packed or unpacked between the two paths.
+
+Layout (offsets `X_*`, shapes in `FIELDS`): `s` (S_SIZE,) scalars indexed by `S_*`, `R_wc` (3, 3),
+`R_wm` (3, 3), `b_c` (3,) rad/s, `P` (12, 12), `last_gyro` (3,) rad/s (the previous gyro reading,
+camera frame), `acc_sum` (3,) m/s, `lp` (2, 3) m/s^2, `lp_J` (2, 3, 3), `rest_sums` (8,). Units and
+meanings as in `filter.Mekf` and `accel.AccelPeriod`. A scalar that may be absent (`t_state`,
+`rest_since_s`) is NaN while it is None.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# Scalars in x[X_S]: state time (s), accelerometer period (time covered, time elapsed, s), products
+# since the last re-orthonormalisation, low-pass valid (0/1), rest samples and rest start (s), the
+# update counters the kernels keep (harvested by `Mekf.counters`), a deferred update due (0/1).
+S_T_STATE, S_ACC_TIME, S_ACC_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
+S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE, S_NONFINITE = range(7, 13)
+S_SIZE = 13
+
+FIELDS = (("s", (S_SIZE,)), ("R_wc", (3, 3)), ("R_wm", (3, 3)), ("b_c", (3,)), ("P", (12, 12)),
+          ("last_gyro", (3,)), ("acc_sum", (3,)), ("lp", (2, 3)), ("lp_J", (2, 3, 3)), ("rest_sums", (8,)))
+"""Fields of `x` in order, with their shapes."""
+X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACC_SUM, X_LP, X_LP_J, X_REST_SUMS = 0, 13, 22, 31, 34, 178, 181, 184, \
+    190, 208
+X_SIZE = 216
+_OFFSETS = np.cumsum([0] + [math.prod(shape) for _, shape in FIELDS]).tolist()
+assert _OFFSETS == [X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACC_SUM, X_LP, X_LP_J, X_REST_SUMS, X_SIZE]
+
+
+def new_state_buffer() -> np.ndarray:
+    """A fresh `x`: identity rotations, everything else zero, `t_state` and `rest_since_s` None."""
+    x = np.zeros(X_SIZE)
+    x[X_R_WC:X_R_WM] = x[X_R_WM:X_B_C] = np.eye(3).ravel()
+    x[S_T_STATE] = x[S_REST_SINCE] = np.nan
+    return x
+
+
+def field_views(x: np.ndarray) -> dict[str, np.ndarray]:
+    """{field name: view of `x` with the field's shape}."""
+    return {name: x[a:b].reshape(shape) for (name, shape), a, b in zip(FIELDS, _OFFSETS[:-1], _OFFSETS[1:])}
+
+
+class BufferArray:
+    """An attribute kept in the owner's state buffer: reading gives the view (`owner.views[field]`),
+    assigning copies the value into it."""
+
+    def __init__(self, field: str):
+        self.field = field
+
+    def __get__(self, obj, objtype=None):
+        return self if obj is None else obj.views[self.field]
+
+    def __set__(self, obj, value) -> None:
+        obj.views[self.field][...] = value
+
+
+class BufferScalar:
+    """A scalar attribute at `x[index]` of the owner's state buffer (`owner.x`), read as `kind`;
+    with `optional`, None is stored as NaN and read back as None."""
+
+    def __init__(self, index: int, kind=float, optional: bool = False):
+        self.index, self.kind, self.optional = index, kind, optional
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            return self
+        value = obj.x[self.index]
+        return None if self.optional and value != value else self.kind(value)
+
+    def __set__(self, obj, value) -> None:
+        obj.x[self.index] = np.nan if value is None else value
