@@ -27,13 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lines.detect import LineSegments
+from .zenith import ZenithConfig, estimate_zenith, miss_angles, segment_lines
 
 
 @dataclass(frozen=True)
 class AtlantaConfig:
-    vertical_deg: tuple[float, ...] = (10.0, 5.0, 2.5, 1.5)
-    """A segment whose direction is within this of the direction towards the zenith counts as vertical
-    (successive refinements)."""
+    zenith: ZenithConfig = ZenithConfig()
+    """The zenith's consensus search (`solver/zenith.py`)."""
     min_vertical_effective: float = 3.0
     """Fewer effective vertical segments than this: the first guess's up direction is kept."""
     horizontal_min_deg: float = 8.0
@@ -81,27 +81,9 @@ class AtlantaHorizon:
         return up / np.linalg.norm(up)
 
 
-def _lines(ends: np.ndarray) -> np.ndarray:
-    """Homogeneous lines (N, 3) through end points (N, 2, 2), scaled so that [a, b] is unit."""
-    h = np.concatenate([ends, np.ones(ends.shape[:2] + (1,))], axis=2)
-    l = np.cross(h[:, 0], h[:, 1])
-    return l / np.maximum(np.linalg.norm(l[:, :2], axis=1, keepdims=True), 1e-300)
-
-
 def _vertical_mask(ends: np.ndarray, zenith: np.ndarray, max_deg: float) -> np.ndarray:
     """Segments whose direction is within `max_deg` of the direction from their midpoint to `zenith`."""
-    mid = ends.mean(axis=1)
-    d = ends[:, 1] - ends[:, 0]
-    to_z = zenith[None, :2] - mid * zenith[2]
-    sin = np.abs(d[:, 0] * to_z[:, 1] - d[:, 1] * to_z[:, 0]) / np.maximum(
-        np.linalg.norm(d, axis=1) * np.linalg.norm(to_z, axis=1), 1e-300)
-    return sin < math.sin(math.radians(max_deg))
-
-
-def _least_squares_vp(lines: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """The point z minimising sum w (l . z)^2 with |z| = 1 (lines in scaled coordinates)."""
-    M = (lines * weights[:, None]).T @ lines
-    return np.linalg.eigh(M)[1][:, 0]
+    return miss_angles(ends, zenith[None])[0] < math.radians(max_deg)
 
 
 def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
@@ -118,16 +100,14 @@ def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
     w = segments.weights
     zenith = K @ up_c
     zenith = np.array([zenith[0] - c[0] * zenith[2], zenith[1] - c[1] * zenith[2], zenith[2] * scale])
-    lines = _lines(ends)
+    lines = segment_lines(ends)
+    length = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
+    sigma_angle = math.sqrt(2.0) * cfg.endpoint_noise_px / scale / np.maximum(length, 1e-9)
+    half_size = np.array([segments.width, segments.height]) / 2.0 / scale
+    found = estimate_zenith(ends, w, sigma_angle, zenith, half_size, cfg.zenith)
     n_vertical = 0.0
-    for deg in cfg.vertical_deg:
-        vertical = _vertical_mask(ends, zenith, deg)
-        wv = w[vertical]
-        n_eff = wv.sum() ** 2 / max(float(wv @ wv), 1e-300)
-        if vertical.sum() < 2 or n_eff < cfg.min_vertical_effective:
-            break
-        z = _least_squares_vp(lines[vertical], wv)
-        zenith, n_vertical = (z if z @ zenith >= 0 else -z), n_eff
+    if found is not None and found.n_effective >= cfg.min_vertical_effective:
+        zenith, n_vertical = found.point, found.n_effective
     # The sky direction in the image: up ~ K^-1 zenith (the sign kept from `up_c`) has up[:2] ~ zenith[:2].
     n = zenith[:2].copy()
     if np.linalg.norm(n) < 1e-12:  # looking straight up or down: no horizon in view
@@ -140,8 +120,7 @@ def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
         return None
     e, wl, l = ends[idx], w[idx], lines[idx]
     mid = e.mean(axis=1)
-    length = np.linalg.norm(e[:, 1] - e[:, 0], axis=1)
-    sigma_angle = math.sqrt(2.0) * cfg.endpoint_noise_px / scale / np.maximum(length, 1e-9)
+    length, sigma_angle = length[idx], sigma_angle[idx]
     i, j = np.triu_indices(len(idx), 1)
     p = np.cross(l[i], l[j])
     ok = np.abs(p[:, 2]) > 1e-9
