@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lines.detect import LineSegments
+from .horizontal_vps import VanishingPoint, horizontal_vps
 from .zenith import ZenithConfig, estimate_zenith, miss_angles, segment_lines
 
 
@@ -57,6 +58,12 @@ class AtlantaConfig:
     chosen on the first half of ECD, where it gives median |error / std| 0.62 (second half 0.81;
     Gaussian 0.67). A wrong mode (clutter) is not covered by it: 80 % of errors within 2 std, not 95 %."""
     min_pairs_weight_fraction: float = 0.02
+    max_horizontal_vps: int = 3
+    """Horizontal VPs sought by sequential consensus (`solver/horizontal_vps.py`)."""
+    min_vp_share: float = 0.08
+    """A horizontal VP needs segments holding this share of the non-vertical segments' weight."""
+    vp_distance_scale: float = 0.3
+    """Distance (fraction of the image diagonal) below which a VP's height counts as fully precise."""
     """Below this share of the pair weight in the mode's +-3 sigma window, there is no horizon evidence."""
 
 
@@ -84,6 +91,38 @@ class AtlantaHorizon:
 def _vertical_mask(ends: np.ndarray, zenith: np.ndarray, max_deg: float) -> np.ndarray:
     """Segments whose direction is within `max_deg` of the direction from their midpoint to `zenith`."""
     return miss_angles(ends, zenith[None])[0] < math.radians(max_deg)
+
+
+def _focal_range_weight(n: np.ndarray, zenith: np.ndarray, n_vertical: float, width: float, cfg: AtlantaConfig):
+    """Weight (0..1) of horizon heights by the focal length they imply with the zenith: a seen zenith at
+    height v_z puts the horizon at t = -f^2 / v_z, f within `hfov_range_deg` (Gaussian tolerance
+    outside). All ones without a seen, finite zenith. `width`: the image width in the scaled units."""
+    if n_vertical <= 0 or abs(zenith[2]) <= 1e-12:
+        return lambda t: np.ones_like(np.asarray(t, float))
+    inv_v_z = float(zenith[2] / (n @ zenith[:2]))
+    f_lo, f_hi = (width / 2 / math.tan(math.radians(a) / 2) for a in cfg.hfov_range_deg[::-1])
+    lo, hi = sorted((-f_lo**2 * inv_v_z, -f_hi**2 * inv_v_z))
+
+    def weight(t):
+        t = np.asarray(t, float)
+        outside = np.maximum(lo - t, 0.0) + np.maximum(t - hi, 0.0)
+        return np.exp(-0.5 * (outside / cfg.zenith_tolerance_fraction) ** 2)
+    return weight
+
+
+def _vp_height(vps: list[VanishingPoint], n: np.ndarray, in_range, distance_scale: float) -> float | None:
+    """The horizon height from horizontal VPs: their heights n . x averaged with weights
+    support * in_range(height) / (|x|^2 + distance_scale^2) (a far VP's height is imprecise: an angle
+    error moves it by |x| times that angle). None without a finite VP of positive weight."""
+    heights, weights = [], []
+    for vp in vps:
+        if abs(vp.point[2]) < 1e-9:
+            continue
+        x = vp.point[:2] / vp.point[2]
+        heights.append(float(n @ x))
+        weights.append(vp.support * float(in_range(heights[-1])) / (float(x @ x) + distance_scale**2))
+    total = sum(weights)
+    return float(np.dot(heights, weights) / total) if total > 1e-12 else None
 
 
 def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
@@ -146,16 +185,12 @@ def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
         s = slice(start, start + 4096)
         zsc = (grid[None, :] - height[s, None]) / spread[s, None]
         density += ((pair_w[s] / spread[s])[:, None] * np.exp(-0.5 * zsc**2)).sum(axis=0)
-    if n_vertical > 0 and abs(zenith[2]) > 1e-12:
-        # A seen zenith at height v_z puts the horizon at t = -f^2 / v_z: keep f within the plausible range.
-        inv_v_z = float(zenith[2] / (n @ zenith[:2]))
-        w_px = segments.width / scale
-        f_lo, f_hi = (w_px / 2 / math.tan(math.radians(a) / 2) for a in cfg.hfov_range_deg[::-1])
-        lo, hi = sorted((-f_lo**2 * inv_v_z, -f_hi**2 * inv_v_z))
-        outside = np.maximum(lo - grid, 0.0) + np.maximum(grid - hi, 0.0)
-        density = density * np.exp(-0.5 * (outside / cfg.zenith_tolerance_fraction) ** 2)
-    k = int(np.argmax(density))
-    t = float(grid[k])
+    in_range = _focal_range_weight(n, zenith, n_vertical, segments.width / scale, cfg)
+    density = density * in_range(grid)
+    vps = horizontal_vps(e, wl, l, sigma_angle, p[keep], cfg.max_horizontal_vps, cfg.min_vp_share)
+    t = _vp_height(vps, n, in_range, cfg.vp_distance_scale)
+    if t is None:  # no VP: the densest height
+        t = float(grid[int(np.argmax(density))])
     # Width of the mode: the pairs that explain it, their heights' weighted spread about t.
     near = np.abs(height - t) < 3 * spread
     support = float(pair_w[near].sum() / pair_w.sum())
