@@ -32,8 +32,12 @@ def intrinsics_from_fov(width: int, height: int, hfov_deg: float,
     if not (lo <= float(hfov_deg) <= hi and 0.0 < float(hfov_deg) < 180.0):
         raise InputError(f"field of view fov_deg must be within {lo:g} to {hi:g} degrees (exclusive of 0 and 180), "
                          f"got {hfov_deg}")
-    f_px = (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
-    return centred_K(f_px, height, width)
+    return centred_K(focal_from_hfov(width, hfov_deg), height, width)
+
+
+def focal_from_hfov(width: float, hfov_deg: float) -> float:
+    """The focal length (in the units of `width`) that spans `hfov_deg` over the full width."""
+    return (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
 
 
 def centred_K(f_px: float, height: int, width: int) -> np.ndarray:

@@ -1,0 +1,55 @@
+"""Horizontal vanishing points of one image by sequential consensus (J-linkage-like, greedy).
+
+Every proposal (an intersection of two non-vertical segments) scores the weight of the segments
+that point at it, S(x) = sum_i w_i exp(-a_i^2 / (2 s_i^2)) (a_i the angle between segment i and the
+line from its midpoint to x, s_i its end point noise angle floored at `min_angle_deg`, as for the
+zenith). The best proposal is refined by weighted least squares over its inliers (a_i < 3 s_i),
+its inliers are removed, and the search repeats while a proposal holds `min_share` of the weight.
+Counting the segments through a point, rather than pairs meeting near a height, keeps crossings of
+two facades' edges (many pairs, each through a different point) from outvoting a real VP whose
+pairs, being nearly parallel, meet imprecisely.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .zenith import least_squares_vp, miss_angles
+
+
+@dataclass(frozen=True)
+class VanishingPoint:
+    point: np.ndarray
+    """Unit homogeneous point (caller's coordinates)."""
+    support: float
+    """S of the module docstring: the weight of the segments that point at it."""
+    n_inliers: int
+
+
+def horizontal_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, angle_std_rad: np.ndarray,
+                   proposals: np.ndarray, max_vps: int = 3, min_share: float = 0.08,
+                   min_angle_deg: float = 1.0) -> list[VanishingPoint]:
+    """Up to `max_vps` VPs of segments `ends` (N, 2, 2) with `lines` (N, 3, [a, b] unit) from the
+    homogeneous `proposals` (P, 3), strongest first (module docstring)."""
+    if len(proposals) == 0:
+        return []
+    s = np.maximum(angle_std_rad, math.radians(min_angle_deg))
+    props = proposals / np.maximum(np.linalg.norm(proposals, axis=1, keepdims=True), 1e-300)
+    angle = miss_angles(ends, props)
+    inlier_angle = angle < 3 * s[None]
+    likelihood = np.exp(-0.5 * (angle / s[None]) ** 2)
+    alive = np.ones(len(ends), bool)
+    found: list[VanishingPoint] = []
+    for _ in range(max_vps):
+        score = likelihood @ (weights * alive)
+        k = int(np.argmax(score))
+        inliers = inlier_angle[k] & alive
+        if score[k] < min_share * weights.sum() or inliers.sum() < 2:
+            break
+        point = least_squares_vp(lines[inliers], weights[inliers] / s[inliers] ** 2)
+        alive &= ~inliers
+        found.append(VanishingPoint(point, float(score[k]), int(inliers.sum())))
+    return found
