@@ -285,9 +285,10 @@ class Mekf(Backend):
             self._count_rejection()
             if accel_rows is not None:
                 self._kalman_update(*accel_rows)
-            if self.rejections >= cfg.reinit_after_rejections and self.motion.reinitialise(self, visual):
+            if self.rejections >= cfg.reinit_after_rejections:
                 self.flags |= Status.REINITIALISED
                 self.counters["reinitialised"] += 1
+                self.motion.reinitialise(self, visual)
             return
         self.rejections = 0
         d = np.sqrt(d2)
@@ -324,9 +325,10 @@ class Mekf(Backend):
     def initialise_manhattan(self, visual: VisualRotation, R_wm_ref: np.ndarray | None = None) -> bool:
         """`R_wm = R_wc R_cm`, labelled nearest `R_wm_ref` (3, 3; identity: m's z nearest up), with
         its covariance from the camera's and the measurement's: `dtheta_m = R_cm^T dtheta_c + delta`.
-        With an IMU, a frame whose z axis is near up but fails the vertical pseudo-measurement's
-        gate (`visual_gate_chi2`) contradicts gravity and is refused (returns False, state kept):
-        the vertical pseudo-measurement would otherwise tilt the camera to the wrong frame."""
+        The first frame with an IMU is refused (returns False, state kept) when its z axis is near
+        up but fails the vertical pseudo-measurement's gate (`visual_gate_chi2`): it contradicts the
+        accelerometer's tilt, and the pseudo-measurement would tilt the camera to it. A
+        re-initialisation is not gated: then the filter's own tilt may be the wrong one."""
         cfg = self.config
         R_wm_ref = np.eye(3) if R_wm_ref is None else R_wm_ref
         visual = visual.symmetric_to(self.R_wc.T @ R_wm_ref)
@@ -336,7 +338,7 @@ class Mekf(Backend):
         T[MF, TH] = visual.R_cm.T
         P = T @ self.P @ T.T
         P[MF, MF] += visual.cov
-        if self.motion.uses_imu:
+        if self.motion.uses_imu and not self.manhattan_initialised:
             d2 = vertical_distance2(R_wm, P[MF, MF], cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad)
             if d2 is not None and not d2 <= cfg.visual_gate_chi2:
                 return False

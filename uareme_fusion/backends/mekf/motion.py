@@ -55,12 +55,11 @@ class ConstantRateMotion:
         filt.t_state = t_s
         filt.initialised = filt.manhattan_initialised = True
 
-    def reinitialise(self, filt, visual: VisualRotation) -> bool:
+    def reinitialise(self, filt, visual: VisualRotation) -> None:
         """A new scene alignment: `R_wc` from `R_cm` against the kept world (= Manhattan) frame."""
         visual = visual.symmetric_to(filt.R_wc.T @ filt.R_wm)
         filt.R_wc = filt.R_wm @ visual.R_cm.T
         self._restart(filt, visual)
-        return True
 
     def _restart(self, filt, visual: VisualRotation) -> None:
         filt.P = np.zeros((N_STATE, N_STATE))
@@ -90,10 +89,9 @@ class GyroMotion:
         """No attitude before the accelerometer gives gravity: the frame waits."""
         filt.flags |= Status.VISUAL_MISSING
 
-    def reinitialise(self, filt, visual: VisualRotation) -> bool:
-        """A new scene alignment: the Manhattan frame re-initialised nearest the old one (False:
-        refused, the frame contradicts gravity)."""
-        return filt.initialise_manhattan(visual, R_wm_ref=filt.R_wm)
+    def reinitialise(self, filt, visual: VisualRotation) -> None:
+        """A new scene alignment: the Manhattan frame re-initialised nearest the old one."""
+        filt.initialise_manhattan(visual, R_wm_ref=filt.R_wm)
 
     # ------------------------------------------------------------------ IMU integration
     def integrate_pending(self, filt, extrapolate_to_s: float | None = None, force_init: bool = False) -> None:
