@@ -1,5 +1,6 @@
 """LearnedNormals: shipped weights on rendered views, output contract, kappa cap, drop-in models, bad input."""
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -86,6 +87,23 @@ def test_output_shapes_for_any_input_size(shipped, height, width):
     np.testing.assert_allclose(np.linalg.norm(nm.normals, axis=-1), 1.0, atol=1e-4)
     assert nm.kappa.min() >= 0.0 and nm.kappa.max() <= 75.0
     assert nm.independent_regions == LearnedNormalsConfig().independent_regions
+
+
+def test_map_at_network_size_solves_to_the_same_rotation(shipped, rendered_views):
+    """Streams keep the network's map (`at_input_size=False`): 4x smaller at 640x480, same rotation
+    and covariance as the upsampled map (the solver's moments are means, its covariance scales with
+    the valid fraction)."""
+    from uareme_fusion.rotations import angle_between
+    from uareme_fusion.solver import solve_manhattan
+
+    cfg = LearnedNormalsConfig(at_input_size=False)
+    small_est = LearnedNormals(config=cfg)
+    rgb = cv2.resize(rendered_views[0][0], (640, 480), interpolation=cv2.INTER_LINEAR)
+    small, full = small_est.estimate(rgb), shipped.estimate(rgb)
+    assert small.normals.shape == (cfg.height_px, cfg.width_px, 3) and full.normals.shape == (480, 640, 3)
+    a, b = solve_manhattan(small), solve_manhattan(full)
+    assert np.degrees(angle_between(a.R_cm, b.R_cm)) < 0.1
+    np.testing.assert_allclose(np.sqrt(np.diag(a.cov)), np.sqrt(np.diag(b.cov)), rtol=0.05)
 
 
 def test_kappa_is_capped_and_non_negative(rendered_views):

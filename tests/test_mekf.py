@@ -140,6 +140,39 @@ def test_persistent_disagreement_reinitialises_the_manhattan_frame():
     assert np.degrees(angle_between(statuses[-1].R_wc, R_wc[-1])) < 1.0
 
 
+def test_a_manhattan_frame_that_contradicts_gravity_is_refused():
+    """Before any Manhattan frame is known, visual frames whose vertical axis leans 15 deg from the
+    accelerometer's up (within the vertical pseudo-measurement's reach, far beyond its std) are
+    refused: the camera's tilt stays the accelerometer's. A level frame seen later is taken."""
+    rng = np.random.default_rng(9)
+    filt = Mekf(MekfConfig(reinit_after_rejections=5))
+    t, R_wc = constant_rate_truth(np.zeros(3), 4.0)
+    accel = np.einsum("nji,j->ni", R_wc, 9.81 * WORLD_UP)
+    gyro = np.zeros_like(accel)
+    R_wm_leaning = exp_so3([np.radians(15), 0.0, 0.0])
+    step = int(RATE_HZ / FPS)
+    estimates = []
+    for k in range(step, t.size, step):
+        filt.process_imu(t[k - step:k], gyro[k - step:k], accel[k - step:k])
+        R_wm = R_wm_leaning if t[k - 1] < 2.0 else np.eye(3)
+        estimates.append(filt.process_frame(t[k - 1], visual_measurement(R_wc[k - 1].T @ R_wm, 1e-4 * np.eye(3), rng)))
+    early = [e for e in estimates if e.t_s < 2.0]
+    assert all(e.R_wm is None and Status.VISUAL_REJECTED in e.status for e in early)
+    assert max(tilt_error_deg(up_in_camera(e.R_wc), up_in_camera(R_wc[0])) for e in early) < 0.5
+    assert filt.counters["reinitialised"] == 0
+    assert np.degrees(angle_between(estimates[-1].R_wm, np.eye(3))) < 1.0
+
+
+def test_correlated_visual_errors_inflate_the_update_covariance():
+    """Updates closer than the correlation time share one measurement's information."""
+    from uareme_fusion.backends.mekf.measurements import correlated_noise_scale
+
+    assert correlated_noise_scale(1 / 30, 0.3) == pytest.approx(9.0)
+    assert correlated_noise_scale(0.5, 0.3) == 1.0
+    assert correlated_noise_scale(1 / 30, 0.0) == 1.0
+    assert correlated_noise_scale(0.0, 0.3) == 1.0
+
+
 def test_vehicle_preset_lets_the_manhattan_frame_turn():
     """Camera fixed in a turning vehicle: gyro sees the turn, vision sees none; R_wm absorbs it."""
     rng = np.random.default_rng(9)

@@ -53,6 +53,11 @@ class LearnedNormalsConfig:
     was trained on 160x120 crops: at 320x240 its held-out synthetic error triples (15 vs 5 degrees,
     tools/bench_normals.py), so 160x120 is the default; raise it only for a model trained larger."""
     height_px: int = 120
+    at_input_size: bool = True
+    """Upsample the map (bilinear) to the input image's size; False keeps the network's width_px x
+    height_px. The solver's rotation and covariance do not depend on the map's resolution (its
+    moments are weighted means, its covariance scales with the valid fraction): streams keep the
+    small map and skip a 16x larger pass at 640x480 (about half the normals stage, `bench pipeline`)."""
     kappa_cap: float = 75.0
     """kappa is capped here before the solver (paper: 100; its released config: 75)."""
     independent_regions: float = 3.0
@@ -211,10 +216,11 @@ class LearnedNormals:
 
     def estimate(self, rgb_uint8, source: str = "image") -> NormalMap:
         """Unit normals (H, W, 3) float32 in the OpenCV camera frame and kappa (H, W) float32 in
-        [0, kappa_cap] for an RGB uint8 image (H, W, 3) of any size (at least 8x8)."""
+        [0, kappa_cap] for an RGB uint8 image (H, W, 3) of any size (at least 8x8); (height_px,
+        width_px) instead of (H, W) when `config.at_input_size` is False."""
         rgb = _check_rgb(rgb_uint8, source)
         out = self.infer(rgb)
-        return self.to_normal_map(out, rgb.shape[:2])
+        return self.to_normal_map(out, rgb.shape[:2] if self.config.at_input_size else out.shape[1:])
 
     def infer(self, rgb: np.ndarray) -> np.ndarray:
         """Raw network output (4, h, w) float32 at the internal size for a checked RGB uint8 image."""

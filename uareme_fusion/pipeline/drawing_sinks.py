@@ -158,7 +158,8 @@ class GroundSink:
             mask = np.zeros((height, width), bool)
         else:
             mask, _ = ground_mask(result.normal_map, result.estimate.up_c, self.threshold_deg)
-            mask = cv2.resize(mask.astype(np.uint8), (width, height), interpolation=cv2.INTER_NEAREST) > 0
+            # Bilinear, then at half: a map smaller than the image (learned normals) keeps smooth edges.
+            mask = cv2.resize(mask.astype(np.uint8) * 255, (width, height), interpolation=cv2.INTER_LINEAR) >= 128
         name = f"{frame.index if frame.index >= 0 else self.count:06d}.png"
         overlay = draw_ground(frame.rgb, mask)
         write_image_atomic(self.out / "masks" / name, mask.astype(np.uint8) * 255)

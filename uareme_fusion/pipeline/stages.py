@@ -140,7 +140,9 @@ def make_normal_estimator(spec: str, info: SourceInfo, threads: int | None = Non
 def _learned(model_path: Path | None = None, threads: int | None = None):
     from ..normals.learned import DEFAULT_THREADS, LearnedNormals, LearnedNormalsConfig
 
-    return LearnedNormals(model=model_path, config=LearnedNormalsConfig(threads=threads or DEFAULT_THREADS))
+    # The map stays at the network's size: the solver does not need it upsampled, overlays resize it.
+    return LearnedNormals(model=model_path, config=LearnedNormalsConfig(threads=threads or DEFAULT_THREADS,
+                                                                        at_input_size=False))
 
 
 CAMERA_PRESETS = ("building", "handheld", "vehicle")

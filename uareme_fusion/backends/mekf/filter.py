@@ -20,7 +20,8 @@ from ..imu_stream import ImuStream, check_imu_arrays
 from .accel import AccelPeriod
 from .compiled import KERNEL, accel_update_compiled, harvest_kernel_counters
 from .config import GyroSampling, MekfConfig, MekfMode
-from .measurements import gravity_model, stack, vertical_model, visual_model
+from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
+                           visual_model)
 from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
@@ -109,6 +110,7 @@ class Mekf(Backend):
         self.pending_span_s = 0.0
         self.init_samples: list[ImuBatch] = []
         self.rejections = 0
+        self.t_visual_s: float | None = None  # time of the previous visual update (camera clock), s
         self._dropped_reported = 0
         self.accel = AccelPeriod(self.x)
         self.record_t: list[np.ndarray] = []
@@ -226,8 +228,8 @@ class Mekf(Backend):
                 self.flags |= Status.VISUAL_MISSING
         elif not self.initialised:
             self.motion.start_from_visual(self, t_s, visual)
-        else:
-            self.initialise_manhattan(visual)
+        elif not self.initialise_manhattan(visual):
+            self._count_rejection()
         return self._estimate(t_s)
 
     def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
@@ -322,12 +324,14 @@ class Mekf(Backend):
             self.accel.due = False
             accel_rows = self._accel_rows()
         r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
+        t_s, t_prev_s = self.t_state, self.t_visual_s
+        self.t_visual_s = t_s
+        if t_prev_s is not None:
+            R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
         S = H @ self.P @ H.T + R_vis
         d2 = float(r @ np.linalg.solve(S, r))
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
-            self.flags |= Status.VISUAL_REJECTED
-            self.counters["visual_rejected"] += 1
-            self.rejections += 1
+            self._count_rejection()
             if accel_rows is not None:
                 self._kalman_update(*accel_rows)
             if self.rejections >= cfg.reinit_after_rejections:
@@ -344,6 +348,11 @@ class Mekf(Backend):
                     if self.motion.uses_imu else None)
         self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
         self.counters["visual_updates"] += 1
+
+    def _count_rejection(self) -> None:
+        self.flags |= Status.VISUAL_REJECTED
+        self.counters["visual_rejected"] += 1
+        self.rejections += 1
 
     def _kalman_update(self, residual: np.ndarray, R: np.ndarray, H: np.ndarray) -> None:
         """filterpy update (Joseph form) of the zero-mean error state, then inject and reset. A
@@ -362,20 +371,31 @@ class Mekf(Backend):
         self.P = 0.5 * (P + P.T)
 
     # ------------------------------------------------------------------ initialisation
-    def initialise_manhattan(self, visual: VisualRotation, R_wm_ref: np.ndarray | None = None) -> None:
+    def initialise_manhattan(self, visual: VisualRotation, R_wm_ref: np.ndarray | None = None) -> bool:
         """`R_wm = R_wc R_cm`, labelled nearest `R_wm_ref` (3, 3; identity: m's z nearest up), with
-        its covariance from the camera's and the measurement's: `dtheta_m = R_cm^T dtheta_c + delta`."""
+        its covariance from the camera's and the measurement's: `dtheta_m = R_cm^T dtheta_c + delta`.
+        The first frame with an IMU is refused (returns False, state kept) when its z axis is near
+        up but fails the vertical pseudo-measurement's gate (`visual_gate_chi2`): it contradicts the
+        accelerometer's tilt, and the pseudo-measurement would tilt the camera to it. A
+        re-initialisation is not gated: then the filter's own tilt may be the wrong one."""
+        cfg = self.config
         R_wm_ref = np.eye(3) if R_wm_ref is None else R_wm_ref
         visual = visual.symmetric_to(self.R_wc.T @ R_wm_ref)
-        self.R_wm = orthonormal(self.R_wc @ visual.R_cm)
+        R_wm = orthonormal(self.R_wc @ visual.R_cm)
         T = np.eye(N_STATE)
         T[MF, MF] = 0.0
         T[MF, TH] = visual.R_cm.T
         P = T @ self.P @ T.T
         P[MF, MF] += visual.cov
+        if self.motion.uses_imu and not self.manhattan_initialised:
+            d2 = vertical_distance2(R_wm, P[MF, MF], cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad)
+            if d2 is not None and not d2 <= cfg.visual_gate_chi2:
+                return False
+        self.R_wm = R_wm
         self.P = 0.5 * (P + P.T)
         self.manhattan_initialised = True
         self.rejections = 0
+        return True
 
     # ------------------------------------------------------------------ output
     def _estimate(self, t_s: float) -> Estimate:

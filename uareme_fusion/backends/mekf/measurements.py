@@ -38,6 +38,15 @@ def visual_model(R_wc: np.ndarray, R_wm: np.ndarray, R_cm: np.ndarray, cov_rad2:
     return r, R_vis, H
 
 
+def correlated_noise_scale(dt_s: float, correlation_s: float) -> float:
+    """Factor on the covariance of a measurement whose errors persist for `correlation_s` s, taken
+    `dt_s` s after the previous one: `max(1, correlation_s / dt_s)`, so that the updates within one
+    correlation time carry the information of one independent measurement (1 when either is 0)."""
+    if correlation_s <= 0 or not dt_s > 0:
+        return 1.0
+    return max(1.0, correlation_s / dt_s)
+
+
 def vertical_model(R_wm: np.ndarray, std_rad: float, max_rad: float):
     """Pseudo-measurement "the Manhattan z axis is (nearly) world up" (DESIGN.md "Conventions"),
     std `std_rad`: `(residual (3,), R (3, 3) rad^2, H (3, 12))`, or None when m's z is farther than
@@ -48,6 +57,19 @@ def vertical_model(R_wm: np.ndarray, std_rad: float, max_rad: float):
     H = np.zeros((3, N_STATE))
     H[:, MF] = skew(h)  # d/d(dtheta) of Exp(-dtheta) h at 0
     return E_Z - h, std_rad**2 * I3, H
+
+
+def vertical_distance2(R_wm: np.ndarray, P_m: np.ndarray, std_rad: float, max_rad: float) -> float | None:
+    """Squared Mahalanobis distance of "the Manhattan z axis is world up" (`vertical_model`) for a
+    Manhattan frame `R_wm` whose error (right perturbation) has covariance `P_m` (3, 3, rad^2); None
+    when that pseudo-measurement does not apply (m's z farther than `max_rad` from up). A frame
+    that fails it contradicts gravity: the vertical pseudo-measurement would tilt the camera."""
+    model = vertical_model(R_wm, std_rad, max_rad)
+    if model is None:
+        return None
+    r, R, H = model
+    H_m = H[:, MF]
+    return float(r @ np.linalg.solve(H_m @ P_m @ H_m.T + R, r))
 
 
 def gravity_model(acc_c, T_s, R_wc, lp_J1, use_lp_J, gravity_m_s2, noise_rad_sqrt_s, norm_scale,
