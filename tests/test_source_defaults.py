@@ -44,6 +44,29 @@ def test_preset_follows_the_source(requested, has_frames, chosen, noted):
     assert preset == chosen and (note is not None) == noted
 
 
+@pytest.mark.parametrize("requested, platform, chosen, noted", [
+    (None, "vehicle", "vehicle", True), ("handheld", "vehicle", "handheld", False), (None, None, "handheld", False),
+    (None, "building", "building", True)])
+def test_preset_follows_the_platform_the_source_states(requested, platform, chosen, noted):
+    preset, note = mekf_preset_for(requested, SourceInfo(name="src", platform=platform))
+    assert preset == chosen and (note is not None) == noted
+
+
+def test_a_simulated_bus_folder_says_vehicle_and_a_bad_platform_is_named(tmp_path):
+    from uareme_fusion.drivers.tum import TumSource
+    from uareme_fusion.errors import InputError
+    from uareme_fusion.sim.dataset import write_sequence
+    from uareme_fusion.sim.options import SequenceOptions
+
+    write_sequence("bus", tmp_path / "bus", SequenceOptions(frames=3, width=32, height=24))
+    with TumSource(tmp_path / "bus") as src:
+        assert src.info.platform == "vehicle"
+    scene = tmp_path / "bus" / "scene.json"
+    scene.write_text(scene.read_text().replace('"platform": "vehicle"', '"platform": "boat"'))
+    with pytest.raises(InputError, match=r"scene.json: platform must be one of building, handheld, vehicle, got 'boat'"):
+        TumSource(tmp_path / "bus")
+
+
 @pytest.fixture
 def broad_trial(shared_data):
     return shared_data / "broad_subset" / "02_undisturbed_slow_rotation_B.hdf5"

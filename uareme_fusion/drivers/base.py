@@ -46,6 +46,10 @@ class GroundTruth:
         return R, ok
 
 
+PLATFORMS = ("building", "handheld", "vehicle")
+"""What may carry a camera (`SourceInfo.platform`); each is also the name of a camera EKF preset."""
+
+
 @dataclass(frozen=True)
 class SourceInfo:
     """What a source knows about itself before it runs."""
@@ -70,6 +74,9 @@ class SourceInfo:
     """Added to IMU timestamps to put them on the camera clock."""
     image_size: tuple[int, int] | None = None
     """(height, width) of yielded frames when known."""
+    platform: str | None = None
+    """What carries the camera when the source says so (`handheld`, `vehicle`, `building`: scene.json or
+    source.json `platform`); the EKF preset when none is asked for. None: unknown."""
 
 
 class Source(ABC):

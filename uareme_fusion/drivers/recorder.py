@@ -86,7 +86,7 @@ class Recorder:
         info = self.info
         meta = dict(name=info.name, K=_jsonable(self.K), R_ci=_jsonable(info.R_ci),
                     imu_time_offset_s=float(info.imu_time_offset_s), depth_scale=self.depth_scale,
-                    fps=info.fps, has_imu=info.has_imu, gravity_aligned=self._gravity_aligned,
+                    fps=info.fps, platform=info.platform, has_imu=info.has_imu, gravity_aligned=self._gravity_aligned,
                     frames=self.n_frames, imu_samples=self.n_imu, depth_pixels_dropped=self.n_depth_dropped,
                     conventions="R_ci maps IMU to camera (v_c = R_ci v_i); an IMU sample stamped t happened at "
                                 "camera time t + imu_time_offset_s; groundtruth.txt holds R_wc (camera OpenCV "

@@ -38,7 +38,7 @@ from uareme_fusion.rotations import is_rotation
 from uareme_fusion.types import Frame, ImuBatch, NormalMap
 
 from ..formats.tum import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
-from .base import GroundTruth, Source, SourceInfo
+from .base import PLATFORMS, GroundTruth, Source, SourceInfo
 from .imu_csv import non_increasing_note, read_imu_log
 from .interleave import interleave
 from .intrinsics import CameraModel, Undistorter, published_camera
@@ -90,7 +90,15 @@ def read_metadata(root: Path) -> dict:
     gravity_aligned = True if name == SIM_META else bool(meta.get("gravity_aligned", False))
     return dict(path=path, K=_matrix(meta, "K", path), R_ci=_matrix(meta, "R_ci", path, rotation=True),
                 imu_time_offset_s=offset, depth_scale=_number(meta, "depth_scale", path, None, positive=True),
-                fps=_number(meta, "fps", path, None, positive=True), gravity_aligned=gravity_aligned)
+                fps=_number(meta, "fps", path, None, positive=True), gravity_aligned=gravity_aligned,
+                platform=_platform(meta, path))
+
+
+def _platform(meta: dict, path: Path) -> str | None:
+    value = meta.get("platform")
+    if value is None or value in PLATFORMS:
+        return value
+    raise InputError(f"{path}: platform must be one of {', '.join(PLATFORMS)}, got {value!r}")
 
 
 def ground_truth_from_tum(trajectory: tuple[np.ndarray, np.ndarray, np.ndarray], gravity_aligned: bool,
@@ -168,7 +176,7 @@ class TumSource(Source):
             K_origin=None if self.camera is None else self.camera.origin,
             has_depth=any(p is not None for p in self.seq.depth_paths), has_imu=self.imu is not None,
             R_ci=self.meta.get("R_ci") if self.meta.get("R_ci") is not None else np.eye(3),
-            imu_time_offset_s=self.meta.get("imu_time_offset_s", 0.0),
+            imu_time_offset_s=self.meta.get("imu_time_offset_s", 0.0), platform=self.meta.get("platform"),
             image_size=None if first is None else first.rgb.shape[:2],
         )
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..backends.base import Backend
-from ..drivers.base import SourceInfo
+from ..drivers.base import PLATFORMS, SourceInfo
 from ..errors import InputError
 from ..io.normal_maps import load_normal_map
 from ..types import Frame, NormalMap
@@ -145,8 +145,8 @@ def _learned(model_path: Path | None = None, threads: int | None = None):
                                                                         at_input_size=False))
 
 
-CAMERA_PRESETS = ("building", "handheld", "vehicle")
-"""Shipped EKF presets tuned for a camera with (or without) an IMU."""
+CAMERA_PRESETS = PLATFORMS
+"""Shipped EKF presets tuned for a camera with (or without) an IMU, one per camera platform."""
 DEFAULT_CAMERA_PRESET = "handheld"
 IMU_ONLY_PRESET = "imu_only"
 
@@ -154,11 +154,14 @@ IMU_ONLY_PRESET = "imu_only"
 def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str | None]:
     """The EKF preset a run uses and, when it is not the one asked for, a note saying why.
 
-    Chosen from what the source holds: with frames, `requested` or handheld; without frames (an IMU
+    Chosen from what the source holds: with frames, `requested`, else the source's `platform` (a
+    simulated bus says `vehicle`), else handheld; without frames (an IMU
     log), `requested` when it is the user's own file or imu_only, and imu_only instead of a camera
     preset (building, handheld, vehicle: their IMU settings assume a camera corrects the attitude; alone
     they give about twice the tilt error of imu_only on BROAD, `bench broad`)."""
     if info.has_frames:
+        if requested is None and info.platform in CAMERA_PRESETS:
+            return info.platform, f"{info.name} says the camera rides a {info.platform}: ran with the '{info.platform}' preset"
         return requested or DEFAULT_CAMERA_PRESET, None
     if requested in CAMERA_PRESETS:
         return IMU_ONLY_PRESET, (f"preset '{requested}' tunes camera + IMU fusion and {info.name} has no camera: "

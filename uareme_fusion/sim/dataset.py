@@ -140,7 +140,7 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
     write_euroc_imu(out / "imu0" / "data.csv", t_imu, gyro, accel)
 
     summary = dict(
-        scenario=scenario, seed=options.seed, frames=options.frames, fps=options.fps,
+        scenario=scenario, platform=spec.platform, seed=options.seed, frames=options.frames, fps=options.fps,
         width=options.width, height=options.height, hfov_deg=hfov, K=K.tolist(),
         depth_scale=DEPTH_SCALE, gt_kappa=GT_KAPPA, imu_rate_hz=options.imu_rate_hz,
         imu_noise=options.imu_noise.as_dict(), R_ci=R_ci.tolist(), imu_time_offset_s=options.imu_time_offset_s,

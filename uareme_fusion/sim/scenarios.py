@@ -38,6 +38,8 @@ class ScenarioSpec:
     """Slowly varying exposure gain (auto-exposure hunting)."""
     drop_probability: float = 0.0
     """Probability that a frame is dropped (black image, zero depth)."""
+    platform: str = "handheld"
+    """What carries the camera (an EKF preset name): `vehicle` where the Manhattan frame moves with it."""
 
 
 SCENARIOS: dict[str, ScenarioSpec] = {
@@ -50,7 +52,7 @@ SCENARIOS: dict[str, ScenarioSpec] = {
     "street": ScenarioSpec("street", "forward_walk", "walking along a street canyon",
                            dict(speed_m_s=1.4), hfov_deg=80.0),
     "bus": ScenarioSpec("bus", "bus", "camera fixed in a city bus: accelerating, braking, corner, "
-                        "roundabout; the interior is the Manhattan frame", hfov_deg=90.0),
+                        "roundabout; the interior is the Manhattan frame", hfov_deg=90.0, platform="vehicle"),
     "shake": ScenarioSpec("room", "shake", "fast handheld shake in a room (motion blur)",
                           motion_blur_exposure_s=0.01),
     "static": ScenarioSpec("room", "static", "camera at rest in a room"),
