@@ -45,7 +45,7 @@ def test_preset_follows_the_source(requested, has_frames, chosen, noted):
 
 
 @pytest.mark.parametrize("requested, platform, chosen, noted", [
-    (None, "vehicle", "vehicle", True), ("handheld", "vehicle", "handheld", False), (None, None, "handheld", False),
+    (None, "vehicle", "vehicle", True), ("handheld", "vehicle", "handheld", False), (None, None, "handheld", False), (None, "handheld", "handheld", False),
     (None, "building", "building", True)])
 def test_preset_follows_the_platform_the_source_states(requested, platform, chosen, noted):
     preset, note = mekf_preset_for(requested, SourceInfo(name="src", platform=platform))

@@ -160,7 +160,7 @@ def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str |
     preset (building, handheld, vehicle: their IMU settings assume a camera corrects the attitude; alone
     they give about twice the tilt error of imu_only on BROAD, `bench broad`)."""
     if info.has_frames:
-        if requested is None and info.platform in CAMERA_PRESETS:
+        if requested is None and info.platform in CAMERA_PRESETS and info.platform != DEFAULT_CAMERA_PRESET:
             return info.platform, f"{info.name} says the camera rides a {info.platform}: ran with the '{info.platform}' preset"
         return requested or DEFAULT_CAMERA_PRESET, None
     if requested in CAMERA_PRESETS:
