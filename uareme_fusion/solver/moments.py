@@ -193,7 +193,8 @@ def _fused_sums(n, k, unit_weights, largest, min_sq_norm, out):
     out[16] = n_bad
 
 
-_fused_kernel = jit.compiled(_fused_sums, fastmath={"reassoc", "contract"}, error_model="numpy")
+# cache=True: compiling it (float32 and float64) takes about a second, paid once per install, not per process.
+_fused_kernel = jit.compiled(_fused_sums, cache=True, fastmath={"reassoc", "contract"}, error_model="numpy")
 
 
 def fused_moments(vectors: np.ndarray, weights: np.ndarray | None) -> NormalMoments | None:
