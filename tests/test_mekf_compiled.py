@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 
+from uareme_fusion import jit
 from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels, state
 from uareme_fusion.backends.mekf import compiled as mekf_compiled
 from uareme_fusion.config import load_config
@@ -16,7 +17,6 @@ from uareme_fusion.rotations import angle_between, exp_so3
 from uareme_fusion.sim.imu import simulate_imu
 from uareme_fusion.sim.trajectory import make_trajectory
 from uareme_fusion.types import Status, VisualRotation
-from helpers import subprocess_env
 
 needs_numba = pytest.mark.skipif(mekf_compiled.KERNEL is None, reason="numba not installed: no compiled path")
 
@@ -143,20 +143,22 @@ def test_without_numba_the_reference_runs_after_one_warning_line():
 
 
 
-def test_kernels_compile_where_no_cache_folder_is_writable(tmp_path):
-    """A read-only install with no writable cache folder anywhere: numba cannot cache, the kernels
-    still compile (in each process) instead of failing or falling back to the reference paths."""
+
+def _doubled(x):
+    return 2.0 * x
+
+
+@needs_numba
+def test_a_kernel_compiles_where_no_cache_folder_is_writable(tmp_path, monkeypatch):
+    """A read-only install with no writable cache folder anywhere: numba cannot cache, and a kernel
+    asked to cache still compiles (in each process) instead of failing or falling back."""
+    from numba.core import config as numba_config
+
     not_a_folder = tmp_path / "file"
     not_a_folder.write_text("")
-    code = ("import warnings; warnings.simplefilter('error')\n"
-            "import numpy as np\n"
-            "from uareme_fusion.backends.mekf import kernels\n"
-            "from uareme_fusion.solver import moments\n"
-            "m = moments.fused_moments(np.ones((4, 3)), None)\n"
-            "print(type(kernels.KERNEL._cache).__name__, type(moments._fused_kernel._cache).__name__, m.n_valid)\n")
     # numba looks only in NUMBA_CACHE_DIR, which cannot be created (a file is in the way)
-    env = {**subprocess_env(), "NUMBA_CACHE_LOCATOR_CLASSES": "UserProvidedCacheLocator",
-           "NUMBA_CACHE_DIR": str(not_a_folder)}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["NullCache", "NullCache", "4"]
+    monkeypatch.setattr(numba_config, "CACHE_LOCATOR_CLASSES", "UserProvidedCacheLocator")
+    monkeypatch.setattr(numba_config, "CACHE_DIR", str(not_a_folder))
+    kernel = jit.compiled(_doubled, cache=True)
+    assert type(kernel._cache).__name__ == "NullCache"
+    assert kernel(np.arange(3.0)).tolist() == [0.0, 2.0, 4.0]
