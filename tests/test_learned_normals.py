@@ -49,6 +49,13 @@ def test_shipped_weights_load_offline_and_fit_the_budget():
     assert payload["format"] == WEIGHTS_FORMAT
 
 
+def test_the_shipped_network_is_loaded_once_per_process_and_drop_ins_afresh(shipped, tmp_path):
+    assert LearnedNormals().model is shipped.model
+    drop_in = tmp_path / "copy.pt"
+    drop_in.write_bytes(DEFAULT_WEIGHTS.read_bytes())
+    assert LearnedNormals(drop_in).model is not LearnedNormals(drop_in).model
+
+
 @pytest.fixture(scope="module")
 def shipped_on_views(shipped, rendered_views):
     """Per-pixel angular errors (deg) and kappa of the shipped model on the rendered views, and the
