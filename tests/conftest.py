@@ -17,8 +17,8 @@ def shared_data() -> Path:
 def pytest_configure(config):
     """In the process that starts xdist's workers (pyproject's addopts: `-n auto`), compile the numba
     kernels into their on-disk cache before the workers start. On a fresh checkout every worker would
-    otherwise compile the EKF kernels (about 20 s of one core) at the same time; with the cache
-    written, each worker loads them in a fraction of a second."""
+    otherwise compile the EKF kernels (20-40 s of one core: 42 s measured on a busy 2-core machine) at
+    the same time; with the cache written, each worker loads them in a fraction of a second."""
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return  # a worker, or a run in one process: that process compiles on first use anyway
     warm_compiled_kernels()
