@@ -105,6 +105,11 @@ def test_mekf_takes_a_preset_name():
 
 
 # ------------------------------------------------------------------------------ pipes and links
+NO_FOCAL_SEARCH = "--cues normals"
+"""For runs on the bare rgb/ folder (no intrinsics): the line cue would search the focal length on
+each of the first 30 frames, seconds that the pipe tests below do not need."""
+
+
 @pytest.fixture
 def imu_csv(tmp_path):
     assert cli("simulate", "room", "--frames", "20", "--size", "64x48", "--out", tmp_path / "seq").returncode == 0
@@ -114,7 +119,8 @@ def imu_csv(tmp_path):
 def test_a_process_substitution_imu_is_read(tmp_path, imu_csv):
     out = tmp_path / "out"
     proc = subprocess.run(["bash", "-c", f"{sys.executable} -m uareme_fusion run {imu_csv / 'rgb'} --imu "
-                           f"<(cat {imu_csv / 'imu0' / 'data.csv'}) --normals {imu_csv / 'normals'} --out {out}"],
+                           f"<(cat {imu_csv / 'imu0' / 'data.csv'}) --normals {imu_csv / 'normals'} --out {out}"
+                           f" {NO_FOCAL_SEARCH}"],
                           capture_output=True, text=True, env=subprocess_env(), timeout=120)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((out / "summary.json").read_text())
@@ -127,7 +133,8 @@ def test_a_fifo_imu_with_a_writer_is_read_and_a_fifo_source_is_named(tmp_path, i
     data = (imu_csv / "imu0" / "data.csv").read_bytes()
     writer = threading.Thread(target=lambda: fifo.write_bytes(data), daemon=True)
     writer.start()
-    proc = cli("run", imu_csv / "rgb", "--imu", fifo, "--normals", imu_csv / "normals", "--out", tmp_path / "out")
+    proc = cli("run", imu_csv / "rgb", "--imu", fifo, "--normals", imu_csv / "normals", "--out", tmp_path / "out",
+               *NO_FOCAL_SEARCH.split())
     writer.join(timeout=10)
     assert proc.returncode == 0, proc.stderr
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["imu_samples"] > 100

@@ -100,8 +100,14 @@ def _eval(root, imu, *extra):
     return json.loads((root / f"out_{imu}" / "summary.json").read_text()), output
 
 
-def test_phone_imu_axes_with_imu_rotation_match_the_camera_axes_case(phone_sequence, tmp_path):
-    camera, camera_out = _eval(phone_sequence, "camera.csv")
+@pytest.fixture(scope="module")
+def camera_run(phone_sequence):
+    """(summary, output) of `eval` with the IMU log in camera axes: the reference of the tests below."""
+    return _eval(phone_sequence, "camera.csv")
+
+
+def test_phone_imu_axes_with_imu_rotation_match_the_camera_axes_case(phone_sequence, camera_run, tmp_path):
+    camera, camera_out = camera_run
     phone, phone_out = _eval(phone_sequence, "phone.csv")
     config = tmp_path / "run.yaml"
     config.write_text("imu_rotation: android\nimu_time_offset_s: 0.0\n")
@@ -123,13 +129,13 @@ def test_phone_imu_axes_with_imu_rotation_match_the_camera_axes_case(phone_seque
     assert fixed["imu_rotation_estimate"]["angle_to_used_deg"] < 5.0
 
 
-def test_imu_time_offset_moves_imu_stamps_onto_the_camera_clock(phone_sequence):
+def test_imu_time_offset_moves_imu_stamps_onto_the_camera_clock(phone_sequence, camera_run):
     """The offset is added to IMU stamps: a log shifted by -0.05 s is put back by +0.05 s."""
     shifted = phone_sequence / "camera_late.csv"
     rows = np.loadtxt(phone_sequence / "camera.csv", delimiter=",", comments="#")
     rows[:, 0] -= 50_000_000
     np.savetxt(shifted, rows, delimiter=",", fmt=["%d"] + ["%.10f"] * 6)
-    reference, _ = _eval(phone_sequence, "camera.csv")
+    reference, _ = camera_run
     fixed, _ = _eval(phone_sequence, "camera_late.csv", "--imu-time-offset-s", "0.05")
     assert fixed["config"]["imu_time_offset_s"] == 0.05
     assert fixed["tilt_deg"]["mean"] == pytest.approx(reference["tilt_deg"]["mean"], abs=0.05)

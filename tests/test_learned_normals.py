@@ -50,6 +50,10 @@ def test_shipped_weights_load_offline_and_fit_the_budget():
     assert payload["format"] == WEIGHTS_FORMAT
 
 
+def test_the_shipped_network_is_loaded_once_per_process(shipped):
+    assert LearnedNormals().model is shipped.model
+
+
 @pytest.fixture(scope="module")
 def shipped_on_views(shipped, rendered_views):
     """Per-pixel angular errors (deg) and kappa of the shipped model on the rendered views, and the
@@ -151,6 +155,7 @@ def test_drop_in_torchscript(tmp_path):
     nm = LearnedNormals(model=path).estimate(np.full((30, 50, 3), 128, np.uint8))
     np.testing.assert_allclose(nm.normals, np.broadcast_to([0.0, 0.0, -1.0], (30, 50, 3)), atol=1e-6)
     np.testing.assert_allclose(nm.kappa, 5.0, atol=1e-5)
+    assert LearnedNormals(model=path).model is not LearnedNormals(model=path).model  # read afresh each time
 
 
 def test_drop_in_state_dict_matches_the_network(tmp_path):

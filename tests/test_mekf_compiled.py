@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 
+from uareme_fusion import jit
 from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels, state
 from uareme_fusion.backends.mekf import compiled as mekf_compiled
 from uareme_fusion.config import load_config
@@ -164,3 +165,23 @@ def test_frame_batch_held_for_its_frame_is_a_copy_and_counted_when_read():
             assert e.status == e_ref.status
     assert filt.stream.counts.nonfinite == 1
     assert_same_filters(filt, ref)
+
+
+def _doubled(x):
+    return 2.0 * x
+
+
+@needs_numba
+def test_a_kernel_compiles_where_no_cache_folder_is_writable(tmp_path, monkeypatch):
+    """A read-only install with no writable cache folder anywhere: numba cannot cache, and a kernel
+    asked to cache still compiles (in each process) instead of failing or falling back."""
+    from numba.core import config as numba_config
+
+    not_a_folder = tmp_path / "file"
+    not_a_folder.write_text("")
+    # numba looks only in NUMBA_CACHE_DIR, which cannot be created (a file is in the way)
+    monkeypatch.setattr(numba_config, "CACHE_LOCATOR_CLASSES", "UserProvidedCacheLocator")
+    monkeypatch.setattr(numba_config, "CACHE_DIR", str(not_a_folder))
+    kernel = jit.compiled(_doubled, cache=True)
+    assert type(kernel._cache).__name__ == "NullCache"
+    assert kernel(np.arange(3.0)).tolist() == [0.0, 2.0, 4.0]

@@ -1,9 +1,8 @@
 """The project's one compiler switch: numba's `njit`, or nothing (pure-numpy reference paths).
 
-`compiled(fn)` compiles `fn` with `numba.njit(cache=False, nogil=True)` when numba imports (lazily,
-at its first call), and
-returns None otherwise, after one warning line. Callers keep a pure Python/numpy reference beside
-each compiled kernel and use it whenever the kernel is None or fails to compile (`disable`).
+`compiled(fn)` compiles `fn` with `numba.njit(nogil=True)` when numba imports (lazily, at its first
+call), and returns None otherwise, after one warning line. Callers keep a pure Python/numpy reference
+beside each compiled kernel and use it whenever the kernel is None or fails to compile (`disable`).
 `UAREME_NO_JIT=1` in the environment forces the reference paths (tests compare the two).
 """
 
@@ -41,12 +40,19 @@ def available() -> bool:
 def compiled(fn=None, cache: bool = False, **options):
     """`numba.njit(cache=cache, nogil=True, **options)(fn)`, or None without numba (one warning).
     `cache=True` keeps the machine code on disk (numba's `__pycache__` beside the source, or
-    `NUMBA_CACHE_DIR`) for kernels whose compilation takes seconds."""
+    `NUMBA_CACHE_DIR`, or a cache folder in the user's home for a read-only install) for kernels
+    whose compilation takes a second or more; where none of those is writable, the kernel compiles
+    in each process instead."""
     def wrap(f):
         if numba is None:
             _warn_once(_REASON)
             return None
-        return numba.njit(cache=cache, nogil=True, **options)(f)
+        try:
+            return numba.njit(cache=cache, nogil=True, **options)(f)
+        except RuntimeError:  # "cannot cache function ...: no locator available" (nowhere writable)
+            if not cache:
+                raise
+            return numba.njit(cache=False, nogil=True, **options)(f)
     return wrap(fn) if fn is not None else wrap
 
 
