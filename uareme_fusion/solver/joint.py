@@ -18,7 +18,9 @@ reweighted by the Cauchy loss at that rotation (`lines.cauchy_reweighted`, scale
 `LineCueConfig.robust_sine`), the weights a_c re-set from the residuals there, and J minimised
 again, `robust_iterations` times (iteratively reweighted least squares; each step is one pass over
 the segments' moments). Without `R_init` the starts are the best few global candidates of J and
-each cue's own best candidates (of E_c and of E_c~), and the minimum kept is the one with the least robust joint score
+each cue's own best candidates (of E_c and of E_c~), each first minimised on the plain J; with
+`R_init` (a frame of a stream) the start is R_init, reweighted there at once and also after a plain
+minimisation (the plain sextic can slide from a good prior to a wrong frame). The minimum kept is the one with the least robust joint score
 sum_c (n_c / s_c) E_c~(R) / min E_c~ over the minima found (E_N~ = E_N, E_L~ the Cauchy cost
 `lines.cauchy_line_cost`): the rotation that explains the most segments and normals together.
 
@@ -243,15 +245,17 @@ class JointSolver:
             total = sum(c.alpha * cost for c, cost in zip(cues, costs))
             order = list(np.argsort(total)[: self.config.global_refinements])
             own = [int(np.argmin(cost)) for cost in costs] + [int(np.argmin(c.robust_cost(candidates))) for c in cues]
-            starts = [candidates[i] for i in order + own]
+            starts = [(candidates[i], True) for i in order + own]
         else:
-            starts = [_check_rotation(R_init)]
+            R_init = _check_rotation(R_init)
+            starts = [(R_init, False), (R_init, True)]
             for c in cues:
-                c.set_alpha(starts[0])
+                c.set_alpha(R_init)
         minima, first, iterations = [], [], 0
-        for R0 in starts:
-            R, its, _, converged = self._refine(cues, R0)
-            iterations += its
+        for R, plain_first in starts:
+            if plain_first:
+                R, its, _, converged = self._refine(cues, R)
+                iterations += its
             if any(_angle_rad(R, other) < _SAME_MINIMUM_RAD for other in first):
                 continue
             first.append(R)
