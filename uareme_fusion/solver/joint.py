@@ -19,8 +19,9 @@ reweighted by the Cauchy loss at that rotation (`lines.cauchy_reweighted`, scale
 again, `robust_iterations` times (iteratively reweighted least squares; each step is one pass over
 the segments' moments). Without `R_init` the starts are the best few global candidates of J and
 each cue's own best candidates (of E_c and of E_c~), each first minimised on the plain J; with
-`R_init` (a frame of a stream) the start is R_init, reweighted there at once and also after a plain
-minimisation (the plain sextic can slide from a good prior to a wrong frame). The minimum kept is the one with the least robust joint score
+`R_init` (a frame of a stream) the one start is R_init, reweighted there at once (the plain sextic can
+slide from a good prior to a wrong frame; from a poor prior every segment gets about the same small
+weight, which is the plain sextic again). The minimum kept is the one with the least robust joint score
 sum_c (n_c / s_c) E_c~(R) / min E_c~ over the minima found (E_N~ = E_N, E_L~ the Cauchy cost
 `lines.cauchy_line_cost`): the rotation that explains the most segments and normals together.
 
@@ -51,6 +52,8 @@ from .quartic import gradient_hessian, normalised_cost
 _NORMALS_MIN_COST = 1e-6
 """Floor on E_N* in a_N: an exact synthetic normal map does not get infinite weight."""
 _SAME_MINIMUM_RAD = np.radians(1.0)
+_IRLS_SETTLED_RAD = np.radians(0.05)
+"""A reweighting round that moves the rotation less than this ends the rounds (well inside the error floor)."""
 """Starts whose first minimum lies within this of an earlier one's (after the symmetry) are not pursued."""
 
 
@@ -245,10 +248,10 @@ class JointSolver:
             total = sum(c.alpha * cost for c, cost in zip(cues, costs))
             order = list(np.argsort(total)[: self.config.global_refinements])
             own = [int(np.argmin(cost)) for cost in costs] + [int(np.argmin(c.robust_cost(candidates))) for c in cues]
-            starts = [(candidates[i], True) for i in order + own]
+            starts = [(candidates[i], True) for i in dict.fromkeys(order + own)]
         else:
             R_init = _check_rotation(R_init)
-            starts = [(R_init, False), (R_init, True)]
+            starts = [(R_init, False)]
             for c in cues:
                 c.set_alpha(R_init)
         minima, first, iterations = [], [], 0
@@ -282,15 +285,20 @@ class JointSolver:
         return d[1] - d[0], P
 
     def _reweighted_minimum(self, cues: list[_Cue], R: np.ndarray) -> tuple[np.ndarray, list[_Cue], int, bool]:
-        """From a minimum R of J: reweight robust cues at R, re-set the weights a_c there, minimise
-        again (`LineCueConfig.robust_iterations` times, at least once)."""
+        """From R: reweight robust cues at R, re-set the weights a_c there, minimise J again
+        (`LineCueConfig.robust_iterations` times, at least once; fewer when a round moves R by less
+        than `_IRLS_SETTLED_RAD`)."""
         iterations, converged = 0, True
         for _ in range(max(self.line_config.robust_iterations, 1)):
             cues = [c.reweighted(R) for c in cues]
             for c in cues:
                 c.set_alpha(R)
-            R, its, _, converged = self._refine(cues, R)
+            R_new, its, _, converged = self._refine(cues, R)
             iterations += its
+            moved = np.linalg.norm(log_so3(R.T @ R_new))
+            R = R_new
+            if moved < _IRLS_SETTLED_RAD:
+                break
         return R, cues, iterations, converged
 
     def joint_cost(self, cues: list[_Cue], R) -> float:
