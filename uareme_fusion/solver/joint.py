@@ -86,6 +86,10 @@ class LineCueConfig:
     """Cauchy scale on c_j = min_k |p_j . r_k| (about 1.1 deg of plane angle; see the module docstring).
     ICSL corridor, given K, every second frame: RGB vs depth rotation mean 2.85 deg without, 2.10 with
     0.02, 2.13 with 0.01 and with 0.035 (not sensitive)."""
+    candidate_sine: float = 0.1
+    """The Cauchy scale when the global candidates are scored: about the distance from a rotation to its
+    nearest candidate (400 over one symmetric cell, about 6 deg), so that the one nearest the true frame
+    scores as explaining its segments."""
     robust_iterations: int = 3
     """Reweightings after each start's first minimum (0: the plain sextic, solved once)."""
 
@@ -121,11 +125,12 @@ class _Cue:
     def summary(self) -> dict:
         raise NotImplementedError
 
-    def robust_cost(self, R):
-        """E_c~ of the module docstring, for choosing among minima (one rotation or a stack)."""
+    def robust_cost(self, R, coarse: bool = False):
+        """E_c~ of the module docstring, for choosing among minima (one rotation or a stack); `coarse`:
+        as seen at the spacing of the global candidates."""
         return self.cost(R)
 
-    def reweighted(self, R) -> "_Cue":
+    def reweighted(self, R, coarse: bool = False) -> "_Cue":
         """A copy of the cue, its measurements reweighted at R for a robust cue (its a_c is then set
         on the copy: one start's weights never leak into another's)."""
         return copy.copy(self)
@@ -157,13 +162,14 @@ class _LineCue(_Cue):
         self.base = moments if base is None else base
         """The segments' moments with their own weights (`moments` may be Cauchy-reweighted)."""
 
-    def robust_cost(self, R):
-        return cauchy_line_cost(self.base, R, self.config.robust_sine)
+    def robust_cost(self, R, coarse: bool = False):
+        return cauchy_line_cost(self.base, R, self.config.candidate_sine if coarse else self.config.robust_sine)
 
-    def reweighted(self, R) -> "_LineCue":
+    def reweighted(self, R, coarse: bool = False) -> "_LineCue":
         if not self.config.robust_iterations:
             return copy.copy(self)
-        return _LineCue(cauchy_reweighted(self.base, R, self.config.robust_sine), self.config, self.base)
+        scale = self.config.candidate_sine if coarse else self.config.robust_sine
+        return _LineCue(cauchy_reweighted(self.base, R, scale), self.config, self.base)
 
     def cost(self, R):
         return normalised_line_cost(self.moments, R)
@@ -247,8 +253,9 @@ class JointSolver:
                 c.set_alpha(candidates[int(np.argmin(cost))])
             total = sum(c.alpha * cost for c, cost in zip(cues, costs))
             order = list(np.argsort(total)[: self.config.global_refinements])
-            own = [int(np.argmin(cost)) for cost in costs] + [int(np.argmin(c.robust_cost(candidates))) for c in cues]
-            starts = [(candidates[i], True) for i in dict.fromkeys(order + own)]
+            own = [int(np.argmin(cost)) for cost in costs]
+            robust = [int(np.argmin(c.robust_cost(candidates, coarse=True))) for c in cues if isinstance(c, _LineCue)]
+            starts = [(candidates[i], True) for i in dict.fromkeys(order + own)] + [(candidates[i], False) for i in robust]
         else:
             R_init = _check_rotation(R_init)
             starts = [(R_init, False)]
@@ -285,19 +292,21 @@ class JointSolver:
         return d[1] - d[0], P
 
     def _reweighted_minimum(self, cues: list[_Cue], R: np.ndarray) -> tuple[np.ndarray, list[_Cue], int, bool]:
-        """From R: reweight robust cues at R, re-set the weights a_c there, minimise J again
-        (`LineCueConfig.robust_iterations` times, at least once; fewer when a round moves R by less
-        than `_IRLS_SETTLED_RAD`)."""
+        """From R: reweight robust cues at R, re-set the weights a_c there, minimise J again: one round
+        at the coarse scale (`LineCueConfig.candidate_sine`, so that a start a few degrees off still
+        sees its segments), then `robust_iterations` at the fine one (fewer when a round moves R by less
+        than `_IRLS_SETTLED_RAD`); without robust rounds, once on the plain J."""
         iterations, converged = 0, True
-        for _ in range(max(self.line_config.robust_iterations, 1)):
-            cues = [c.reweighted(R) for c in cues]
+        rounds = self.line_config.robust_iterations
+        for i in range(rounds + 1 if rounds else 1):
+            cues = [c.reweighted(R, coarse=rounds > 0 and i == 0) for c in cues]
             for c in cues:
                 c.set_alpha(R)
             R_new, its, _, converged = self._refine(cues, R)
             iterations += its
             moved = np.linalg.norm(log_so3(R.T @ R_new))
             R = R_new
-            if moved < _IRLS_SETTLED_RAD:
+            if i > 0 and moved < _IRLS_SETTLED_RAD:
                 break
         return R, cues, iterations, converged
 
