@@ -52,9 +52,9 @@ from .quartic import gradient_hessian, normalised_cost
 _NORMALS_MIN_COST = 1e-6
 """Floor on E_N* in a_N: an exact synthetic normal map does not get infinite weight."""
 _SAME_MINIMUM_RAD = np.radians(1.0)
+"""Starts whose first minimum lies within this of an earlier one's (after the symmetry) are not pursued."""
 _IRLS_SETTLED_RAD = np.radians(0.05)
 """A reweighting round that moves the rotation less than this ends the rounds (well inside the error floor)."""
-"""Starts whose first minimum lies within this of an earlier one's (after the symmetry) are not pursued."""
 
 
 @dataclass(frozen=True)
@@ -91,7 +91,8 @@ class LineCueConfig:
     nearest candidate (400 over one symmetric cell, about 6 deg), so that the one nearest the true frame
     scores as explaining its segments."""
     robust_iterations: int = 3
-    """Reweightings after each start's first minimum (0: the plain sextic, solved once)."""
+    """Reweightings at `robust_sine` from each start, after one at `candidate_sine` from a global candidate
+    (0: the plain sextic)."""
 
 
 class _Cue:
@@ -255,7 +256,8 @@ class JointSolver:
             order = list(np.argsort(total)[: self.config.global_refinements])
             own = [int(np.argmin(cost)) for cost in costs]
             robust = [int(np.argmin(c.robust_cost(candidates, coarse=True))) for c in cues if isinstance(c, _LineCue)]
-            starts = [(candidates[i], True) for i in dict.fromkeys(order + own)] + [(candidates[i], False) for i in robust]
+            starts = ([(candidates[i], True) for i in dict.fromkeys(order + own)]
+                      + [(candidates[i], False) for i in robust])
         else:
             R_init = _check_rotation(R_init)
             starts = [(R_init, False)]
@@ -269,7 +271,7 @@ class JointSolver:
             if any(_angle_rad(R, other) < _SAME_MINIMUM_RAD for other in first):
                 continue
             first.append(R)
-            R, found, its, converged = self._reweighted_minimum(cues, R)
+            R, found, its, converged = self._reweighted_minimum(cues, R, coarse_first=R_init is None)
             minima.append((R, found, converged))
             iterations += its
         scores = _robust_scores(cues, minima)
@@ -291,22 +293,25 @@ class JointSolver:
         P = sum(information_to_covariance(c.info, self.config) for c in cues)
         return d[1] - d[0], P
 
-    def _reweighted_minimum(self, cues: list[_Cue], R: np.ndarray) -> tuple[np.ndarray, list[_Cue], int, bool]:
-        """From R: reweight robust cues at R, re-set the weights a_c there, minimise J again: one round
-        at the coarse scale (`LineCueConfig.candidate_sine`, so that a start a few degrees off still
-        sees its segments), then `robust_iterations` at the fine one (fewer when a round moves R by less
-        than `_IRLS_SETTLED_RAD`); without robust rounds, once on the plain J."""
+    def _reweighted_minimum(self, cues: list[_Cue], R: np.ndarray, coarse_first: bool
+                            ) -> tuple[np.ndarray, list[_Cue], int, bool]:
+        """From R: reweight robust cues at R, re-set the weights a_c there, minimise J again:
+        `robust_iterations` rounds at the fine scale (fewer when a round moves R by less than
+        `_IRLS_SETTLED_RAD`), after one at the coarse scale (`LineCueConfig.candidate_sine`) when
+        `coarse_first` (a global candidate, a few degrees off, still sees its segments); without
+        robust rounds, once on the plain J."""
         iterations, converged = 0, True
         rounds = self.line_config.robust_iterations
-        for i in range(rounds + 1 if rounds else 1):
-            cues = [c.reweighted(R, coarse=rounds > 0 and i == 0) for c in cues]
+        coarse = rounds > 0 and coarse_first
+        for i in range(max(rounds, 1) + coarse):
+            cues = [c.reweighted(R, coarse=coarse and i == 0) for c in cues]
             for c in cues:
                 c.set_alpha(R)
             R_new, its, _, converged = self._refine(cues, R)
             iterations += its
             moved = np.linalg.norm(log_so3(R.T @ R_new))
             R = R_new
-            if i > 0 and moved < _IRLS_SETTLED_RAD:
+            if i >= coarse and moved < _IRLS_SETTLED_RAD:
                 break
         return R, cues, iterations, converged
 
@@ -380,7 +385,7 @@ def _disagreement_inflated(cov: np.ndarray, disagreement, config: SolverConfig) 
         return cov
     d, P = disagreement
     ratio = float(d @ np.linalg.solve(P, d)) / 3.0
-    return _capped(cov * ratio, config) if ratio > 1.0 else cov
+    return capped_covariance(cov * ratio, config) if ratio > 1.0 else cov
 
 
 def _with_other_minima(cov: np.ndarray, R_cm: np.ndarray, others: list, config: SolverConfig) -> np.ndarray:
@@ -392,11 +397,11 @@ def _with_other_minima(cov: np.ndarray, R_cm: np.ndarray, others: list, config: 
     p = np.exp(-0.5 * np.array([delta for _, delta in others]))
     p = p / (1.0 + p.sum())
     d = np.array([log_so3(R_cm.T @ nearest_symmetric(R, R_cm)[0]) for R, _ in others])
-    return _capped(cov + np.einsum("i,ia,ib->ab", p, d, d), config)
+    return capped_covariance(cov + np.einsum("i,ia,ib->ab", p, d, d), config)
 
 
-def _capped(cov: np.ndarray, config: SolverConfig) -> np.ndarray:
-    """`cov` symmetrised with its eigenvalues clipped to [0, the solver's cap]."""
+def capped_covariance(cov: np.ndarray, config: SolverConfig) -> np.ndarray:
+    """`cov` (rad^2) symmetrised, its eigenvalues clipped to [0, the solver's cap]."""
     val, vec = np.linalg.eigh(0.5 * (cov + cov.T))
     return (vec * np.clip(val, 0.0, config.max_variance_rad2)) @ vec.T
 
