@@ -92,8 +92,9 @@ class LineCueConfig:
     scores as explaining its segments."""
     min_robust_segments: float = 20.0
     """Fewer effective segments than this are not reweighted (the plain sextic): with few segments the
-    Cauchy loss can fit a subset confidently (simulated rooms at 640x480 with 11-22 segments: ARE max
-    6.7 deg with reweighting, 2.6 without)."""
+    Cauchy loss can fit a subset confidently (`eval` of a simulated room whose frames 3-5 have lines
+    only: ARE max 6.7 deg reweighting all, 2.6 without; a threshold of 20 undid the gain on ICSL streams,
+    whose 320 px segments number about 10-25)."""
     robust_iterations: int = 3
     """Reweightings at `robust_sine` from each start, after one at `candidate_sine` from a global candidate
     (0: the plain sextic)."""
@@ -135,11 +136,6 @@ class _Cue:
         as seen at the spacing of the global candidates."""
         return self.cost(R)
 
-    def plain(self) -> "_Cue":
-        """A copy with the measurements' own weights (the covariance is that of the plain cost at the
-        robust minimum: its calibration, s_c, was fitted on it)."""
-        return copy.copy(self)
-
     def reweighted(self, R, coarse: bool = False) -> "_Cue":
         """A copy of the cue, its measurements reweighted at R for a robust cue (its a_c is then set
         on the copy: one start's weights never leak into another's)."""
@@ -174,9 +170,6 @@ class _LineCue(_Cue):
 
     def robust_cost(self, R, coarse: bool = False):
         return cauchy_line_cost(self.base, R, self.config.candidate_sine if coarse else self.config.robust_sine)
-
-    def plain(self) -> "_LineCue":
-        return _LineCue(self.base, self.config)
 
     def reweighted(self, R, coarse: bool = False) -> "_LineCue":
         if not self.config.robust_iterations or self.base.n_effective < self.config.min_robust_segments:
@@ -237,14 +230,11 @@ class JointSolver:
                 cues.insert(0, normal_cue)
         t1 = time.perf_counter()
         R_cm, cues, iterations, converged, others = self._solve_cues(cues, R_init)
-        cov_cues = [c.plain() for c in cues]
-        for c in cov_cues:
-            c.set_alpha(R_cm)
-        cov = self._covariance(cov_cues, R_cm)
-        cov = _disagreement_inflated(cov, self._cue_disagreement(cues, cov_cues, R_cm), self.config)
+        cov = self._covariance(cues, R_cm)
+        cov = _disagreement_inflated(cov, self._cue_disagreement(cues, cues, R_cm), self.config)
         cov = _with_other_minima(cov, R_cm, others, self.config)
         t2 = time.perf_counter()
-        return self._result(cov_cues, R_cm, cov, iterations, converged, t_s, {"moments": 1e3 * (t1 - t0),
+        return self._result(cues, R_cm, cov, iterations, converged, t_s, {"moments": 1e3 * (t1 - t0),
                                                                          "optimise": 1e3 * (t2 - t1)})
 
     # --- cues -------------------------------------------------------------------------------------
@@ -302,7 +292,8 @@ class JointSolver:
                           ) -> tuple[np.ndarray, np.ndarray] | None:
         """With two cues: (d, P), d the rotation from the normals' own minimum to the lines' own minimum
         (each refined alone from R_cm; rad, right perturbation at R_cm) and P the sum of the two cues'
-        own covariances (`information_to_covariance` of the information of each of `cov_cues`). None with one cue."""
+        own covariances (`information_to_covariance` of the information of each of `cov_cues`). None with one
+        cue."""
         if len(cues) < 2:
             return None
         own = [self._refine([c], R_cm)[0] for c in cues]
