@@ -231,7 +231,7 @@ class JointSolver:
         t1 = time.perf_counter()
         R_cm, cues, iterations, converged, others = self._solve_cues(cues, R_init)
         cov = self._covariance(cues, R_cm)
-        cov = _disagreement_inflated(cov, self._cue_disagreement(cues, cues, R_cm), self.config)
+        cov = _disagreement_inflated(cov, self._cue_disagreement(cues, R_cm), self.config)
         cov = _with_other_minima(cov, R_cm, others, self.config)
         t2 = time.perf_counter()
         return self._result(cues, R_cm, cov, iterations, converged, t_s, {"moments": 1e3 * (t1 - t0),
@@ -288,17 +288,15 @@ class JointSolver:
         others = [(m[0], scores[i] - scores[best]) for i, m in enumerate(minima) if i != best]
         return R_cm, cues, iterations, converged, others
 
-    def _cue_disagreement(self, cues: list[_Cue], cov_cues: list[_Cue], R_cm: np.ndarray
-                          ) -> tuple[np.ndarray, np.ndarray] | None:
+    def _cue_disagreement(self, cues: list[_Cue], R_cm: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """With two cues: (d, P), d the rotation from the normals' own minimum to the lines' own minimum
         (each refined alone from R_cm; rad, right perturbation at R_cm) and P the sum of the two cues'
-        own covariances (`information_to_covariance` of the information of each of `cov_cues`). None with one
-        cue."""
+        own covariances (`information_to_covariance` of each cue's information). None with one cue."""
         if len(cues) < 2:
             return None
         own = [self._refine([c], R_cm)[0] for c in cues]
         d = [log_so3(R_cm.T @ nearest_symmetric(R, R_cm)[0]) for R in own]
-        P = sum(information_to_covariance(c.info, self.config) for c in cov_cues)
+        P = sum(information_to_covariance(c.info, self.config) for c in cues)
         return d[1] - d[0], P
 
     def _reweighted_minimum(self, cues: list[_Cue], R: np.ndarray, coarse_first: bool
