@@ -26,7 +26,7 @@ from ..lines.detect import LineSegments
 from ..pinhole import DEFAULT_FOV_DEG, assumed_K, centred_K
 from ..rotations import log_so3
 from ..types import NormalMap, VisualRotation
-from .joint import JointSolver
+from .joint import JointSolver, capped_covariance
 from .lines import LineMoments, interpretation_planes, line_moments
 
 
@@ -173,6 +173,4 @@ def _rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, f_p
 
 def _replace_cov(visual: VisualRotation, solver: JointSolver, cov: np.ndarray) -> VisualRotation:
     """`visual` with the covariance `cov` (symmetrised, eigenvalues clipped to [0, the solver's cap])."""
-    val, vec = np.linalg.eigh(0.5 * (cov + cov.T))
-    val = np.minimum(np.maximum(val, 0.0), solver.config.max_variance_rad2)
-    return dataclasses.replace(visual, cov=(vec * val) @ vec.T)
+    return dataclasses.replace(visual, cov=capped_covariance(cov, solver.config))

@@ -248,5 +248,31 @@ def inlier_fraction(moments: LineMoments, R_cm: np.ndarray, max_sine: float = IN
     """Weighted fraction of segments whose plane is within asin(`max_sine`) of containing some axis."""
     if moments.total_weight <= 0:
         return 0.0
-    c = np.abs(moments.planes @ np.asarray(R_cm, float)).min(axis=1)
+    c = nearest_axis_sine(moments, R_cm)
     return float(moments.weights[c < max_sine].sum() / moments.total_weight)
+
+
+def nearest_axis_sine(moments: LineMoments, R_cm: np.ndarray) -> np.ndarray:
+    """c_j = min_k |p_j . r_k| (N,), or (..., N) for a stack of rotations (..., 3, 3): the sine of each
+    segment plane's angle to the axis it nearly contains."""
+    return np.abs(moments.planes @ np.asarray(R_cm, float)).min(axis=-1)
+
+
+def cauchy_line_cost(moments: LineMoments, R_cm: np.ndarray, scale_sine: float) -> float | np.ndarray:
+    """The robust line cost sum_j w_j log(1 + (c_j / scale)^2) / sum_j w_j (c_j of `nearest_axis_sine`).
+
+    Quadratic in c_j near an axis like equation (L), but it grows only logarithmically for clutter
+    instead of in proportion to the other axes' factors, so it ranks rotations by how many segments they
+    explain. One value for a rotation (3, 3), an array for a stack (..., 3, 3)."""
+    if moments.total_weight <= 0:
+        return 0.0 if np.ndim(R_cm) == 2 else np.zeros(np.shape(R_cm)[:-2])
+    c = nearest_axis_sine(moments, R_cm)
+    cost = np.log1p((c / scale_sine) ** 2) @ moments.weights / moments.total_weight
+    return float(cost) if np.ndim(cost) == 0 else cost
+
+
+def cauchy_reweighted(moments: LineMoments, R_cm: np.ndarray, scale_sine: float) -> LineMoments:
+    """The moments of the same planes with weights w_j / (1 + (c_j / scale)^2) at `R_cm`: one step of
+    iteratively reweighted least squares for the Cauchy loss of `cauchy_line_cost`, on equation (L)."""
+    c = nearest_axis_sine(moments, R_cm)
+    return line_moments(moments.planes, moments.weights / (1.0 + (c / scale_sine) ** 2))
