@@ -95,6 +95,10 @@ class LineCueConfig:
     Cauchy loss can fit a subset confidently (`eval` of a simulated room whose frames 3-5 have lines
     only: ARE max 6.7 deg reweighting all, 2.6 without; a threshold of 20 undid the gain on ICSL streams,
     whose 320 px segments number about 10-25)."""
+    min_robust_segments_beside_normals: float = 15.0
+    """`min_robust_segments` when the frame also has a normal cue (the normals then anchor the joint
+    score): ICSL-more RGB-only streams single / mekf / smoother 2.16 / 2.19 / 2.19 deg at 15 against
+    6.16 / 6.29 / 5.96 at 20 (`bench horizon`); lines-only frames keep 20."""
     robust_iterations: int = 3
     """Reweightings at `robust_sine` from each start, after one at `candidate_sine` from a global candidate
     (0: the plain sextic)."""
@@ -161,10 +165,14 @@ class _LineCue(_Cue):
     name = "lines"
     random_cost = RANDOM_LINES_COST
 
-    def __init__(self, moments: LineMoments, config: LineCueConfig, base: LineMoments | None = None):
+    def __init__(self, moments: LineMoments, config: LineCueConfig, base: LineMoments | None = None,
+                 beside_normals: bool = False):
         super().__init__(moments, min(moments.n_effective, config.independent_segments), config.covariance_scale,
                          config.min_cost)
         self.config = config
+        self.beside_normals = beside_normals
+        self.min_robust_segments = (config.min_robust_segments_beside_normals if beside_normals
+                                    else config.min_robust_segments)
         self.base = moments if base is None else base
         """The segments' moments with their own weights (`moments` may be Cauchy-reweighted)."""
 
@@ -172,10 +180,10 @@ class _LineCue(_Cue):
         return cauchy_line_cost(self.base, R, self.config.candidate_sine if coarse else self.config.robust_sine)
 
     def reweighted(self, R, coarse: bool = False) -> "_LineCue":
-        if not self.config.robust_iterations or self.base.n_effective < self.config.min_robust_segments:
+        if not self.config.robust_iterations or self.base.n_effective < self.min_robust_segments:
             return copy.copy(self)
         scale = self.config.candidate_sine if coarse else self.config.robust_sine
-        return _LineCue(cauchy_reweighted(self.base, R, scale), self.config, self.base)
+        return _LineCue(cauchy_reweighted(self.base, R, scale), self.config, self.base, self.beside_normals)
 
     def cost(self, R):
         return normalised_line_cost(self.moments, R)
@@ -223,11 +231,9 @@ class JointSolver:
                 raise InputError("No visual cue in this frame: no normal map and too few line segments")
             return self.normal_solver.solve(normal_map, R_init)
         t0 = time.perf_counter()
-        cues: list[_Cue] = [_LineCue(lines, self.line_config)]
-        if normal_map is not None:
-            normal_cue = self._normal_cue(normal_map)
-            if normal_cue is not None:
-                cues.insert(0, normal_cue)
+        normal_cue = self._normal_cue(normal_map) if normal_map is not None else None
+        line_cue = _LineCue(lines, self.line_config, beside_normals=normal_cue is not None)
+        cues: list[_Cue] = [line_cue] if normal_cue is None else [normal_cue, line_cue]
         t1 = time.perf_counter()
         R_cm, cues, iterations, converged, others = self._solve_cues(cues, R_init)
         cov = self._covariance(cues, R_cm)
