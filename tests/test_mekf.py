@@ -251,7 +251,7 @@ def test_zero_rate_update_learns_every_bias_axis_at_rest():
         filt = Mekf(MekfConfig(mode="imu_only", rest_gyro_max_rad_s=rest))
         filt.process_imu(t, gyro, accel)
         filt.flush()
-        learned[rest] = (filt.b_c, filt.counters["rest_updates"])
+        learned[rest] = (filt.b_c.copy(), filt.counters["rest_updates"])
     b_rest, n_rest = learned[0.035]
     assert n_rest > 30
     np.testing.assert_allclose(b_rest, bias, atol=3e-4)

@@ -29,6 +29,8 @@ def _increments_mismatch(t_s, gyro_rad_s, slerp, valid, keep, shift_s, dt_s) -> 
     summed = np.cumsum(np.vstack([np.zeros(3), gyro_rad_s]), axis=0) * dt_s
     inc_gyro = summed[L + 1:] - summed[1:-L]
     use = valid[:-L] & valid[L:] & keep[:-L]
+    if not use.any():
+        return np.inf  # nothing moved with a reference on both ends: this shift says nothing
     return float(np.mean(np.sum((inc_ref[use] - inc_gyro[use]) ** 2, axis=1)))
 
 
@@ -47,6 +49,8 @@ def imu_delay_s(t_s: np.ndarray, gyro_rad_s: np.ndarray, R_ref: np.ndarray, keep
     for step, half_width in ((0.25, max_samples), (0.05, 0.25)):  # coarse, then fine around the coarse best
         shifts = best + np.arange(-half_width, half_width + 1e-9, step) * dt_s
         cost = [_increments_mismatch(t_s, gyro_rad_s, slerp, valid, keep, s, dt_s) for s in shifts]
+        if not np.isfinite(cost).any():
+            return 0.0  # no moving samples to time against: no delay measured
         best = float(shifts[int(np.argmin(cost))])
     return -best
 

@@ -273,8 +273,6 @@ class JointSolver:
         else:
             R_init = _check_rotation(R_init)
             starts = [(R_init, False)]
-            for c in cues:
-                c.set_alpha(R_init)
         minima, first, iterations = [], [], 0
         for R, plain_first in starts:
             if plain_first:

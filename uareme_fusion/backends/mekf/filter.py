@@ -41,7 +41,8 @@ class Mekf(Backend):
     `Estimate` at `t_s`: `R_wc` (3, 3) camera to a z-up world, `cov` (3, 3) rad^2 of its right
     perturbation, `gyro_bias_rad_s` (3,) in the IMU frame. Counters of what happened are in
     `counters` (e.g. `nonfinite_updates`: updates dropped because their result was not finite,
-    flagged `Status.UPDATE_NONFINITE`).
+    flagged `Status.UPDATE_NONFINITE`). The state attributes (`R_wc`, `P`, `b_c`, ...) are live views
+    of the filter's one state array (`state_buffer.py`): copy one to keep it; `Estimate`s are copies.
 
     The mode (`MekfConfig.mode`) fixes the motion strategy: `visual_imu` and `imu_only` integrate
     the gyro, `visual_only` runs a constant-rate model. `auto` resolves once, to `visual_imu` when
