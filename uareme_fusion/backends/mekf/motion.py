@@ -27,6 +27,12 @@ from .state import BG, I3, MF, N_STATE, RATE, TH, ZERO_STATE, orthonormal
 _NO_ROWS = np.zeros((0, COLUMNS))
 
 
+def _nothing_waits(filt) -> bool:
+    """No IMU gap, no saturated sample seen and no accelerometer update due: the one-call compiled
+    paths of `propagate_to` may run (otherwise the reference path handles what waits)."""
+    return not filt.in_imu_gap and not filt.stream.saturation_seen and not filt.accel.due
+
+
 class ConstantRateMotion:
     """Visual only: constant-rate model between frames; the world is the first Manhattan frame
     labelled with its z the axis nearest image up (`R_wm = I`)."""
@@ -84,15 +90,14 @@ class GyroMotion:
         """Integrate IMU samples up to `t_s` (camera clock, s), then hold the last rate."""
         deferred = filt.take_deferred()
         if deferred is not None:  # a frame's batch, held unchecked: checked and integrated in one call
-            if (not filt.in_imu_gap and not filt.stream.saturation_seen and not filt.accel.due
-                    and integrate_frame_batch_compiled(filt, *deferred, t_s, self.fuses_visual)):
+            if _nothing_waits(filt) and integrate_frame_batch_compiled(filt, *deferred, t_s, self.fuses_visual):
                 return
             filt.add_taken(*deferred)  # not clean, not all before the frame, or a gap: as any batch
         rows = filt.stream.release_rows_until(t_s)
         # The common case of a frame after its samples, in one kernel call: what `integrate_pending`
         # decides for one clean batch when nothing else waits, without queueing it first.
         if (filt.compiled and rows.shape[0] and filt.initialised and filt.imu_is_camera and not filt.pending
-                and not filt.in_imu_gap and not filt.stream.saturation_seen and not filt.accel.due):
+                and _nothing_waits(filt)):
             extra_s = max(t_s - float(rows[-1, 0]), 0.0)
             if extra_s <= filt.config.imu_gap_limit_s and integrate_compiled(filt, rows, extra_s, self.fuses_visual):
                 return
