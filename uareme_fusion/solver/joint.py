@@ -299,7 +299,7 @@ class JointSolver:
         if len(cues) < 2:
             return None
         own = [self._refine([c], R_cm)[0] for c in cues]
-        d = [log_so3(R_cm.T @ nearest_symmetric(R, R_cm)[0]) for R in own]
+        d = [_symmetric_offset(R, R_cm) for R in own]
         P = sum(information_to_covariance(c.info, self.config) for c in cues)
         return d[1] - d[0], P
 
@@ -372,10 +372,15 @@ class JointSolver:
             timing_ms=timing_ms, cues=summary)
 
 
+def _symmetric_offset(R: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
+    """Rotation vector (3,) rad from `R_ref` to the labelling of Manhattan frame `R` nearest it (right
+    perturbation at `R_ref`)."""
+    return log_so3(R_ref.T @ nearest_symmetric(R, R_ref)[0])
+
+
 def _angle_rad(R_a: np.ndarray, R_b: np.ndarray) -> float:
     """Angle between two Manhattan frames after the symmetry nearest R_b."""
-    R_sym, _ = nearest_symmetric(R_a, R_b)
-    return float(np.linalg.norm(log_so3(R_sym.T @ R_b)))
+    return float(np.linalg.norm(_symmetric_offset(R_a, R_b)))
 
 
 def _robust_scores(cues: list[_Cue], minima: list) -> np.ndarray:
@@ -406,7 +411,7 @@ def _with_other_minima(cov: np.ndarray, R_cm: np.ndarray, others: list, config: 
         return cov
     p = np.exp(-0.5 * np.array([delta for _, delta in others]))
     p = p / (1.0 + p.sum())
-    d = np.array([log_so3(R_cm.T @ nearest_symmetric(R, R_cm)[0]) for R, _ in others])
+    d = np.array([_symmetric_offset(R, R_cm) for R, _ in others])
     return capped_covariance(cov + np.einsum("i,ia,ib->ab", p, d, d), config)
 
 
