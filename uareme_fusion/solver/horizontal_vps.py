@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .zenith import least_squares_vp, miss_angles
+from .zenith import least_squares_vp, miss_angles, vp_likelihood
 
 
 @dataclass(frozen=True)
@@ -40,7 +40,7 @@ def horizontal_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, ang
     props = proposals / np.maximum(np.linalg.norm(proposals, axis=1, keepdims=True), 1e-300)
     angle = miss_angles(ends, props)
     inlier_angle = angle < 3 * s[None]
-    likelihood = np.exp(-0.5 * (angle / s[None]) ** 2)
+    likelihood = vp_likelihood(angle, s)
     alive = np.ones(len(ends), bool)
     found: list[VanishingPoint] = []
     for _ in range(max_vps):

@@ -69,6 +69,12 @@ def miss_angles(ends: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.arcsin(np.minimum(sin, 1.0))
 
 
+def vp_likelihood(miss_rad: np.ndarray, std_rad: np.ndarray) -> np.ndarray:
+    """Gaussian support exp(-(a / s)^2 / 2) of segments missing a point by `miss_rad` (`miss_angles`),
+    each with angle std `std_rad` (N,); summed with the segments' weights it scores the point."""
+    return np.exp(-0.5 * (miss_rad / std_rad) ** 2)
+
+
 def least_squares_vp(lines: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """The unit point z minimising sum w (l . z)^2 (lines with [a, b] unit)."""
     M = (lines * weights[:, None]).T @ lines
@@ -104,7 +110,7 @@ def estimate_zenith(ends: np.ndarray, weights: np.ndarray, angle_std_rad: np.nda
     score = np.zeros(len(proposals))
     for start in range(0, len(proposals), 2048):
         a = miss_angles(ends[cand], proposals[start:start + 2048])
-        score[start:start + 2048] = (weights[cand] * np.exp(-0.5 * (a / s) ** 2)).sum(axis=1)
+        score[start:start + 2048] = (weights[cand] * vp_likelihood(a, s)).sum(axis=1)
     score *= np.exp(-0.5 * (roll_rad(proposals) / math.radians(cfg.roll_prior_deg)) ** 2)
     z = proposals[int(np.argmax(score))]
     inliers = np.zeros(len(ends), bool)
