@@ -28,11 +28,9 @@ S_SIZE = 13
 FIELDS = (("s", (S_SIZE,)), ("R_wc", (3, 3)), ("R_wm", (3, 3)), ("b_c", (3,)), ("P", (12, 12)),
           ("last_gyro", (3,)), ("acc_sum", (3,)), ("lp", (2, 3)), ("lp_J", (2, 3, 3)), ("rest_sums", (8,)))
 """Fields of `x` in order, with their shapes."""
-X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACC_SUM, X_LP, X_LP_J, X_REST_SUMS = 0, 13, 22, 31, 34, 178, 181, 184, \
-    190, 208
-X_SIZE = 216
 _OFFSETS = np.cumsum([0] + [math.prod(shape) for _, shape in FIELDS]).tolist()
-assert _OFFSETS == [X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACC_SUM, X_LP, X_LP_J, X_REST_SUMS, X_SIZE]
+X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACC_SUM, X_LP, X_LP_J, X_REST_SUMS, X_SIZE = _OFFSETS
+"""Where each field of `FIELDS` starts in `x` (Python ints: compile-time constants in the kernels), and its size."""
 
 
 def new_state_buffer() -> np.ndarray:
