@@ -18,6 +18,12 @@ WINDOW_SAMPLES = 4
 """Rotation increments are compared over this many samples (short: the increments stay small-angle)."""
 
 
+def _slerp_of_valid(t_s: np.ndarray, R_ref: np.ndarray) -> tuple[Slerp, np.ndarray]:
+    """Slerp over the finite rows of `R_ref` (N, 3, 3) at `t_s` (N,) s, and the mask of those rows."""
+    valid = np.all(np.isfinite(R_ref), axis=(1, 2))
+    return Slerp(t_s[valid], Rotation.from_matrix(R_ref[valid])), valid
+
+
 def _increments_mismatch(t_s, gyro_rad_s, slerp, valid, keep, shift_s, dt_s) -> float:
     """Mean squared difference (rad^2) between the gyro's rotation increments over `WINDOW_SAMPLES`
     and the reference's, read `shift_s` later."""
@@ -41,9 +47,8 @@ def imu_delay_s(t_s: np.ndarray, gyro_rad_s: np.ndarray, R_ref: np.ndarray, keep
     (interval samples) at `t`. Searched within `max_samples` sample steps on the samples `keep` (N,)
     (the moving ones), to a twentieth of a sample."""
     t_s = np.asarray(t_s, float)
-    valid = np.all(np.isfinite(R_ref), axis=(1, 2))
+    slerp, valid = _slerp_of_valid(t_s, R_ref)
     dt_s = float(np.median(np.diff(t_s)))
-    slerp = Slerp(t_s[valid], Rotation.from_matrix(R_ref[valid]))
     keep = np.asarray(keep, bool)
     best = 0.0
     for step, half_width in ((0.25, max_samples), (0.05, 0.25)):  # coarse, then fine around the coarse best
@@ -58,8 +63,7 @@ def imu_delay_s(t_s: np.ndarray, gyro_rad_s: np.ndarray, R_ref: np.ndarray, keep
 def retimed_reference(t_s: np.ndarray, R_ref: np.ndarray, delay_s: float) -> np.ndarray:
     """`R_ref` (N, 3, 3) read `delay_s` earlier (slerp between valid samples), NaN where it was NaN."""
     t_s = np.asarray(t_s, float)
-    valid = np.all(np.isfinite(R_ref), axis=(1, 2))
-    slerp = Slerp(t_s[valid], Rotation.from_matrix(R_ref[valid]))
+    slerp, valid = _slerp_of_valid(t_s, R_ref)
     R = slerp(np.clip(t_s - delay_s, t_s[valid][0], t_s[valid][-1])).as_matrix()
     R[~valid] = np.nan
     return R

@@ -56,6 +56,16 @@ def _span_cuts(t_s: np.ndarray, span_s: float) -> np.ndarray:
     return np.unique(np.concatenate([[0], np.searchsorted(t_s, edges, side="right"), [len(t_s)]]))
 
 
+def release_until(pending: list[ImuBatch], t_s: float) -> tuple[ImuBatch | None, list[ImuBatch]]:
+    """Split held batches at stamp `t_s`: (the samples stamped <= `t_s` as one batch, or None when
+    there are none; the batches still held)."""
+    if not pending:
+        return None, []
+    held = ImuBatch.concat(pending)
+    cut = int(np.searchsorted(held.t_s, t_s, side="right"))
+    return (held[:cut] if cut else None), ([held[cut:]] if cut < len(held) else [])
+
+
 class ImuInterleaver:
     """Hands out IMU samples in camera-time order, pulling batches from an iterator only as far as
     needed (a live IMU is never read ahead by more than one batch)."""
@@ -80,15 +90,10 @@ class ImuInterleaver:
                 self._exhausted = True
             elif len(batch):
                 self._pending.append(batch)
-        if not self._pending:
-            return None
-        pending = ImuBatch.concat(self._pending)
-        cut = int(np.searchsorted(pending.t_s, t_cam_s - self.time_offset_s, side="right"))
-        self._pending = [pending[cut:]] if cut < len(pending) else []
-        if cut == 0:
-            return None
-        self.n_samples += cut
-        return pending[:cut]
+        released, self._pending = release_until(self._pending, t_cam_s - self.time_offset_s)
+        if released is not None:
+            self.n_samples += len(released)
+        return released
 
     def rest(self) -> Iterator[ImuBatch]:
         """The samples after the last frame, batch by batch."""

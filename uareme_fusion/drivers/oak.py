@@ -32,6 +32,7 @@ from uareme_fusion.rotations import is_rotation, project_to_so3
 from uareme_fusion.types import Frame, ImuBatch
 
 from .base import Source, SourceInfo
+from .interleave import release_until
 
 OAK_DEPTH_UNITS_PER_M = 1000.0
 """OAK stereo depth is uint16 millimetres."""
@@ -159,18 +160,12 @@ class FrameImuSync:
         while self._frames and (force or self._newest_imu_s() > self._frames[0].t_s
                                 or len(self._frames) > self.max_pending_frames):
             frame = self._frames.popleft()
-            out.extend(self._imu_until(frame.t_s))
+            released, self._imu = release_until(self._imu, frame.t_s)
+            if released is not None:
+                out.append(released)
             out.append(frame)
             self._released_t_s = max(self._released_t_s, frame.t_s)
         return out
-
-    def _imu_until(self, t_s: float) -> list:
-        if not self._imu:
-            return []
-        pending = ImuBatch.concat(self._imu)
-        cut = int(np.searchsorted(pending.t_s, t_s, side="right"))
-        self._imu = [pending[cut:]] if cut < len(pending) else []
-        return [pending[:cut]] if cut else []
 
     def flush(self) -> list:
         """Everything still held, in order (end of stream)."""

@@ -34,7 +34,6 @@ from typing import Iterator
 
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
 from ..errors import InputError
 from ..io.images import read_image
@@ -178,14 +177,6 @@ class TumSequence:
     def frames(self) -> Iterator[Frame]:
         for i in range(len(self)):
             yield self.read_frame(i)
-
-    def R_wc_at(self, t_s: np.ndarray) -> np.ndarray:
-        """Ground-truth rotations (N, 3, 3) at times t_s by slerp (as stored: R_wc for TUM/sim)."""
-        if self.groundtruth is None:
-            raise InputError(f"{self.root} has no groundtruth.txt")
-        t_gt, _, q = self.groundtruth
-        t = np.clip(np.asarray(t_s, float), t_gt[0], t_gt[-1])
-        return Slerp(t_gt, Rotation.from_quat(q))(t).as_matrix()
 
 
 def read_json_object(path: Path) -> dict:

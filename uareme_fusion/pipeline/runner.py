@@ -160,21 +160,28 @@ class Pipeline:
         return self._emit(FrameResult(frame.t_s, estimate, frame, normal_map, visual, K))
 
     def _emit(self, result: FrameResult) -> FrameResult:
+        self._deliver(lambda sink: sink.write(result), np.array([int(result.estimate.status)]))
+        return result
+
+    def _deliver(self, write: Callable, statuses: np.ndarray) -> None:
+        """`write(sink)` for every sink, then count the results (their status bits `statuses`); a
+        stop signal waits until every sink has them. A sink refusing them (bad input, full disk)
+        makes the sinks already written take them back, so the files hold whole results only."""
         t0 = time.perf_counter()
-        with stop_signals.writing():  # a stop signal waits: every sink gets the result, and it is counted
+        with stop_signals.writing():
             for k, sink in enumerate(self.sinks):
                 try:
-                    sink.write(result)
-                except (InputError, OutputError):  # the files hold whole results only: take this one back where written
+                    write(sink)
+                except (InputError, OutputError):
                     for written in self.sinks[:k]:
                         getattr(written, "undo_last", lambda: None)()
                     raise
             self.stats.times.add("sinks", time.perf_counter() - t0)
-            self.stats.estimates += 1
+            self.stats.estimates += len(statuses)
             for flag in Status:
-                if flag and flag in result.estimate.status:
-                    self.stats.status_counts[flag.name] += 1
-        return result
+                count = int(np.count_nonzero(statuses & int(flag)))
+                if flag and count:
+                    self.stats.status_counts[flag.name] += count
 
     def run(self, source: Source, max_frames: int | None = None,
             on_result: Callable[[FrameResult, RunStats], None] | None = None) -> RunStats:
@@ -270,21 +277,7 @@ class Pipeline:
                 if on_result is not None:
                     on_result(result, self.stats)
             return
-        t0 = time.perf_counter()
-        with stop_signals.writing():
-            for k, sink in enumerate(self.sinks):
-                try:
-                    sink.write_many(estimates)
-                except (InputError, OutputError):  # the files hold whole runs of results: take these back
-                    for written in self.sinks[:k]:
-                        getattr(written, "undo_last", lambda: None)()
-                    raise
-            self.stats.times.add("sinks", time.perf_counter() - t0)
-            self.stats.estimates += len(estimates)
-            for flag in Status:
-                count = int(np.count_nonzero(estimates.status & int(flag)))
-                if flag and count:
-                    self.stats.status_counts[flag.name] += count
+        self._deliver(lambda sink: sink.write_many(estimates), np.asarray(estimates.status))
         if on_result is not None:
             on_result(FrameResult(float(estimates.t_s[-1]), estimates[len(estimates) - 1]), self.stats)
 
