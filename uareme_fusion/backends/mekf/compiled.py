@@ -165,8 +165,7 @@ def accel_rows_compiled(filt):
     R (3, 3), H (3, 12))` or None near free fall."""
     rows = np.empty(40)
     code = K.ACCEL_ROWS(filt.x, _parameters(filt, False), rows)
-    if code & (K.DOWNWEIGHTED | K.NONFINITE):
-        _flag(filt, code)
+    _flag(filt, code)
     if not code & K.MEASURED:
         return None
     return rows[0:3], rows[3] * I3, rows[4:40].reshape(3, 12)

@@ -37,7 +37,7 @@ from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DOWNWEIGHTED, S_AC
                            S_T_STATE, X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S,
                            X_SIZE)
 
-# The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place` return.
+# The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `accel_rows_in_place` return.
 DOWNWEIGHTED, NONFINITE, MEASURED = 1, 2, 4
 """An accelerometer update was down-weighted; an update's result was not finite (and dropped);
 `accel_rows_in_place` wrote an accelerometer measurement."""
