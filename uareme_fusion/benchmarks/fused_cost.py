@@ -8,6 +8,9 @@ returned `Estimate`. `run_scenario` times `process_imu` + `propagate_to` (its IM
 `VisualUpdateTimedMekf` measures the visual update proper so that it can be taken out:
 `Mekf._visual_update` less the accelerometer rows it stacks into the same Kalman update (those are
 the accelerometer update's cost, which the figure counts).
+The clock is part of what is measured: a read of the thread's CPU time is a system call, about 3 us
+of CPU time when a solver ran before it, so about 0.5-1 us per IMU sample of the 30 fps figure is
+the timing's own.
 """
 
 from __future__ import annotations
