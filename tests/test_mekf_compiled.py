@@ -97,6 +97,29 @@ def test_fused_with_frames_same_estimates(preset):
 
 
 @needs_numba
+def test_accelerometer_rows_stacked_into_visual_updates_same_with_rest_updates():
+    """A camera held still in front of a scene: the compiled accelerometer rows that visual updates
+    stack (`compiled.accel_rows_compiled`) apply the at-rest update first and give the reference's
+    estimates, counts and flags; each estimate owns its arrays."""
+    traj, t, gyro, accel = stream(4, duration_s=8.0)
+    still = np.zeros_like(gyro) + np.array([0.01, -0.02, 0.015])  # only the bias the filter should learn
+    accel_still = np.tile(accel[0], (t.size, 1))
+    R_cm = traj.sample(t[:1]).R_wc[0].T @ traj.R_wm(t[:1])[0]
+
+    def frames(t_f, filt):
+        return VisualRotation(R_cm=R_cm, cov=1e-4 * np.eye(3), cost=0.01, iterations=3, n_valid=100)
+
+    cfg = load_config("handheld", MekfConfig).model_copy(update={"rest_gyro_max_rad_s": 0.05,
+                                                                 "rest_min_duration_s": 0.5})
+    (a, ea), (b, eb) = (run(c, t, still, accel_still, 7, frames) for c in both(cfg))
+    assert a.counters["rest_updates"] > 20 and a.counters["visual_updates"] > 100
+    assert_same_filters(a, b, ea, eb)
+    est = ea[-1]
+    est.R_wc[0, 0] = est.gyro_bias_rad_s[0] = np.nan  # a copy: the filter and the other fields keep theirs
+    assert np.isfinite(a.R_wc).all() and np.isfinite(a.b_c).all() and np.isfinite(est.R_wm).all()
+
+
+@needs_numba
 def test_bad_samples_gaps_and_saturation_same_estimates_counts_and_flags():
     _, t, gyro, accel = stream(2, duration_s=20.0)
     gyro, accel, t = gyro.copy(), accel.copy(), t.copy()

@@ -13,7 +13,7 @@ from ...types import Status
 from . import kernels as K
 from .accel import PERIOD_TOLERANCE_S
 from .kernels import KERNEL
-from .state import ORTHONORMALISE_EVERY
+from .state import I3, ORTHONORMALISE_EVERY
 from .state_buffer import S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_NONFINITE, S_REST_UPDATES
 
 
@@ -157,6 +157,18 @@ def integrate_segments_compiled(filt, t, gyro_c, accel_c, ends: np.ndarray):
     flags = np.where(out_flags & K.DOWNWEIGHTED, int(Status.ACCEL_DOWNWEIGHTED), 0) | np.where(
         out_flags & K.NONFINITE, int(Status.UPDATE_NONFINITE), 0)
     return out_R, out_cov, out_b, flags
+
+
+def accel_rows_compiled(filt):
+    """The accelerometer measurement of the period just completed, for a stacked update, compiled in
+    the filter's state buffer (an at-rest update applied first): as `Mekf._accel_rows`, `(residual (3,),
+    R (3, 3), H (3, 12))` or None near free fall."""
+    rows = np.empty(40)
+    code = K.ACCEL_ROWS(filt.x, _parameters(filt, False), rows)
+    _flag(filt, code)
+    if not code & K.MEASURED:
+        return None
+    return rows[0:3], rows[3] * I3, rows[4:40].reshape(3, 12)
 
 
 def accel_update_compiled(filt) -> None:

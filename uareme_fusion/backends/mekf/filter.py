@@ -18,14 +18,25 @@ from ...types import Estimate, Estimates, ImuBatch, Status, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
 from .accel import AccelPeriod
-from .compiled import KERNEL, accel_update_compiled, harvest_kernel_counters
+from .compiled import KERNEL, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
                            visual_model)
 from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
-from .state_buffer import S_PRODUCTS, S_T_STATE, BufferArray, BufferScalar, field_views, new_state_buffer
+from .state_buffer import (S_PRODUCTS, S_T_STATE, X_B_C, X_P, X_R_WC, X_R_WM, BufferArray, BufferScalar, field_views,
+                           new_state_buffer)
+
+
+_R_WM, _B_C = X_R_WM - X_R_WC, X_B_C - X_R_WC
+"""Where R_wm and b_c start in a copy of `x[X_R_WC:X_P]` (R_wc, R_wm, b_c side by side)."""
+
+
+def _shape(a) -> tuple:
+    """`np.shape(a)`, an ndarray's without a numpy call (a frame's checks run between solver calls,
+    where each numpy call costs microseconds)."""
+    return a.shape if type(a) is np.ndarray else np.shape(a)
 
 
 def motion_for(mode: MekfMode):
@@ -212,11 +223,12 @@ class Mekf(Backend):
         the right perturbation of `R_wc`; `gyro_bias_rad_s` is in the IMU frame; `R_wm` is None
         until a Manhattan frame was seen."""
         t_s = float(t_s)
-        if visual is not None and (np.shape(visual.R_cm) != (3, 3) or np.shape(visual.cov) != (3, 3)):
+        if visual is not None and not (_shape(visual.R_cm) == _shape(visual.cov) == (3, 3)):
             raise InputError(f"visual rotation at t = {t_s:g} s: expected R_cm and cov of shape (3, 3), got "
                              f"{np.shape(visual.R_cm)} and {np.shape(visual.cov)}")
-        seen_imu = self.initialised or self.pending or self.stream.newest_s > -np.inf or self.init_samples
-        self.resolve_mode(MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY)
+        if not self._mode_resolved:
+            seen_imu = self.initialised or self.pending or self.stream.newest_s > -np.inf or self.init_samples
+            self.resolve_mode(MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY)
         self.propagate_to(t_s)
         fuses_visual = self.motion.fuses_visual
         if visual is not None and self.manhattan_initialised and fuses_visual:
@@ -294,6 +306,8 @@ class Mekf(Backend):
         """The period's zero-rate update (applied at once, with `rest_gyro_max_rad_s`), then the
         gravity measurement of its mean (or low-passed) direction: `(residual, R, H)` or None (near
         free fall). Consumes the period."""
+        if self.compiled:
+            return accel_rows_compiled(self)
         cfg = self.config
         acc_c, T = self.accel.take_mean()
         if cfg.rest_gyro_max_rad_s > 0:
@@ -411,10 +425,17 @@ class Mekf(Backend):
     def _make_estimate(self, t_s, flags: Status) -> Estimate:
         if not self.initialised:
             return Estimate(t_s, np.eye(3), np.eye(3), flags | Status.NOT_INITIALISED)
-        cov = 0.5 * (self.P[TH, TH] + self.P[TH, TH].T)
-        bias_i = self.R_ci.T @ self.b_c if self.motion.uses_imu else None
-        return Estimate(
-            t_s, self.R_wc.copy(), cov, flags,
-            R_wm=self.R_wm.copy() if self.manhattan_initialised else None,
-            gyro_bias_rad_s=bias_i,
-        )
+        # R_wc, R_wm and b_c lie side by side in `x`: one copy holds all three. The fewest numpy calls
+        # (a frame's estimate runs between solver calls, where each call costs microseconds; a numba
+        # call, cold, costs more than these few).
+        nominal = self.x[X_R_WC:X_P].copy()
+        R_wc, R_wm, b_c = nominal[:_R_WM].reshape(3, 3), nominal[_R_WM:_B_C].reshape(3, 3), nominal[_B_C:]
+        P_th = self.views["P"][TH, TH]
+        cov = P_th + P_th.T
+        cov *= 0.5
+        if not self.motion.uses_imu:
+            bias_i = None
+        else:
+            bias_i = b_c if self.imu_is_camera else self.R_ci.T @ b_c
+        return Estimate(t_s, R_wc, cov, flags, R_wm=R_wm if self.manhattan_initialised else None,
+                        gyro_bias_rad_s=bias_i)

@@ -37,9 +37,10 @@ from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DOWNWEIGHTED, S_AC
                            S_T_STATE, X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S,
                            X_SIZE)
 
-# The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place` return.
-DOWNWEIGHTED, NONFINITE = 1, 2
-"""An accelerometer update was down-weighted; an update's result was not finite (and dropped)."""
+# The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `accel_rows_in_place` return.
+DOWNWEIGHTED, NONFINITE, MEASURED = 1, 2, 4
+"""An accelerometer update was down-weighted; an update's result was not finite (and dropped);
+`accel_rows_in_place` wrote an accelerometer measurement."""
 
 # Layout of the float64 parameter vector `p`.
 (P_Q_GYRO, P_Q_BIAS, P_Q_RATE, P_TRAPEZOID, P_PERIOD, P_DUE, P_DEFER, P_LP_TAU, P_INV_G, P_GRAVITY,
@@ -163,9 +164,11 @@ def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
     return R_wc, R_wm
 
 
-def accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
-    """The update at the end of an accelerometer period (as `Mekf._accel_update`): the zero-rate
-    update when at rest, then the (low-passed) accelerometer direction. Returns (R_wc, R_wm, flag)."""
+def accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
+    """The end of an accelerometer period (as `Mekf._accel_rows`): the zero-rate update when at rest,
+    applied, then the (low-passed) accelerometer direction's measurement. Consumes the period.
+    Returns (R_wc, R_wm, ok, residual (3,), variance, H (3, 12), downweighted); `ok` False (no
+    measurement) near free fall."""
     T = s[S_ACC_TIME]
     acc_c = acc_sum / T if T > 0 else acc_sum.copy()
     acc_sum[:] = 0.0
@@ -201,11 +204,19 @@ def accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p
     ok, r, var, H, downweighted = accel_measurement(acc_c, T, R_wc, lp_J[1], tau > 0, p)
     if not ok:
         s[S_ACCEL_SKIPPED] += 1
-        return R_wc, R_wm, False
+        return R_wc, R_wm, False, r, var, H, False
     if downweighted:
         s[S_ACCEL_DOWNWEIGHTED] += 1
     s[S_ACCEL_UPDATES] += 1
-    R_wc, R_wm = kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
+    return R_wc, R_wm, True, r, var, H, downweighted
+
+
+def accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
+    """The update at the end of an accelerometer period (as `Mekf.accel_update`): `accel_rows`, then
+    its measurement's update. Returns (R_wc, R_wm, downweighted)."""
+    R_wc, R_wm, ok, r, var, H, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
+    if ok:
+        R_wc, R_wm = kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
     return R_wc, R_wm, downweighted
 
 
@@ -392,10 +403,31 @@ def accel_update_in_place(x, p):
     return (DOWNWEIGHTED if downweighted else 0) + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
 
 
+def accel_rows_in_place(x, p, rows):
+    """`accel_rows` on the state buffer `x`, in place (an at-rest update included), for an update
+    that stacks the accelerometer with other measurements: the measurement goes to `rows` (40,):
+    residual (3,), variance (rad^2, isotropic), H (3, 12) row by row. Returns the `MEASURED` |
+    `DOWNWEIGHTED` | `NONFINITE` bits of what happened (no `MEASURED`: no measurement, near free fall)."""
+    s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state_views(x)
+    nonfinite_before = s[S_NONFINITE]
+    R_wc_new, R_wm_new, ok, r, var, H, downweighted = accel_rows(s, R_wc.copy(), R_wm.copy(), b_c, P, acc_sum, lp,
+                                                                 lp_J, rest_sums, p)
+    R_wc[:, :] = R_wc_new
+    R_wm[:, :] = R_wm_new
+    rows[0:3] = r
+    rows[3] = var
+    for i in range(3):
+        rows[4 + 12 * i:16 + 12 * i] = H[i]
+    return ((MEASURED if ok else 0) + (DOWNWEIGHTED if downweighted else 0)
+            + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0))
+
+
 KERNEL = None
 """`integrate_batch` compiled, with the functions it calls, or None (numba missing or broken)."""
 ACCEL_UPDATE = None
 """`accel_update_in_place` compiled, or None."""
+ACCEL_ROWS = None
+"""`accel_rows_in_place` compiled, or None."""
 SEGMENTS = None
 """`integrate_segments` compiled, or None."""
 FRAME_BATCH = None
@@ -404,14 +436,15 @@ if jit.available():
     try:
         _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into, exp3,
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
-                 zero_rate_measurement, kalman_update, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks,
-                 state_views, rows_if_clean, integrate_batch)
+                 zero_rate_measurement, kalman_update, accel_rows, accel_and_rest_update, has_gap, chunk_bounds,
+                 integrate_chunks, state_views, rows_if_clean, integrate_batch)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = integrate_batch
         FRAME_BATCH = jit.compiled(integrate_frame_batch, cache=True, error_model="numpy")
         ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
+        ACCEL_ROWS = jit.compiled(accel_rows_in_place, cache=True, error_model="numpy")
         SEGMENTS = jit.compiled(integrate_segments, cache=True, error_model="numpy")
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)
-        KERNEL = ACCEL_UPDATE = SEGMENTS = FRAME_BATCH = None
+        KERNEL = ACCEL_UPDATE = ACCEL_ROWS = SEGMENTS = FRAME_BATCH = None
