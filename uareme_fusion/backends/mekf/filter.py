@@ -17,6 +17,7 @@ from ...errors import InputError
 from ...types import Estimate, Estimates, ImuBatch, Status, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
+from ..visual_noise_share import VisualNoiseShare
 from .accel import AccelPeriod
 from .compiled import KERNEL, accel_update_compiled, harvest_kernel_counters
 from .config import GyroSampling, MekfConfig, MekfMode
@@ -112,6 +113,8 @@ class Mekf(Backend):
         self.init_samples: list[ImuBatch] = []
         self.rejections = 0
         self.t_visual_s: float | None = None  # time of the previous visual update (camera clock), s
+        self.noise_share = VisualNoiseShare(cfg.visual_noise_share_frames)
+        self.persistent_cov = np.zeros((3, 3))  # visual only: the frames' error the filter cannot average, rad^2
         self._dropped_reported = 0
         self.accel = AccelPeriod(self.x)
         self.record_t: list[np.ndarray] = []
@@ -329,6 +332,10 @@ class Mekf(Backend):
         self.t_visual_s = t_s
         if t_prev_s is not None:
             R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
+        if not self.motion.uses_imu and self.noise_share.enabled:  # fuse the independent share only
+            labelled = visual.symmetric_to(self.R_wc.T @ self.R_wm)
+            R_vis = R_vis * self.noise_share.update(t_s, labelled)
+            self.persistent_cov = self.noise_share.persistent_R_wc_covariance(labelled)
         S = H @ self.P @ H.T + R_vis
         d2 = float(r @ np.linalg.solve(S, r))
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
@@ -411,7 +418,7 @@ class Mekf(Backend):
     def _make_estimate(self, t_s, flags: Status) -> Estimate:
         if not self.initialised:
             return Estimate(t_s, np.eye(3), np.eye(3), flags | Status.NOT_INITIALISED)
-        cov = 0.5 * (self.P[TH, TH] + self.P[TH, TH].T)
+        cov = 0.5 * (self.P[TH, TH] + self.P[TH, TH].T) + self.persistent_cov
         bias_i = self.R_ci.T @ self.b_c if self.motion.uses_imu else None
         return Estimate(
             t_s, self.R_wc.copy(), cov, flags,
