@@ -18,10 +18,11 @@ persistent error and a constant-rate motion:
     D_k = Log(R_k-1^T R_k) - (dt_k / dt_k-1) Log(R_k-2^T R_k-1)     (rad, the frames' `R_mc`)
     E |D_k|^2 = (1 + (1 + r)^2 + r^2) lam tr C + (what the motion changes),  r = dt_k / dt_k-1.
 
-`lam_k = |D_k|^2 / ((1 + (1 + r)^2 + r^2) tr C)`, clipped to [`min_share`, 1] (a change of motion
-reads as independent error: the estimate errs towards `lam = 1`, the plain filter), is averaged over
-the last `frames` frames (exponential, from lam = 1 before three consecutive frames are seen). With
-independent frame errors (simulated maps) `lam` stays near 1 and the filter is unchanged.
+`lam_k = |D_k|^2 / ((1 + (1 + r)^2 + r^2) tr C)` (capped at `MAX_SAMPLE`) is averaged over the last
+`frames` frames (exponentially; lam = 1 before three frames are seen) and the average clipped to
+[`min_share`, 1]. A change of motion reads as independent error, so the estimate errs towards
+lam = 1, the plain filter. Measured: ICSL-more lam 0.05, ICL kt3 (rendered) about 0.35, simulated
+maps drawn afresh each frame about 1 (the filters unchanged there).
 """
 
 from __future__ import annotations
