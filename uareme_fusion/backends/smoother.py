@@ -218,11 +218,12 @@ class Smoother(Backend):
         return _robust(self.config.visual_huber_sigma, gtsam.noiseModel.Gaussian.Covariance(cov))
 
     def _take_noise_share(self, t_s: float, visual: VisualRotation | None) -> None:
-        """Update the independent share with the frame (labelled as fused) and the persistent part
-        reported with the estimate (`visual_noise_share.py`); nothing in gyro mode."""
+        """After the frame's factor (made with the share of the previous frames): update the share
+        with the frame (labelled as fused) and the persistent part reported with the estimate
+        (`visual_noise_share.py`); nothing in gyro mode."""
         if self._noise_share.enabled:
             self._noise_share.update(t_s, visual)
-            if visual is not None:
+            if visual is not None and np.all(np.isfinite(visual.cov)):
                 self._persistent_cov = self._noise_share.persistent_R_wc_covariance(visual)
 
     def _smoothness_factor(self, k: int) -> gtsam.NonlinearFactor:
@@ -257,8 +258,8 @@ class Smoother(Backend):
         try:
             if visual is not None:
                 visual = visual.symmetric_to(R_wc_pred.T @ self._R_wm)
-                self._take_noise_share(t_s, visual)
                 graph.add(self._visual_factor(k, visual))
+                self._take_noise_share(t_s, visual)
             self._add_motion_factors(graph, values, stamps, k, t_s)
             values.insert(X(k), gtsam.Rot3(R_wc_pred))
             stamps[X(k)] = float(k)
@@ -283,8 +284,8 @@ class Smoother(Backend):
         self._smoother = self._new_smoother()
         graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
         visual = self._start_priors(graph, values, stamps, visual)
-        self._take_noise_share(t_s, visual)
         graph.add(self._visual_factor(0, visual))
+        self._take_noise_share(t_s, visual)
         values.insert(X(0), gtsam.Rot3(self._R_wm @ visual.R_cm.T))
         stamps[X(0)] = 0.0
         self._smoother.update(graph, values, stamps)

@@ -60,6 +60,8 @@ class VisualNoiseShare:
         if visual is None:
             self._history.clear()
             return self.share
+        if not np.all(np.isfinite(visual.cov)):  # not a covariance: the frame says nothing here
+            return self.share
         self._history = (self._history + [(float(t_s), visual.R_cm.T)])[-3:]
         if len(self._history) < 3:
             return self.share
@@ -69,7 +71,9 @@ class VisualNoiseShare:
         r = (t2 - t1) / (t1 - t0)
         D = log_so3(R1.T @ R2) - r * log_so3(R0.T @ R1)
         expected = (1.0 + (1.0 + r) ** 2 + r**2) * float(np.trace(visual.cov))
-        sample = min(float(D @ D / expected), MAX_SAMPLE) if expected > 0 else 1.0
+        if not expected > 0:
+            return self.share
+        sample = min(float(D @ D / expected), MAX_SAMPLE)
         # Exponential average over `frames`, its start-up bias removed (the first sample counts fully).
         a = min(1.0 / self.frames, 1.0)
         self._sum = (1.0 - a) * self._sum + a * sample
