@@ -114,8 +114,8 @@ class MekfConfig(GyroNoiseConfig):
     """Visual-only mode: frames over which the independent share of the visual covariance is
     averaged (`backends/visual_noise_share.py`); only that share is fused, the rest is added to the
     reported covariance (0 = off: every frame's error independent). Real ICSL corridor, RGB only:
-    ARE 2.176 -> 2.146 deg against `single`'s 2.141 (NEES 4.55 -> 3.16); ICL kt3 0.282 -> 0.285 (single
-    0.289); simulated walks without IMU 2.123 / 2.043 -> 2.126 / 2.050."""
+    ARE 2.176 -> 2.149 deg against `single`'s 2.141 (NEES 4.55 -> 3.19); ICL kt3 0.282 -> 0.284 (single
+    0.289); simulated walks without IMU 2.123 / 2.043 -> 2.124 / 2.048."""
     visual_gate_chi2: float = Field(16.27, gt=0, le=1e6)
     """Mahalanobis gate on the 3-dof visual residual (16.27 = chi-square 99.9 %)."""
     visual_huber_sigma: float = Field(2.0, ge=1e-3, le=1e6)

@@ -332,10 +332,7 @@ class Mekf(Backend):
         self.t_visual_s = t_s
         if t_prev_s is not None:
             R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
-        shared = not self.motion.uses_imu and self.noise_share.enabled
-        if shared:  # fuse the independent share only (as estimated over the previous frames)
-            R_vis = R_vis * self.noise_share.share
-        S = H @ self.P @ H.T + R_vis
+        S = H @ self.P @ H.T + R_vis  # the gate and Huber weigh the frame's full error
         d2 = float(r @ np.linalg.solve(S, r))
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
             self._count_rejection()
@@ -347,7 +344,9 @@ class Mekf(Backend):
                 self.motion.reinitialise(self, visual)
             return
         self.rejections = 0
-        if shared:
+        shared = not self.motion.uses_imu and self.noise_share.enabled
+        if shared:  # fuse the independent share only (as estimated over the previous frames)
+            R_vis = R_vis * self.noise_share.share
             labelled = visual.symmetric_to(self.R_wc.T @ self.R_wm)
             self.noise_share.update(t_s, labelled)
             self.persistent_cov = self.noise_share.persistent_R_wc_covariance(labelled)
