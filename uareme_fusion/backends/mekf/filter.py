@@ -17,6 +17,7 @@ from ...errors import InputError
 from ...types import Estimate, Estimates, ImuBatch, Status, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
+from ..visual_noise_share import VisualNoiseShare
 from .accel import AccelPeriod
 from .compiled import KERNEL, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters
 from .config import GyroSampling, MekfConfig, MekfMode
@@ -123,6 +124,8 @@ class Mekf(Backend):
         self.init_samples: list[ImuBatch] = []
         self.rejections = 0
         self.t_visual_s: float | None = None  # time of the previous visual update (camera clock), s
+        self.noise_share = VisualNoiseShare(cfg.visual_noise_share_frames)
+        self.persistent_cov = np.zeros((3, 3))  # visual only: the frames' error the filter cannot average, rad^2
         self._dropped_reported = 0
         self.accel = AccelPeriod(self.x)
         self.record_t: list[np.ndarray] = []
@@ -343,7 +346,7 @@ class Mekf(Backend):
         self.t_visual_s = t_s
         if t_prev_s is not None:
             R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
-        S = H @ self.P @ H.T + R_vis
+        S = H @ self.P @ H.T + R_vis  # the gate and Huber weigh the frame's full error
         d2 = float(r @ np.linalg.solve(S, r))
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
             self._count_rejection()
@@ -355,6 +358,12 @@ class Mekf(Backend):
                 self.motion.reinitialise(self, visual)
             return
         self.rejections = 0
+        shared = not self.motion.uses_imu and self.noise_share.enabled
+        if shared:  # fuse the independent share only (as estimated over the previous frames)
+            R_vis = R_vis * self.noise_share.share
+            labelled = visual.symmetric_to(self.R_wc.T @ self.R_wm)
+            self.noise_share.update(t_s, labelled)
+            self.persistent_cov = self.noise_share.persistent_R_wc_covariance(labelled)
         d = np.sqrt(d2)
         if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_sigma)
@@ -433,6 +442,7 @@ class Mekf(Backend):
         P_th = self.views["P"][TH, TH]
         cov = P_th + P_th.T
         cov *= 0.5
+        cov += self.persistent_cov
         if not self.motion.uses_imu:
             bias_i = None
         else:
