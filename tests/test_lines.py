@@ -160,6 +160,7 @@ def ecd_first_15(shared_data):
 def test_ecd_subset_horizon_beats_the_level_camera(ecd_first_15):
     _, scores = ecd_first_15
     assert scores["auc_percent"] > scores["level_auc_percent"] + 15.0
+    assert min(scores["auc_odd_percent"], scores["auc_even_percent"]) > scores["level_auc_percent"]
 
 
 def test_icsl_focal_length_within_five_percent(shared_data):
@@ -276,3 +277,13 @@ def test_ecd_subset_atlanta_horizon(shared_data, ecd_first_15):
     assert scores["auc_percent"] > 80.0  # measured 90.0 (78.1 before the zenith and VP consensus); level 29.1
     first = analyser.analyse(sorted((shared_data / "eurasian_cities").glob("*.jpg"))[0]).as_dict()
     assert first["horizon_source"] == "atlanta" and first["horizon_std_px"] > 0
+
+
+def test_ecd_auc_on_odd_and_even_numbered_images():
+    from uareme_fusion.benchmarks.horizon import auc_percent, parity_auc_percent
+
+    errors = [0.0, 0.25, 0.0, 0.25, 0.125]  # 001, 003 and 005 odd; 002 and 004 even
+    split = parity_auc_percent(["001", "002", "003", "004", "005"], errors)
+    assert split["auc_odd_percent"] == pytest.approx(auc_percent([0.0, 0.0, 0.125]))
+    assert split["auc_even_percent"] == pytest.approx(0.0, abs=0.1)  # every error at the cut-off
+    assert split["auc_odd_percent"] == pytest.approx(100 * (2 + 0.5) / 3, abs=0.1)
