@@ -48,6 +48,7 @@ def bench(
                                 help="pipeline: torch CPU threads of the learned normals (default 1)."),
     cues: str = typer.Option("normals,lines", "--cues", help="horizon: visual cues (normals, lines or both)."),
     ecd_limit: int = typer.Option(None, "--ecd-limit", min=1, help="horizon: score only the first N ECD images."),
+    ecd_only: bool = typer.Option(False, "--ecd-only", help="horizon: only the ECD figures (a third of the time)."),
     json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
 ) -> None:
     """Time a benchmark on this machine and print its figures against the goals."""
@@ -73,7 +74,7 @@ def bench(
         data = data or Path("../shared/data")
         if not (data / "eurasian_cities").is_dir():
             raise fail(f"--data {data}: no eurasian_cities/ folder there (see shared/data/README.md)")
-        results = horizon.run(data, cues, ecd_limit)
+        results = horizon.run(data, cues, ecd_limit, ecd_only=ecd_only)
     elif what == "mekf":
         from ..benchmarks import mekf
 

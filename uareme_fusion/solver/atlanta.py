@@ -11,12 +11,18 @@ and t (pixels along n from c, negative below the centre) is where the horizontal
 1. the zenith by consensus over pairs of near-vertical segments, with a prior on the camera's roll
    (`solver/zenith.py`); the first guess `up_c` (from the Manhattan solve) is one proposal; n from it;
 2. t: horizontal VPs by sequential consensus over the intersections of the other segments
-   (`solver/horizontal_vps.py`); t is the average of their heights v_k = n . (x_k - c), weighted by
-   support over |x_k - c|^2 + d^2 (a far VP's height is imprecise) and by the focal range the zenith
-   allows (t = -f^2 / v_z, f within `hfov_range_deg`); a typical lens (`prior_hfov_deg`) adds one
-   weak pseudo-VP at t = -f^2 / v_z. Without a VP, t is the mode of the pair density
-   sum_ij w_i w_j N(v; v_ij, s_ij^2) of the pairs' intersection heights, s_ij their uncertainty from
-   end point noise (near-parallel pairs: large s_ij);
+   (`solver/horizontal_vps.py`), each with the covariance of its position. t maximises
+   log P(t) + sum_k log(pi_k N(v_k; t, s_k^2) + (1 - pi_k) / L): a VP at height v_k = n . (x_k - c)
+   is on the horizon with probability pi_k = S_k / (S_k + `vp_inlier_support`) (S_k its support),
+   else anywhere in the searched range L; s_k^2 = n^T C_k n + `vp_floor`^2 + (r u_k)^2, C_k its
+   covariance, u_k its distance along the horizon from the centre and r `roll_std_deg`: the image
+   direction of up is uncertain (ECD's horizons, fitted through their VPs, stand a median 0.5 deg
+   and a 90th percentile 1.3 deg off perpendicular to the centre-zenith line), so a far VP tells the
+   horizon's direction rather than its height. P(t) is the focal range the zenith allows
+   (t = -f^2 / v_z, f within `hfov_range_deg`) times a typical lens (`prior_hfov_deg`, log-normal)
+   at t = -f^2 / v_z, its spread widened by the zenith's own uncertainty. Without a VP, t is the mode
+   of the pair density sum_ij w_i w_j N(v; v_ij, s_ij^2) of the pairs' intersection heights, s_ij
+   their uncertainty from end point noise (near-parallel pairs: large s_ij);
 3. the horizon's standard deviation `t_std_px`: the scatter of the pair heights within 3 s_ij of t
    over the root of the effective number of segments behind them, scaled (`AtlantaConfig.std_scale`).
 With a finite zenith at height v_z, f^2 = -t v_z (K = [f 0 c; 0 f c; 0 0 1]): `focal_px`.
@@ -32,7 +38,7 @@ import numpy as np
 from ..lines.detect import LineSegments
 from ..pinhole import focal_from_hfov
 from .horizontal_vps import VanishingPoint, horizontal_vps
-from .zenith import ZenithConfig, estimate_zenith, miss_angles, segment_lines
+from .zenith import ZenithConfig, estimate_zenith, miss_angles, point_covariance, segment_lines
 
 
 @dataclass(frozen=True)
@@ -67,17 +73,25 @@ class AtlantaConfig:
     """Horizontal VPs sought by sequential consensus (`solver/horizontal_vps.py`)."""
     min_vp_share: float = 0.08
     """A horizontal VP needs segments holding this share of the non-vertical segments' weight."""
-    vp_distance_scale: float = 0.3
-    """Distance (fraction of the image diagonal) below which a VP's height counts as fully precise."""
     prior_hfov_deg: float = 55.0
     """A typical lens: 35 mm-equivalent 35 mm (28 mm: 65 deg, 50 mm: 40 deg). With a seen zenith it
-    puts the horizon at t = -f^2 / v_z, one more (weak) horizontal VP for the height."""
-    prior_log_focal_std: float = 0.3
-    prior_weight: float = 0.3
-    """The prior's weight relative to the strongest VP at equal precision. Fitted on ECD's
-    even-numbered images (AUC: no prior 84.2 %, weight 0.3 86.1 %, 1 86.1 %, 3 85.4 %; std 0.2 / 0.5
-    at weight 1: 85.9 / 85.8 %), the weaker of the tie kept; held out, the odd-numbered ones score
-    87.0 % (no prior 86.7 %, weight 1 86.0 %): its gain there is within the noise of 52 images."""
+    puts the horizon at t = -f^2 / v_z (module docstring, step 2)."""
+    prior_log_focal_std: float = 1.2
+    """Std of log f about `prior_hfov_deg`. ECD's focal lengths (from its zenith and horizon) spread
+    by a median |log f / f_55| of 0.14 with tails to 0.8 (telephotos); tuned below."""
+    vp_floor: float = 0.02
+    """Floor on a VP's height std (fraction of the diagonal): segments misgrouped, edges not straight."""
+    roll_std_deg: float = 1.0
+    """Std of the horizon's direction about perpendicular to the centre-zenith line (seen zenith)."""
+    roll_std_unseen_deg: float = 3.0
+    """The same without a seen zenith (up from the first guess)."""
+    vp_inlier_support: float = 1.0
+    """Support at which a VP is as likely on the horizon as not (pi_k = 1/2). This and `vp_floor`,
+    `roll_std_deg` and `prior_log_focal_std` are the best on ECD's even-numbered images of a grid
+    (floor 0.003-0.02, roll 0.5-1 deg, prior std 0.3-1.2, support 0.3-3): AUC even 86.1 -> 86.7 %,
+    held out on the odd-numbered ones 87.0 -> 87.8 % (all 86.5 -> 87.3 %). A wider grid (floor to
+    0.08, roll to 2 deg) finds 87.1 % on even that scores 83.2 % on odd: +-1 % is the noise of 52
+    images."""
 
 
 @dataclass(frozen=True)
@@ -123,38 +137,43 @@ def _focal_range_weight(n: np.ndarray, zenith: np.ndarray, n_vertical: float, wi
     return weight
 
 
-def _focal_prior(n: np.ndarray, zenith: np.ndarray, n_vertical: float, width: float,
+def _focal_prior(n: np.ndarray, zenith: np.ndarray, zenith_cov: np.ndarray | None, width: float,
                  cfg: AtlantaConfig) -> tuple[float, float] | None:
     """(t, std t) that a typical lens (`prior_hfov_deg`, log-normal with `prior_log_focal_std`) puts the
-    horizon at with a seen, finite zenith: t = -f^2 / v_z, std 2 |t| std(log f). None otherwise."""
-    if n_vertical <= 0 or abs(zenith[2]) <= 1e-12:
+    horizon at with a seen, finite zenith of covariance `zenith_cov`: t = -f^2 / v_z, std from
+    2 |t| std(log f) and f^2 std(1 / v_z) in quadrature. None without that covariance."""
+    if zenith_cov is None:
         return None
     f = focal_from_hfov(width, cfg.prior_hfov_deg)
-    t = -f**2 * float(zenith[2] / (n @ zenith[:2]))
-    return t, 2 * abs(t) * cfg.prior_log_focal_std
+    v_z = float(n @ zenith[:2] / zenith[2])
+    t = -f**2 / v_z
+    std_inv_v = math.sqrt(float(n @ zenith_cov @ n)) / v_z**2
+    return t, math.hypot(2 * abs(t) * cfg.prior_log_focal_std, f**2 * std_inv_v)
 
 
 def _vp_height(vps: list[VanishingPoint], n: np.ndarray, in_range, prior: tuple[float, float] | None,
-               cfg: AtlantaConfig) -> float | None:
-    """The horizon height from horizontal VPs: their heights n . x averaged with weights
-    support * in_range(height) / (|x|^2 + d^2) (a far VP's height is imprecise: an angle error moves
-    it by |x| times that angle; d = `vp_distance_scale`), and the focal prior's t as one more VP of
-    `prior_weight` times the strongest support whose |x| is its std over one degree. None without a
-    finite VP of positive weight."""
-    heights, weights = [], []
-    for vp in vps:
-        if abs(vp.point[2]) < 1e-9:
-            continue
-        x = vp.point[:2] / vp.point[2]
-        heights.append(float(n @ x))
-        weights.append(vp.support * float(in_range(heights[-1])) / (float(x @ x) + cfg.vp_distance_scale**2))
-    if not heights or sum(weights) <= 1e-12:
+               roll_std_rad: float, cfg: AtlantaConfig) -> float | None:
+    """The horizon height t from horizontal VPs, each on the horizon or an outlier, with the focal
+    range `in_range` and the typical lens `prior` (module docstring, step 2), on a grid of
+    `height_floor_fraction` / 4. None without a finite VP."""
+    vps = [v for v in vps if v.cov is not None]
+    if not vps:
         return None
+    x = np.array([v.point[:2] / v.point[2] for v in vps])
+    cov = np.array([v.cov for v in vps])
+    support = np.array([v.support for v in vps])
+    along = np.array([-n[1], n[0]])
+    height = x @ n
+    var = np.einsum("i,kij,j->k", n, cov, n) + cfg.vp_floor**2 + (roll_std_rad * (x @ along)) ** 2
+    inlier = support / (support + cfg.vp_inlier_support)
+    span = 2.0 * cfg.height_range_fraction
+    grid = np.arange(-cfg.height_range_fraction, cfg.height_range_fraction, cfg.height_floor_fraction / 4)
+    on = np.exp(-0.5 * (grid[None] - height[:, None]) ** 2 / var[:, None]) / np.sqrt(2 * np.pi * var[:, None])
+    log_p = np.log(inlier[:, None] * on + (1.0 - inlier[:, None]) / span).sum(axis=0)
+    log_p += np.log(np.maximum(in_range(grid), 1e-300))
     if prior is not None:
-        spread = max(prior[1], 1e-9) / math.radians(1.0)
-        heights.append(prior[0])
-        weights.append(cfg.prior_weight * max(v.support for v in vps) / (spread**2 + cfg.vp_distance_scale**2))
-    return float(np.dot(heights, weights) / sum(weights))
+        log_p -= 0.5 * ((grid - prior[0]) / prior[1]) ** 2
+    return float(grid[int(np.argmax(log_p))])
 
 
 def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
@@ -176,9 +195,11 @@ def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
     sigma_angle = math.sqrt(2.0) * cfg.endpoint_noise_px / scale / np.maximum(length, 1e-9)
     half_size = np.array([segments.width, segments.height]) / 2.0 / scale
     found = estimate_zenith(ends, w, sigma_angle, zenith, half_size, cfg.zenith)
-    n_vertical = 0.0
+    n_vertical, zenith_cov = 0.0, None
     if found is not None and found.n_effective >= cfg.min_vertical_effective:
         zenith, n_vertical = found.point, found.n_effective
+        zenith_cov = point_covariance(ends[found.inliers], zenith,
+                                      np.maximum(sigma_angle[found.inliers], math.radians(cfg.zenith.min_angle_deg)))
     # The sky direction in the image: up ~ K^-1 zenith (the sign kept from `up_c`) has up[:2] ~ zenith[:2].
     n = zenith[:2].copy()
     if np.linalg.norm(n) < 1e-12:  # looking straight up or down: no horizon in view
@@ -220,8 +241,9 @@ def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
     in_range = _focal_range_weight(n, zenith, n_vertical, segments.width / scale, cfg)
     density = density * in_range(grid)
     vps = horizontal_vps(e, wl, l, sigma_angle, p[keep], cfg.max_horizontal_vps, cfg.min_vp_share)
-    prior = _focal_prior(n, zenith, n_vertical, segments.width / scale, cfg)
-    t = _vp_height(vps, n, in_range, prior, cfg)
+    prior = _focal_prior(n, zenith, zenith_cov, segments.width / scale, cfg)
+    roll_std = math.radians(cfg.roll_std_deg if n_vertical > 0 else cfg.roll_std_unseen_deg)
+    t = _vp_height(vps, n, in_range, prior, roll_std, cfg)
     if t is None:  # no VP: the densest height
         t = float(grid[int(np.argmax(density))])
     # Width of the mode: the pairs that explain it, their heights' weighted spread about t.

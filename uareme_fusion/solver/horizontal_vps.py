@@ -8,6 +8,9 @@ its inliers are removed, and the search repeats while a proposal holds `min_shar
 Counting the segments through a point, rather than pairs meeting near a height, keeps crossings of
 two facades' edges (many pairs, each through a different point) from outvoting a real VP whose
 pairs, being nearly parallel, meet imprecisely.
+
+Each finite VP carries the covariance of its position from its inliers (`VanishingPoint.cov`,
+`zenith.point_covariance`).
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .zenith import least_squares_vp, miss_angles, vp_likelihood
+from .zenith import least_squares_vp, miss_angles, point_covariance, vp_likelihood
 
 
 @dataclass(frozen=True)
@@ -27,6 +30,8 @@ class VanishingPoint:
     support: float
     """S of the module docstring: the weight of the segments that point at it."""
     n_inliers: int
+    cov: np.ndarray | None = None
+    """2x2 covariance of the finite point point[:2] / point[2] (`zenith.point_covariance`); None at infinity."""
 
 
 def horizontal_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, angle_std_rad: np.ndarray,
@@ -51,5 +56,6 @@ def horizontal_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, ang
             break
         point = least_squares_vp(lines[inliers], weights[inliers] / s[inliers] ** 2)
         alive &= ~inliers
-        found.append(VanishingPoint(point, float(score[k]), int(inliers.sum())))
+        found.append(VanishingPoint(point, float(score[k]), int(inliers.sum()),
+                                    point_covariance(ends[inliers], point, s[inliers])))
     return found

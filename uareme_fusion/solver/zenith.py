@@ -81,6 +81,32 @@ def least_squares_vp(lines: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return np.linalg.eigh(M)[1][:, 0]
 
 
+def point_covariance(ends: np.ndarray, point: np.ndarray, angle_std_rad: np.ndarray) -> np.ndarray | None:
+    """The 2x2 covariance of the finite VP `point` (homogeneous) of segments `ends` (n, 2, 2), each
+    with miss-angle std `angle_std_rad`; None at infinity or when singular.
+
+    The inverse of the information sum_i g_i g_i^T / s_i^2, g_i = d_i^perp / r_i the gradient of
+    segment i's miss angle with respect to x (d_i its unit direction, r_i its midpoint's distance to
+    x), times the Birge ratio chi^2 / (n - 2) of the miss angles when above 1 (segments that scatter
+    more than their noise says). A far VP is precise along its direction from the segments and
+    imprecise across it: its height along the image up is uncertain by about |x| times an angle."""
+    if abs(point[2]) < 1e-9:
+        return None
+    x = point[:2] / point[2]
+    d = ends[:, 1] - ends[:, 0]
+    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+    v = x - ends.mean(axis=1)
+    r = np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+    g = np.stack([-d[:, 1], d[:, 0]], axis=1) / r[:, None]
+    info = (g / angle_std_rad[:, None] ** 2).T @ g
+    if np.linalg.cond(info) > 1e12:
+        return None
+    miss = (d[:, 0] * v[:, 1] - d[:, 1] * v[:, 0]) / r
+    n = len(ends)
+    birge = float(np.sum((miss / angle_std_rad) ** 2)) / (n - 2) if n > 2 else 1.0
+    return max(birge, 1.0) * np.linalg.inv(info)
+
+
 def roll_rad(points: np.ndarray) -> np.ndarray:
     """Angle between the image line from the centre (origin) to each point and the image vertical."""
     return np.arctan2(np.abs(points[:, 0]), np.abs(points[:, 1]))
