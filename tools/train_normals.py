@@ -14,6 +14,10 @@ Fine-tuning the shipped weights (issue 12; `--init` takes a checkpoint or the sh
         --random-light 0.5 --white 0.3
     python tools/train_normals.py train --data /work/train_runs/h55_data --run /work/train_runs/h55_run \
         --minutes 60 --init uareme_fusion/normals/weights/normalnet_lite0.pt --lr 5e-4 --real-fraction 0.3 --threads 1
+    # ckpt_last.pt copied to snap_*.pt each time it was rewritten (every 100 iterations) over the last
+    # ~12 minutes; the shipped file averages the last 8 of them and ckpt_last.pt:
+    python tools/train_normals.py export --run /work/train_runs/h55_run --checkpoint SNAP1 .. SNAP8 ckpt_last.pt \
+        --out uareme_fusion/normals/weights/normalnet_lite0.pt
 
 Data (`render`):
 - synthetic: random views of the simulator's room, office, corridor, street and bus scenes (a new
