@@ -1,6 +1,7 @@
 """Shared test fixtures, and the compiled kernels built once, by one xdist worker at a time."""
 
 import contextlib
+import gc
 import hashlib
 import importlib.util
 import os
@@ -58,6 +59,14 @@ files with most tests first, left the 5 s demo file to the end of one worker).""
 def pytest_collection_modifyitems(items):
     rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: files stay whole and in order
+
+
+def pytest_collection_finish(session):
+    """Move everything alive after collection (the package, numpy, scipy, torch, ...: about 365,000
+    objects) out of the garbage collector's reach: each full collection then skips them, those Python
+    starts on its own during the run and the five pytest runs at the end (0.17 s each before,
+    0.00 s after, measured)."""
+    gc.freeze()
 
 
 def pytest_configure(config):
