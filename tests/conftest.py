@@ -48,8 +48,8 @@ def shared_data() -> Path:
 
 
 LONGEST_FIRST = ("test_safe_outputs.py", "test_lines.py", "test_faults.py", "test_demo.py", "test_mekf_scenarios.py",
-                 "test_imu_extrinsics.py", "test_intrinsics.py", "test_bad_input_pipeline.py", "test_mekf_compiled.py",
-                 "test_bad_input_cli.py", "test_smoother.py", "test_bad_input_limits.py", "test_solver.py")
+                 "test_imu_extrinsics.py", "test_intrinsics.py", "test_bad_input_cli.py", "test_smoother.py",
+                 "test_solver.py", "test_bad_input_limits.py", "test_mekf_compiled.py")
 """The test files that take longest (3-17 s of one core each, measured), in that order, before all others.
 xdist (pyproject: `--dist loadfile --no-loadscope-reorder`) hands each worker whole files in collection
 order, so the long files start first and the short ones even out the workers' ends (its default order,
