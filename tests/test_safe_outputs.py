@@ -176,10 +176,11 @@ def test_a_closed_stdout_after_a_completed_run_exits_0(tmp_path):
 
 # ------------------------------------------------------------------------------ full disk
 @pytest.fixture
-def small_disk(tmp_path):
-    """A 200 KiB tmpfs (needs root and mount); skips where the machine does not allow one."""
+def small_disk(tmp_path, request):
+    """A 200 KiB tmpfs (needs root and mount) with a filler of `request.param` bytes (170,000 unless
+    the test says: leaves about 30 KiB); skips where the machine does not allow one."""
     with tmpfs(tmp_path / "disk", "size=200k") as mount:
-        (mount / "filler").write_bytes(bytes(170_000))  # leaves about 30 KiB
+        (mount / "filler").write_bytes(bytes(getattr(request, "param", 170_000)))
         yield mount
 
 
@@ -207,7 +208,8 @@ def test_a_full_disk_keeps_every_complete_row_and_exits_1(small_disk):
     assert 20 < summary["estimates"] < 300
 
 
-def test_a_full_disk_during_horizon_names_the_file_and_leaves_no_broken_video(small_disk):
+@pytest.mark.parametrize("small_disk", [170_000, 180_000], indirect=True)  # 180,000: the disk fills as the
+def test_a_full_disk_during_horizon_names_the_file_and_leaves_no_broken_video(small_disk):  # mp4 closes (segfaulted)
     proc = cli("horizon", "sim:room", "--max-frames", "100", "--out", small_disk / "h.mp4")
     assert proc.returncode == 1
     (line,) = error_lines(proc)

@@ -21,6 +21,8 @@ from ..errors import InputError
 OPENCV_CODECS = {".mp4": "mp4v", ".avi": "MJPG", ".mkv": "MJPG", ".mov": "mp4v"}
 """Fourcc of OpenCV's writer per extension (the fallback)."""
 H264_SUFFIXES = (".mp4", ".mkv", ".mov")
+MUXERS = {".mp4": "mp4", ".mkv": "matroska", ".mov": "mov"}
+"""libav muxer per extension (PyAV writes to a Python file, which has no name to guess it from)."""
 H264_CRF = "20"
 """x264 constant rate factor: visually near lossless for overlays, a few MB per minute at 640x480."""
 
@@ -30,7 +32,10 @@ class _PyAvEncoder:
         import av
         from fractions import Fraction
 
-        self.container = av.open(str(path), mode="w")
+        # Through a Python file: a write the disk refuses raises OSError here, where libav's own file
+        # I/O crashed the process in close() (segfault on a full disk, measured with PyAV 14).
+        self.file = open(path, "wb")
+        self.container = av.open(self.file, mode="w", format=MUXERS[path.suffix.lower()])
         rate = Fraction(fps).limit_denominator(1001)
         self.stream = self.container.add_stream("libx264", rate=rate, options={"crf": H264_CRF})
         self.width, self.height = (size_wh[0] + 1) // 2 * 2, (size_wh[1] + 1) // 2 * 2
@@ -46,9 +51,12 @@ class _PyAvEncoder:
             self.container.mux(packet)
 
     def close(self) -> None:
-        for packet in self.stream.encode():
-            self.container.mux(packet)
-        self.container.close()
+        try:
+            for packet in self.stream.encode():
+                self.container.mux(packet)
+            self.container.close()
+        finally:
+            self.file.close()
 
 
 class _OpenCvEncoder:

@@ -289,6 +289,7 @@ class Pipeline:
                 sink.close()
             except OutputError as exc:
                 if self.stats.stopped == "output_error":
-                    self.stats.error = f"{self.stats.error}; {exc}"
+                    if str(exc) not in self.stats.error:  # the same refusal met again while closing
+                        self.stats.error = f"{self.stats.error}; {exc}"
                 else:
                     self.stats.stopped, self.stats.error = "output_error", str(exc)
