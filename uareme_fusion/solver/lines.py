@@ -208,10 +208,17 @@ def _functionals() -> np.ndarray:
     return out
 
 
+def _kron(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """np.kron of two square matrices by one broadcast product (the same numbers; np.kron's general
+    path cost 26 us of the 6 us here for R x R x R, called at every solver iteration)."""
+    n, m = len(A), len(B)
+    return (A[:, None, :, None] * B[None, :, None, :]).reshape(n * m, n * m)
+
+
 def line_cost_gradient_hessian(moments: LineMoments, R_cm: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """Equation (L), its gradient (3,) and Hessian (3, 3) with respect to the right perturbation of `R_cm`."""
     R = np.asarray(R_cm, float)
-    K3 = np.kron(np.kron(R, R), R)
+    K3 = _kron(_kron(R, R), R)
     rotated = (K3.T @ moments.T @ K3).reshape(729)
     values = _functionals() @ rotated / moments.total_weight
     hess = values[4:].reshape(3, 3)
