@@ -20,9 +20,10 @@ from ..errors import InputError
 
 OPENCV_CODECS = {".mp4": "mp4v", ".avi": "MJPG", ".mkv": "MJPG", ".mov": "mp4v"}
 """Fourcc of OpenCV's writer per extension (the fallback)."""
-H264_SUFFIXES = (".mp4", ".mkv", ".mov")
 MUXERS = {".mp4": "mp4", ".mkv": "matroska", ".mov": "mov"}
-"""libav muxer per extension (PyAV writes to a Python file, which has no name to guess it from)."""
+"""libav muxer per extension written as H.264 (PyAV writes to a Python file, which has no name to
+guess it from)."""
+H264_SUFFIXES = tuple(MUXERS)
 H264_CRF = "20"
 """x264 constant rate factor: visually near lossless for overlays, a few MB per minute at 640x480."""
 
