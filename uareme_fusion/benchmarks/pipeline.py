@@ -91,6 +91,8 @@ class MemoryProbe:
 
 FPS_GOAL = 20.0
 """640x480, both cues, learned normals, EKF and file sinks (issue 12)."""
+
+
 class CpuClock:
     """A sink that reads the process's CPU time at each estimate: `ms_per_frame` between the first
     and the last one (start-up excluded) is what a frame costs on an idle core, whatever else runs
