@@ -223,9 +223,9 @@ class Smoother(Backend):
         with the frame (labelled as fused) and the persistent part reported with the estimate
         (`visual_noise_share.py`); nothing in gyro mode."""
         if self._noise_share.enabled:
-            self._noise_share.update(t_s, visual)
-            if visual is not None and np.all(np.isfinite(visual.cov)):
-                self._persistent_cov = self._noise_share.persistent_R_wc_covariance(visual)
+            persistent = self._noise_share.take(t_s, visual)
+            if persistent is not None:
+                self._persistent_cov = persistent
 
     def _smoothness_factor(self, k: int) -> gtsam.NonlinearFactor:
         return gtsam.BetweenFactorRot3(X(k - 1), X(k), gtsam.Rot3(), self._between_noise)

@@ -100,6 +100,14 @@ class VisualNoiseShare:
         self.share = float(np.clip(upper, self.min_share, 1.0))
         return self.share
 
+    def take(self, t_s: float, visual: VisualRotation | None) -> np.ndarray | None:
+        """`update` with the frame, then the persistent covariance of it to report with the estimate
+        (`persistent_R_wc_covariance`); None when the frame has no rotation or no finite covariance."""
+        self.update(t_s, visual)
+        if visual is None or not np.all(np.isfinite(visual.cov)):
+            return None
+        return self.persistent_R_wc_covariance(visual)
+
     def persistent_R_wc_covariance(self, visual: VisualRotation) -> np.ndarray:
         """(1 - lam) times `visual`'s covariance as one of `R_wc` (rad^2, right perturbation)."""
         return (1.0 - self.share) * visual_R_wc_covariance(visual)

@@ -106,19 +106,31 @@ def tilt_rmse_on(t_s, t_rec, R_rec, R_ref, keep) -> float:
     return rmse(tilt_error_deg(up_in_camera(R_rec[ok]), up_in_camera(R_ref[idx][ok])))
 
 
-def broad_inclination(trial, config: MekfConfig, retimed: bool = False) -> tuple[float, float, float, float]:
-    """(mekf online, mekf offline, vqf 6D inclination RMSE deg over the movement samples, mekf us/sample).
-    With `retimed`, all three against the optical reference read the IMU's delay earlier
-    (`reference_timing.imu_delay_s`) instead of the published index pairing."""
+def broad_runs(trial, config: MekfConfig) -> tuple:
+    """The estimates scored on one BROAD trial: (mekf online (t, R), mekf offline (t, R), vqf 6D R (N, 3, 3),
+    mekf us/sample)."""
     t = trial.t_s
     t_on, R_on, us = imu_only_run(config, t, trial.gyro_rad_s, trial.accel_m_s2)
     t_off, R_off, _ = imu_only_run(config, t, trial.gyro_rad_s, trial.accel_m_s2, offline=True)
     R_vqf = vqf_6d_R_wi(trial.gyro_rad_s, trial.accel_m_s2, 1.0 / trial.sampling_rate_hz)
-    R_ref, keep = trial.R_ref_imu, trial.movement
+    return (t_on, R_on), (t_off, R_off), R_vqf, us
+
+
+def broad_scores(trial, runs: tuple, retimed: bool = False) -> tuple[float, float, float, float]:
+    """(mekf online, mekf offline, vqf 6D inclination RMSE deg over the movement samples, mekf us/sample)
+    of `broad_runs`. With `retimed`, all three against the optical reference read the IMU's delay
+    earlier (`reference_timing.imu_delay_s`) instead of the published index pairing."""
+    (t_on, R_on), (t_off, R_off), R_vqf, us = runs
+    t, R_ref, keep = trial.t_s, trial.R_ref_imu, trial.movement
     if retimed:
         R_ref = retimed_reference(t, R_ref, imu_delay_s(t, trial.gyro_rad_s, R_ref, keep))
     return (tilt_rmse_on(t, t_on, R_on, R_ref, keep), tilt_rmse_on(t, t_off, R_off, R_ref, keep),
             tilt_rmse_on(t, t, R_vqf, R_ref, keep), us)
+
+
+def broad_inclination(trial, config: MekfConfig, retimed: bool = False) -> tuple[float, float, float, float]:
+    """`broad_scores` of `broad_runs`: the filters run and scored on one trial."""
+    return broad_scores(trial, broad_runs(trial, config), retimed)
 
 
 def euroc_tilt(config: MekfConfig, euroc_dir: Path) -> tuple[float, float, float]:
@@ -285,7 +297,8 @@ def run(seeds: int = 5, quick: bool = False, broad_dir: Path = Path("../shared/d
         print(f"  settings (all trials): configs/{BROAD_PRESET}.yaml")
         for path in sorted(broad_dir.glob("*.hdf5")):
             trial = read_broad(path)
-            online, offline, vqf_rmse, us = broad_inclination(trial, config)
+            runs = broad_runs(trial, config)
+            online, offline, vqf_rmse, us = broad_scores(trial, runs)
             figures.setdefault("broad_tilt_rmse_deg", {})[path.stem] = {"online": online, "offline": offline,
                                                                          "vqf_6d": vqf_rmse}
             imu_us["broad"].append(us)
@@ -294,7 +307,7 @@ def run(seeds: int = 5, quick: bool = False, broad_dir: Path = Path("../shared/d
             print(f"  {path.stem:34s} vqf6D {vqf_rmse:5.2f} | online {online:5.2f} ratio {online / vqf_rmse:4.2f} "
                   f"[<= {GOALS['online']}] | offline {offline:5.2f} ratio {offline / vqf_rmse:4.2f} "
                   f"[<= {GOALS['offline']}]  ({us:.2f} us/sample)")
-            online, offline, vqf_rmse, _ = broad_inclination(trial, config, retimed=True)
+            online, offline, vqf_rmse, _ = broad_scores(trial, runs, retimed=True)
             figures["broad_tilt_rmse_deg"][path.stem]["retimed"] = {"online": online, "offline": offline,
                                                                      "vqf_6d": vqf_rmse}
             print(f"  {'  reference re-timed to the IMU delay':34s} vqf6D {vqf_rmse:5.2f} | online {online:5.2f} ratio "

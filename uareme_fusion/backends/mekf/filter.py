@@ -361,9 +361,9 @@ class Mekf(Backend):
         shared = not self.motion.uses_imu and self.noise_share.enabled
         if shared:  # fuse the independent share only (as estimated over the previous frames)
             R_vis = R_vis * self.noise_share.share
-            labelled = visual.symmetric_to(self.R_wc.T @ self.R_wm)
-            self.noise_share.update(t_s, labelled)
-            self.persistent_cov = self.noise_share.persistent_R_wc_covariance(labelled)
+            persistent = self.noise_share.take(t_s, visual.symmetric_to(self.R_wc.T @ self.R_wm))
+            if persistent is not None:  # always, past the gate (a finite covariance)
+                self.persistent_cov = persistent
         d = np.sqrt(d2)
         if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_sigma)
