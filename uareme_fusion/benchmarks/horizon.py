@@ -22,6 +22,7 @@ Each figure is printed beside its goal (issue 12) and its baseline:
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from pathlib import Path
@@ -93,8 +94,10 @@ def ecd_scores(folder: Path, analyser, limit: int | None = None) -> dict:
             "median_hfov_deg": float(np.median(hfov)), "ms_per_image": float(np.median(ms))}
 
 
+@functools.cache
 def icsl_depth_reference(rgb_path: Path):
-    """The depth-normal rotation and its covariance for one ICSL frame (published intrinsics)."""
+    """The depth-normal rotation and its covariance for one ICSL frame (published intrinsics); once
+    per frame (both ICSL scorings and the ICSL-more sequence use them)."""
     from ..normals.depth import DepthNormals
     from ..solver import solve_manhattan
     from ..types import Frame

@@ -232,20 +232,20 @@ def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
     height, spread, pair_w = height[keep], spread[keep], pair_w[keep]
     if len(height) == 0:
         return None
-    grid = np.arange(-cfg.height_range_fraction, cfg.height_range_fraction + floor / 4, floor / 2)
-    density = np.zeros_like(grid)
-    for start in range(0, len(height), 4096):
-        s = slice(start, start + 4096)
-        zsc = (grid[None, :] - height[s, None]) / spread[s, None]
-        density += ((pair_w[s] / spread[s])[:, None] * np.exp(-0.5 * zsc**2)).sum(axis=0)
     in_range = _focal_range_weight(n, zenith, n_vertical, segments.width / scale, cfg)
-    density = density * in_range(grid)
-    vps = horizontal_vps(e, wl, l, sigma_angle, p[keep], cfg.max_horizontal_vps, cfg.min_vp_share)
+    vps = horizontal_vps(e, wl, l, sigma_angle, p[keep], cfg.max_horizontal_vps, cfg.min_vp_share,
+                         cfg.zenith.min_angle_deg)
     prior = _focal_prior(n, zenith, zenith_cov, segments.width / scale, cfg)
     roll_std = math.radians(cfg.roll_std_deg if n_vertical > 0 else cfg.roll_std_unseen_deg)
     t = _vp_height(vps, n, in_range, prior, roll_std, cfg)
-    if t is None:  # no VP: the densest height
-        t = float(grid[int(np.argmax(density))])
+    if t is None:  # no VP: the densest height of the pairs' meeting points
+        grid = np.arange(-cfg.height_range_fraction, cfg.height_range_fraction + floor / 4, floor / 2)
+        density = np.zeros_like(grid)
+        for start in range(0, len(height), 4096):
+            s = slice(start, start + 4096)
+            zsc = (grid[None, :] - height[s, None]) / spread[s, None]
+            density += ((pair_w[s] / spread[s])[:, None] * np.exp(-0.5 * zsc**2)).sum(axis=0)
+        t = float(grid[int(np.argmax(density * in_range(grid)))])
     # Width of the mode: the pairs that explain it, their heights' weighted spread about t.
     near = np.abs(height - t) < 3 * spread
     support = float(pair_w[near].sum() / pair_w.sum())

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lines.detect import LineSegments
-from ..pinhole import DEFAULT_FOV_DEG, assumed_K, centred_K
+from ..pinhole import DEFAULT_FOV_DEG, assumed_K, centred_K, focal_from_hfov
 from ..rotations import log_so3
 from ..types import NormalMap, VisualRotation
 from .joint import JointSolver, capped_covariance
@@ -108,7 +108,7 @@ def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s) -> tuple[V
     reference = solve_given_K(solver, normal_map, segments, K_assumed, R_init, t_s)
     if "lines" not in reference.cues:
         return reference, FocalEstimate(K_assumed, "assumed", width=w)
-    lo, hi = (w / 2.0 / math.tan(math.radians(a) / 2.0) for a in cfg.hfov_range_deg[::-1])
+    lo, hi = (focal_from_hfov(w, a) for a in cfg.hfov_range_deg[::-1])
     log_f = np.linspace(math.log(lo), math.log(hi), cfg.grid_points)
     profile, rotations = [], []
     for lf in log_f:

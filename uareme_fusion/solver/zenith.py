@@ -121,7 +121,8 @@ def estimate_zenith(ends: np.ndarray, weights: np.ndarray, angle_std_rad: np.nda
     cfg = config or ZenithConfig()
     d = ends[:, 1] - ends[:, 0]
     off_vertical = np.arctan2(np.abs(d[:, 0]), np.abs(d[:, 1]))
-    cand = np.flatnonzero(off_vertical < math.radians(cfg.candidate_deg))
+    vertical = off_vertical < math.radians(cfg.candidate_deg)
+    cand = np.flatnonzero(vertical)
     if len(cand) < 2:
         return None
     top = cand[np.argsort(-weights[cand])][: cfg.max_candidates]
@@ -139,11 +140,9 @@ def estimate_zenith(ends: np.ndarray, weights: np.ndarray, angle_std_rad: np.nda
         score[start:start + 2048] = (weights[cand] * vp_likelihood(a, s)).sum(axis=1)
     score *= np.exp(-0.5 * (roll_rad(proposals) / math.radians(cfg.roll_prior_deg)) ** 2)
     z = proposals[int(np.argmax(score))]
-    inliers = np.zeros(len(ends), bool)
     s_all = np.maximum(angle_std_rad, math.radians(cfg.min_angle_deg))
     for _ in range(cfg.refinements + 1):
-        inliers = miss_angles(ends, z[None])[0] < 3 * s_all
-        inliers[off_vertical >= math.radians(cfg.candidate_deg)] = False
+        inliers = (miss_angles(ends, z[None])[0] < 3 * s_all) & vertical
         if inliers.sum() < 2:
             return None
         z = least_squares_vp(lines[inliers], weights[inliers] / s_all[inliers] ** 2)
