@@ -95,11 +95,13 @@ class GyroMotion:
             filt.add_taken(*deferred)  # not clean, not all before the frame, or a gap: as any batch
         rows = filt.stream.release_rows_until(t_s)
         # The common case of a frame after its samples, in one kernel call: what `integrate_pending`
-        # decides for one clean batch when nothing else waits, without queueing it first.
+        # decides (the same test, the same call) for one batch when nothing else waits, without
+        # queueing it first.
         if (filt.compiled and rows.shape[0] and filt.initialised and filt.imu_is_camera and not filt.pending
-                and _nothing_waits(filt)):
+                and not filt.accel.due):
             extra_s = max(t_s - float(rows[-1, 0]), 0.0)
-            if extra_s <= filt.config.imu_gap_limit_s and integrate_compiled(filt, rows, extra_s, self.fuses_visual):
+            if (compiled_path_applies(filt, rows[:, 0], rows[:, 7], extra_s)
+                    and integrate_compiled(filt, rows, extra_s, self.fuses_visual)):
                 return
         filt.queue(ImuBatch.from_rows(rows))
         self.integrate_pending(filt, extrapolate_to_s=t_s, force_init=True)
