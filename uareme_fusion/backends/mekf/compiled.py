@@ -110,18 +110,18 @@ def integrate_compiled(filt, rows: np.ndarray, extra_s: float, defer: bool) -> b
     return True
 
 
-def integrate_frame_batch_compiled(filt, t, gyro_c, accel_c, t_frame_s: float, defer: bool) -> bool:
+def integrate_frame_batch_compiled(filt, stream, t, gyro_c, accel_c, t_frame_s: float) -> bool:
     """A batch that `process_imu` held unchecked (`t` (n,) s, `gyro_c` (n, 3) rad/s, `accel_c` (n, 3)
-    m/s^2, camera frame), nothing else in the reorder buffer: checked as `ImuStream.add` checks it
-    and integrated to the frame at `t_frame_s`, in one kernel call (`kernels.integrate_frame_batch`).
+    m/s^2, camera frame), nothing else in the reorder buffer `stream` (the filter's `ImuStream`):
+    checked as `ImuStream.add` checks it and integrated to the frame at `t_frame_s`, in one kernel
+    call (`kernels.integrate_frame_batch`); an update falling due at its end is prepared for the frame.
     False, changing nothing, unless every sample is clean (finite, in order, later than the stream's
     watermark, below the gyro range) and at or before the frame, with no IMU gap and no
     accelerometer update waiting. A frame's path: the fewest Python steps around the one call."""
-    stream = filt.stream
     recording = filt.config.record_imu_estimates
     record_R, record_P = _record_buffers(filt, t.shape[0]) if recording else (_NO_RECORD, _NO_RECORD)
     code = K.FRAME_BATCH(filt.x, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s, t_frame_s,
-                         _parameters(filt, defer), record_R, record_P)
+                         _parameters(filt, True), record_R, record_P)
     if code < 0:
         return False
     stream.released_elsewhere(t_frame_s)

@@ -20,7 +20,8 @@ from ..imu_stream import ImuStream, check_imu_arrays
 from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
-from .compiled import KERNEL, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters
+from .compiled import (KERNEL, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters,
+                       integrate_frame_batch_compiled)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
                            visual_model)
@@ -171,8 +172,8 @@ class Mekf(Backend):
             t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
             n = t.shape[0]
             # A frame's worth, nothing else waiting: held as it is until the frame checks and integrates
-            # it in one compiled call (`GyroMotion.propagate_to`); any other use of the stream adds it
-            # first, as below (a batch this short releases nothing on its own).
+            # it in one compiled call (`propagate_to`); any other use of the stream adds it first, as
+            # below (a batch this short releases nothing on its own).
             if (n and not self.pending and self._stream.held_count == 0
                     and t.item(n - 1) - t.item(0) < self.config.accel_update_period_s + self._stream.reorder_window_s):
                 self._deferred = (t.copy(), gyro.copy(), accel.copy())  # the caller may reuse its arrays
@@ -198,16 +199,6 @@ class Mekf(Backend):
     def _add_deferred(self) -> None:
         deferred, self._deferred = self._deferred, None
         self._add(*deferred)
-
-    def take_deferred(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """The batch `process_imu` holds unchecked, `(t_s, gyro_rad_s, accel_m_s2)`, or None; the caller
-        integrates it, or hands it back to `add_taken`."""
-        deferred, self._deferred = self._deferred, None
-        return deferred
-
-    def add_taken(self, t_s, gyro_rad_s, accel_m_s2) -> None:
-        """A batch from `take_deferred` that its caller did not integrate: added as `process_imu` adds."""
-        self._add(t_s, gyro_rad_s, accel_m_s2)
 
     @property
     def stream(self) -> ImuStream:
@@ -268,7 +259,16 @@ class Mekf(Backend):
 
     def propagate_to(self, t_s: float) -> None:
         """Propagate the state to `t_s` (s, camera clock) with the mode's motion strategy."""
-        if self._deferred is None and not self.pending and t_s == self.t_state:
+        deferred = self._deferred
+        if deferred is not None:
+            # A frame's batch, held unchecked by `process_imu`: checked and integrated in one compiled call
+            # (an IMU gap or saturation seen, an unclean batch or one past the frame take the reference path).
+            if (not self.in_imu_gap and not self._stream.saturation_seen
+                    and integrate_frame_batch_compiled(self, self._stream, *deferred, t_s)):
+                self._deferred = None
+                return
+            self._add_deferred()
+        elif not self.pending and t_s == self.t_state:
             return  # already there (a frame's prediction, then its update); later stamps are late
         self.motion.propagate_to(self, t_s)
 

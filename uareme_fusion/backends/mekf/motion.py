@@ -19,7 +19,7 @@ from ...rotations import R_CM_UPRIGHT, WORLD_UP
 from ...types import IMU_COLUMNS as COLUMNS, ImuBatch, VisualRotation, visual_R_wc_covariance
 from . import status_bits
 from .accel import PERIOD_TOLERANCE_S, chunk_bounds, tilt_direction
-from .compiled import compiled_path_applies, integrate_compiled, integrate_frame_batch_compiled
+from .compiled import compiled_path_applies, integrate_compiled
 from .config import MekfMode
 from .propagation import constant_rate_model, gyro_chunk, gyro_process_noise, gyro_rates, gyro_transition
 from .propagation import manhattan_walk_noise
@@ -85,14 +85,6 @@ class GyroMotion:
 
     def propagate_to(self, filt, t_s: float) -> None:
         """Integrate IMU samples up to `t_s` (camera clock, s), then hold the last rate."""
-        deferred = filt.take_deferred()
-        if deferred is not None:  # a frame's batch, held unchecked: checked and integrated in one call
-            # (the kernel refuses it while an accelerometer update waits; an IMU gap or saturation seen
-            # takes the reference path)
-            if (not filt.in_imu_gap and not filt.stream.saturation_seen
-                    and integrate_frame_batch_compiled(filt, *deferred, t_s, self.fuses_visual)):
-                return
-            filt.add_taken(*deferred)  # not clean, not all before the frame, or a gap: as any batch
         rows = filt.stream.release_rows_until(t_s)
         # The common case of a frame after its samples, in one kernel call: what `integrate_pending`
         # decides (the same test, the same call) for one batch when nothing else waits, without
