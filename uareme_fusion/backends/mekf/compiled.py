@@ -165,22 +165,32 @@ def _deferred_views(filt) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
     return views
 
 
+def take_prepared_accel_rows(filt):
+    """`(True, rows)` for an accelerometer measurement prepared when its update fell due at the end of
+    a batch (`kernels.prepare_deferred_update`), taken as it is: `rows` `(residual (3,), R (3, 3), H (3,
+    12))` as `accel_rows_compiled` gives them, or None (near free fall); `(False, None)` when none was
+    prepared (the caller then computes it, `Mekf._accel_rows`). The residual and H are views of the
+    state buffer, valid until the next update falls due."""
+    x = filt.x
+    taken = x[S_DEFERRED_ROWS]
+    if not taken:
+        return False, None
+    x[S_DEFERRED_ROWS] = ROWS_NOT_TAKEN
+    if taken != ROWS_MEASURED:
+        return True, None
+    residual, H, _, _ = _deferred_views(filt)
+    return True, (residual, x[X_ACCEL_ROWS + 3] * I3, H)
+
+
 def accel_rows_compiled(filt):
     """The accelerometer measurement of the period just completed, for a stacked update, compiled in
     the filter's state buffer (an at-rest update applied first): as `Mekf._accel_rows`, `(residual (3,),
     R (3, 3), H (3, 12))` or None near free fall. The residual and H are views of the buffer, valid
-    until the next update falls due. A measurement taken when the update fell due at the end of a
-    batch (`kernels.prepare_deferred_update`) is used as it is: no compiled call."""
+    until the next update falls due."""
     x = filt.x
-    taken = x[S_DEFERRED_ROWS]
-    if taken:
-        x[S_DEFERRED_ROWS] = ROWS_NOT_TAKEN
-        measured = taken == ROWS_MEASURED
-    else:
-        code = K.ACCEL_ROWS(x, _parameters(filt, False), filt.views["accel_rows"])
-        filt.flags |= code & _STATUS_RESULTS
-        measured = code & K.MEASURED
-    if not measured:
+    code = K.ACCEL_ROWS(x, _parameters(filt, False), filt.views["accel_rows"])
+    filt.flags |= code & _STATUS_RESULTS
+    if not code & K.MEASURED:
         return None
     residual, H, _, _ = _deferred_views(filt)
     return residual, x[X_ACCEL_ROWS + 3] * I3, H
