@@ -133,6 +133,17 @@ def zero_rate_measurement(rest_sums, rest_n, T, b_c, p):
     return zero_rate_model(rest_sums, rest_n, T, b_c, p[P_Q_GYRO], p[P_REST_GYRO], p[P_REST_ACCEL], p[P_REST_STD])
 
 
+def matmul_into(A, B, out):
+    """`out = A @ B` by scalar loops (small matrices: no BLAS call), summed in index order."""
+    for i in range(A.shape[0]):
+        for j in range(B.shape[1]):
+            acc = 0.0
+            for k in range(A.shape[1]):
+                acc += A[i, k] * B[k, j]
+            out[i, j] = acc
+    return out
+
+
 def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
     """Joseph-form update with isotropic measurement noise `var`, then injection into the nominal
     state and the reset of the error (as `Mekf._kalman_update`). Updates the arrays in place and
@@ -141,20 +152,10 @@ def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
     and more still out of the caches, after a solver call): the Joseph form expanded,
     `(I - K H) P (I - K H)^T + K (var I) K^T = P - K (P H^T)^T - (P H^T) K^T + K S K^T` with `S` the
     innovation covariance, and the reset `G P G^T` on the rotation blocks only."""
-    PHt = np.empty((12, 3))
-    for i in range(12):
-        for j in range(3):
-            acc = 0.0
-            for k in range(12):
-                acc += P[i, k] * H[j, k]
-            PHt[i, j] = acc
-    S = np.empty((3, 3))
+    PHt = matmul_into(P, H.T, np.empty((12, 3)))
+    S = matmul_into(H, PHt, np.empty((3, 3)))
     for i in range(3):
-        for j in range(3):
-            acc = 0.0
-            for k in range(12):
-                acc += H[i, k] * PHt[k, j]
-            S[i, j] = acc + var if i == j else acc
+        S[i, i] += var
     S_inv = inv3(S)
     K = np.empty((12, 3))
     KS = np.empty((12, 3))
@@ -517,9 +518,9 @@ if jit.available():
     try:
         _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into,
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
-                 zero_rate_measurement, kalman_update, accel_rows, accel_and_rest_update, has_gap, chunk_bounds,
-                 integrate_chunks, state_views, rows_if_clean, accel_rows_in_place, prepare_deferred_update,
-                 integrate_batch)
+                 zero_rate_measurement, matmul_into, kalman_update, accel_rows, accel_and_rest_update, has_gap,
+                 chunk_bounds, integrate_chunks, state_views, rows_if_clean, accel_rows_in_place,
+                 prepare_deferred_update, integrate_batch)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = integrate_batch

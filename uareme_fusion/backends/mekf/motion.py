@@ -28,8 +28,6 @@ from .state import BG, I3, MF, N_STATE, RATE, TH, ZERO_STATE, orthonormal
 _NO_ROWS = np.zeros((0, COLUMNS))
 
 
-
-
 class ConstantRateMotion:
     """Visual only: constant-rate model between frames; the world is the first Manhattan frame
     labelled with its z the axis nearest image up (`R_wm = I`)."""
