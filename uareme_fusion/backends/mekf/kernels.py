@@ -524,7 +524,7 @@ if jit.available():
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = integrate_batch
-        FRAME_BATCH = jit.compiled(integrate_frame_batch, cache=True, error_model="numpy")
+        FRAME_BATCH = jit.compiled(integrate_frame_batch, cache=True, error_model="numpy", nogil=False)  # per frame
         ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
         ACCEL_ROWS = accel_rows_in_place
         SEGMENTS = jit.compiled(integrate_segments, cache=True, error_model="numpy")
