@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from uareme_fusion import jit
-from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels, state
+from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels, state, state_buffer
 from uareme_fusion.backends.mekf import compiled as mekf_compiled
 from uareme_fusion.config import load_config
 from uareme_fusion.rotations import angle_between, exp_so3
@@ -188,6 +188,37 @@ def test_frame_batch_held_for_its_frame_is_a_copy_and_counted_when_read():
             assert e.status == e_ref.status
     assert filt.stream.counts.nonfinite == 1
     assert_same_filters(filt, ref)
+
+
+@needs_numba
+def test_update_prepared_when_due_same_as_reference_with_or_without_a_frame():
+    """An accelerometer update that falls due at the end of a frame's batch is prepared in the same
+    compiled call (`kernels.prepare_deferred_update`): its measurement for a visual update, the state
+    after the update alone for a frame without one. Frames with and without rotation, the counts read
+    between the propagation and the frame, and a propagation past a prepared update: the reference's
+    estimates, counts and flags."""
+    traj, t, gyro, accel = stream(6, duration_s=10.0)
+    rng = np.random.default_rng(8)
+    deltas = rng.normal(scale=0.01, size=(t.size, 3))
+    filt, ref = (Mekf(c) for c in both(load_config("handheld", MekfConfig)))
+    ests = ([], [])
+    prepared = 0
+    for k, i in enumerate(range(0, t.size - 7, 7)):
+        t_f = float(t[i + 6]) + 0.001
+        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0] @ exp_so3(deltas[i])
+        visual = VisualRotation(R_cm=R_cm, cov=1e-4 * np.eye(3), cost=0.01, iterations=3, n_valid=100)
+        for f in (filt, ref):
+            f.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
+            f.propagate_to(t_f - 0.0005 if k % 11 == 5 else t_f)  # now and then the frame comes later
+        if filt.x[state_buffer.S_DEFERRED_ROWS] != state_buffer.ROWS_NOT_TAKEN:
+            prepared += 1
+            if prepared % 2:
+                filt.counters  # read (and moved out of the state buffer) before the frame takes the update
+        for f, out in zip((filt, ref), ests):
+            out.append(f.process_frame(t_f, None if k % 4 == 1 else visual))
+        assert filt.counters == ref.counters
+    assert prepared > 30 and filt.counters["accel_updates"] > 40 and filt.counters["visual_updates"] > 100
+    assert_same_filters(filt, ref, *ests)
 
 
 def _doubled(x):

@@ -37,22 +37,23 @@ def available() -> bool:
     return numba is not None
 
 
-def compiled(fn=None, cache: bool = False, **options):
-    """`numba.njit(cache=cache, nogil=True, **options)(fn)`, or None without numba (one warning).
+def compiled(fn=None, cache: bool = False, nogil: bool = True, **options):
+    """`numba.njit(cache=cache, nogil=nogil, **options)(fn)`, or None without numba (one warning).
     `cache=True` keeps the machine code on disk (numba's `__pycache__` beside the source, or
     `NUMBA_CACHE_DIR`, or a cache folder in the user's home for a read-only install) for kernels
     whose compilation takes a second or more; where none of those is writable, the kernel compiles
-    in each process instead."""
+    in each process instead. `nogil=False` for a kernel of a few microseconds called often: releasing
+    and taking back the GIL costs about half a microsecond a call."""
     def wrap(f):
         if numba is None:
             _warn_once(_REASON)
             return None
         try:
-            return numba.njit(cache=cache, nogil=True, **options)(f)
+            return numba.njit(cache=cache, nogil=nogil, **options)(f)
         except RuntimeError:  # "cannot cache function ...: no locator available" (nowhere writable)
             if not cache:
                 raise
-            return numba.njit(cache=False, nogil=True, **options)(f)
+            return numba.njit(cache=False, nogil=nogil, **options)(f)
     return wrap(fn) if fn is not None else wrap
 
 

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...types import Status
 from . import kernels as K
 from .accel import PERIOD_TOLERANCE_S
 from .kernels import KERNEL
 from .state import I3, ORTHONORMALISE_EVERY
-from .state_buffer import S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_NONFINITE, S_REST_UPDATES
+from .state_buffer import (ROWS_MEASURED, ROWS_NOT_TAKEN, S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES,
+                           S_DEFERRED_BITS, S_DEFERRED_ROWS, S_NONFINITE, S_REST_UPDATES, X_ACCEL_ROWS, X_AFTER_ACCEL,
+                           X_SIZE)
 
 
 def compiled_path_applies(filt, t: np.ndarray, saturated: np.ndarray, extra_s: float) -> bool:
@@ -73,19 +74,18 @@ _NO_RECORD = np.empty((0, 3, 3))  # record buffers when nothing is recorded (wri
 
 
 def harvest_kernel_counters(x: np.ndarray, counters: dict[str, int]) -> None:
-    """Move the update counts the kernels keep in the state buffer `x` into `counters` (by name)."""
+    """Move the update counts the kernels keep in the state buffer `x` into `counters` (by name); the
+    state after a deferred update (`kernels.prepare_deferred_update`) counts from the same start."""
     for index, name in _COUNTERS:
-        if x[index]:
-            counters[name] += int(x[index])
+        count = x[index]
+        if count:
+            counters[name] += int(count)
             x[index] = 0.0
+            x[X_AFTER_ACCEL + index] -= count
 
 
-def _flag(filt, code: int) -> None:
-    """The status flags of a kernel's result bits (`kernels.DOWNWEIGHTED`, `kernels.NONFINITE`)."""
-    if code & K.DOWNWEIGHTED:
-        filt.flags |= Status.ACCEL_DOWNWEIGHTED
-    if code & K.NONFINITE:
-        filt.flags |= Status.UPDATE_NONFINITE
+_STATUS_RESULTS = K.DOWNWEIGHTED | K.NONFINITE
+"""The bits of a kernel's result that are `Status` bits (`kernels.DOWNWEIGHTED`, `kernels.NONFINITE`)."""
 
 
 def _record_buffers(filt, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -106,32 +106,30 @@ def integrate_compiled(filt, rows: np.ndarray, extra_s: float, defer: bool) -> b
         filt.record_t.append(rows[:, 0].copy())
         filt.record_R.append(record_R)
         filt.record_P.append(record_P)
-    filt.imu_t_s = float(rows[-1, 0])
-    if code:
-        _flag(filt, code)
+    filt.flags |= code
     return True
 
 
-def integrate_frame_batch_compiled(filt, t, gyro_c, accel_c, t_frame_s: float, defer: bool) -> bool:
+def integrate_frame_batch_compiled(filt, stream, t, gyro_c, accel_c, t_frame_s: float) -> bool:
     """A batch that `process_imu` held unchecked (`t` (n,) s, `gyro_c` (n, 3) rad/s, `accel_c` (n, 3)
-    m/s^2, camera frame), nothing else in the reorder buffer: checked as `ImuStream.add` checks it
-    and integrated to the frame at `t_frame_s`, in one kernel call (`kernels.integrate_frame_batch`).
+    m/s^2, camera frame), nothing else in the reorder buffer `stream` (the filter's `ImuStream`):
+    checked as `ImuStream.add` checks it and integrated to the frame at `t_frame_s`, in one kernel
+    call (`kernels.integrate_frame_batch`); an update falling due at its end is prepared for the frame.
     False, changing nothing, unless every sample is clean (finite, in order, later than the stream's
-    watermark, below the gyro range) and at or before the frame, with no IMU gap."""
-    stream = filt.stream
-    record_R, record_P = _record_buffers(filt, t.shape[0])
+    watermark, below the gyro range) and at or before the frame, with no IMU gap and no
+    accelerometer update waiting. A frame's path: the fewest Python steps around the one call."""
+    recording = filt.config.record_imu_estimates
+    record_R, record_P = _record_buffers(filt, t.shape[0]) if recording else (_NO_RECORD, _NO_RECORD)
     code = K.FRAME_BATCH(filt.x, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s, t_frame_s,
-                         _parameters(filt, defer), record_R, record_P)
+                         _parameters(filt, True), record_R, record_P)
     if code < 0:
         return False
     stream.released_elsewhere(t_frame_s)
-    if record_R.shape[0]:
+    if recording:
         filt.record_t.append(t.copy())
         filt.record_R.append(record_R)
         filt.record_P.append(record_P)
-    filt.imu_t_s = float(t[-1])
-    if code:
-        _flag(filt, code)
+    filt.flags |= code
     return True
 
 
@@ -153,27 +151,59 @@ def integrate_segments_compiled(filt, t, gyro_c, accel_c, ends: np.ndarray):
         filt.record_t.append(np.array(t, float))
         filt.record_R.append(record_R)
         filt.record_P.append(record_P)
-    filt.imu_t_s = float(t[-1])
-    flags = np.where(out_flags & K.DOWNWEIGHTED, int(Status.ACCEL_DOWNWEIGHTED), 0) | np.where(
-        out_flags & K.NONFINITE, int(Status.UPDATE_NONFINITE), 0)
-    return out_R, out_cov, out_b, flags
+    return out_R, out_cov, out_b, out_flags  # the kernels' result bits are `Status` bits
+
+
+def _deferred_views(filt) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Views of the filter's state buffer (cached per filter): the residual (3,) and H (3, 12) in
+    `accel_rows`, the fields, and the state after a deferred accelerometer update alone."""
+    views = filt.__dict__.get("_deferred_views")
+    if views is None:
+        x = filt.x
+        views = filt._deferred_views = (x[X_ACCEL_ROWS:X_ACCEL_ROWS + 3], x[X_ACCEL_ROWS + 4:X_SIZE].reshape(3, 12),
+                                        x[:X_SIZE], x[X_AFTER_ACCEL:X_AFTER_ACCEL + X_SIZE])
+    return views
+
+
+def take_prepared_accel_rows(filt):
+    """`(True, rows)` for an accelerometer measurement prepared when its update fell due at the end of
+    a batch (`kernels.prepare_deferred_update`), taken as it is: `rows` `(residual (3,), R (3, 3), H (3,
+    12))` as `accel_rows_compiled` gives them, or None (near free fall); `(False, None)` when none was
+    prepared (the caller then computes it, `Mekf._accel_rows`). The residual and H are views of the
+    state buffer, valid until the next update falls due."""
+    x = filt.x
+    taken = x[S_DEFERRED_ROWS]
+    if not taken:
+        return False, None
+    x[S_DEFERRED_ROWS] = ROWS_NOT_TAKEN
+    if taken != ROWS_MEASURED:
+        return True, None
+    residual, H, _, _ = _deferred_views(filt)
+    return True, (residual, x[X_ACCEL_ROWS + 3] * I3, H)
 
 
 def accel_rows_compiled(filt):
     """The accelerometer measurement of the period just completed, for a stacked update, compiled in
     the filter's state buffer (an at-rest update applied first): as `Mekf._accel_rows`, `(residual (3,),
-    R (3, 3), H (3, 12))` or None near free fall."""
-    rows = np.empty(40)
-    code = K.ACCEL_ROWS(filt.x, _parameters(filt, False), rows)
-    _flag(filt, code)
+    R (3, 3), H (3, 12))` or None near free fall. The residual and H are views of the buffer, valid
+    until the next update falls due."""
+    x = filt.x
+    code = K.ACCEL_ROWS(x, _parameters(filt, False), filt.views["accel_rows"])
+    filt.flags |= code & _STATUS_RESULTS
     if not code & K.MEASURED:
         return None
-    return rows[0:3], rows[3] * I3, rows[4:40].reshape(3, 12)
+    residual, H, _, _ = _deferred_views(filt)
+    return residual, x[X_ACCEL_ROWS + 3] * I3, H
 
 
 def accel_update_compiled(filt) -> None:
     """The accelerometer (and at-rest) update of the period just completed, compiled, in the filter's
-    state buffer: as `Mekf.accel_update`."""
-    code = K.ACCEL_UPDATE(filt.x, _parameters(filt, False))
-    if code:
-        _flag(filt, code)
+    state buffer: as `Mekf.accel_update`. An update prepared when it fell due at the end of a batch
+    (`kernels.prepare_deferred_update`) is one copy of the state it left."""
+    x = filt.x
+    if x[S_DEFERRED_ROWS]:
+        filt.flags |= int(x[S_DEFERRED_BITS])
+        _, _, fields, after = _deferred_views(filt)
+        np.copyto(fields, after)
+        return
+    filt.flags |= K.ACCEL_UPDATE(x, _parameters(filt, False))

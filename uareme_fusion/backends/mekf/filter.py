@@ -14,24 +14,30 @@ from filterpy.kalman import update as kf_update
 
 from ...config import load_config, preset_names
 from ...errors import InputError
-from ...types import Estimate, Estimates, ImuBatch, Status, VisualRotation
+from ...types import Estimate, Estimates, ImuBatch, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
 from ..visual_noise_share import VisualNoiseShare
+from . import status_bits
 from .accel import AccelPeriod
-from .compiled import KERNEL, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters
+from .compiled import (KERNEL, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters,
+                       integrate_frame_batch_compiled, take_prepared_accel_rows)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
                            visual_model)
 from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
+from .status_bits import status_of
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
-from .state_buffer import (S_PRODUCTS, S_T_STATE, X_B_C, X_P, X_R_WC, X_R_WM, BufferArray, BufferScalar, field_views,
-                           new_state_buffer)
+from .state_buffer import (S_IMU_T, S_PRODUCTS, S_T_STATE, X_B_C, X_P, X_R_WC, X_R_WM, BufferArray, BufferScalar,
+                           field_views, new_state_buffer)
 
 
-_R_WM, _B_C = X_R_WM - X_R_WC, X_B_C - X_R_WC
-"""Where R_wm and b_c start in a copy of `x[X_R_WC:X_P]` (R_wc, R_wm, b_c side by side)."""
+_P_TH = X_P + N_STATE * np.arange(3)[:, None] + np.arange(3)  # where P[TH, TH] lies in `x`
+_ESTIMATE_INDEX = np.stack([np.arange(X_R_WC, X_R_WM).reshape(3, 3), np.arange(X_R_WM, X_B_C).reshape(3, 3), _P_TH,
+                            _P_TH.T])
+"""Where R_wc, R_wm, P[TH, TH] and its transpose lie in the state buffer `x` (4, 3, 3): one `take` copies them."""
+_BIAS_INDEX = np.arange(X_B_C, X_P)
 
 
 def _shape(a) -> tuple:
@@ -85,6 +91,7 @@ class Mekf(Backend):
     P = BufferArray("P")
     last_gyro_c = BufferArray("last_gyro")
     t_state = BufferScalar(S_T_STATE, optional=True)
+    imu_t_s = BufferScalar(S_IMU_T)  # time of the newest integrated IMU sample (camera clock), s; -inf before any
     products_unnormalised = BufferScalar(S_PRODUCTS, int)
 
     def __init__(self, config: MekfConfig | str | None = None):
@@ -116,8 +123,7 @@ class Mekf(Backend):
         self._counters = dict(visual_rejected=0, reinitialised=0, accel_downweighted=0, accel_skipped=0,
                               imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0,
                               rest_updates=0, nonfinite_updates=0)
-        self.flags = Status.OK  # flags gathered since the last estimate
-        self.imu_t_s = -np.inf  # time of the newest integrated IMU sample (camera clock), s
+        self.flags = status_bits.OK  # `Status` bits gathered since the last estimate (`status_bits.py`)
         self.in_imu_gap = False  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
         self.pending: list[ImuBatch] = []
         self.pending_span_s = 0.0
@@ -166,18 +172,23 @@ class Mekf(Backend):
             t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
             n = t.shape[0]
             # A frame's worth, nothing else waiting: held as it is until the frame checks and integrates
-            # it in one compiled call (`GyroMotion.propagate_to`); any other use of the stream adds it
-            # first, as below (a batch this short releases nothing on its own).
+            # it in one compiled call (`propagate_to`); any other use of the stream adds it first, as
+            # below (a batch this short releases nothing on its own).
             if (n and not self.pending and self._stream.held_count == 0
-                    and t[n - 1] - t[0] < self.config.accel_update_period_s + self._stream.reorder_window_s):
+                    and t.item(n - 1) - t.item(0) < self.config.accel_update_period_s + self._stream.reorder_window_s):
                 self._deferred = (t.copy(), gyro.copy(), accel.copy())  # the caller may reuse its arrays
                 return
+            t_s, gyro_rad_s, accel_m_s2 = t, gyro, accel  # checked: `ImuStream.add` takes them as they are
         self._add(t_s, gyro_rad_s, accel_m_s2)
 
     def _add(self, t_s, gyro_rad_s, accel_m_s2) -> None:
         """`process_imu`'s samples into the reorder buffer, released once they span an update period."""
         stream = self._stream
         stream.add(t_s, gyro_rad_s, accel_m_s2)
+        dropped = stream.counts.dropped  # only `add` drops samples: flagged here, not per estimate
+        if dropped > self._dropped_reported:
+            self.flags |= status_bits.IMU_DROPPED
+            self._dropped_reported = dropped
         # Samples wait in the reorder buffer; a frame's `propagate_to` releases them, or, in an
         # IMU-only stream, this does once an accelerometer period's worth is older than the window.
         if stream.held_span_s + self.pending_span_s >= self.config.accel_update_period_s + stream.reorder_window_s:
@@ -188,16 +199,6 @@ class Mekf(Backend):
     def _add_deferred(self) -> None:
         deferred, self._deferred = self._deferred, None
         self._add(*deferred)
-
-    def take_deferred(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """The batch `process_imu` holds unchecked, `(t_s, gyro_rad_s, accel_m_s2)`, or None; the caller
-        integrates it, or hands it back to `add_taken`."""
-        deferred, self._deferred = self._deferred, None
-        return deferred
-
-    def add_taken(self, t_s, gyro_rad_s, accel_m_s2) -> None:
-        """A batch from `take_deferred` that its caller did not integrate: added as `process_imu` adds."""
-        self._add(t_s, gyro_rad_s, accel_m_s2)
 
     @property
     def stream(self) -> ImuStream:
@@ -241,7 +242,7 @@ class Mekf(Backend):
             self.accel_update()
         if visual is None or not fuses_visual:
             if fuses_visual:
-                self.flags |= Status.VISUAL_MISSING
+                self.flags |= status_bits.VISUAL_MISSING
         elif not self.initialised:
             self.motion.start_from_visual(self, t_s, visual)
         elif not self.initialise_manhattan(visual):
@@ -258,7 +259,16 @@ class Mekf(Backend):
 
     def propagate_to(self, t_s: float) -> None:
         """Propagate the state to `t_s` (s, camera clock) with the mode's motion strategy."""
-        if t_s == self.t_state and not self.pending:
+        deferred = self._deferred
+        if deferred is not None:
+            # A frame's batch, held unchecked by `process_imu`: checked and integrated in one compiled call
+            # (an IMU gap or saturation seen, an unclean batch or one past the frame take the reference path).
+            if (not self.in_imu_gap and not self._stream.saturation_seen
+                    and integrate_frame_batch_compiled(self, self._stream, *deferred, t_s)):
+                self._deferred = None
+                return
+            self._add_deferred()
+        elif not self.pending and t_s == self.t_state:
             return  # already there (a frame's prediction, then its update); later stamps are late
         self.motion.propagate_to(self, t_s)
 
@@ -328,7 +338,7 @@ class Mekf(Backend):
             self.counters["accel_skipped"] += 1
             return None
         if downweighted:
-            self.flags |= Status.ACCEL_DOWNWEIGHTED
+            self.flags |= status_bits.ACCEL_DOWNWEIGHTED
             self.counters["accel_downweighted"] += 1
         self.counters["accel_updates"] += 1
         return r, var * I3, H
@@ -338,9 +348,11 @@ class Mekf(Backend):
         the vertical pseudo-measurement and a due accelerometer update into one update."""
         cfg = self.config
         accel_rows = None
-        if self.accel.due:
+        if self.accel.due:  # the period's measurement: prepared when it fell due (compiled), or now
             self.accel.due = False
-            accel_rows = self._accel_rows()
+            prepared, accel_rows = take_prepared_accel_rows(self) if self.compiled else (False, None)
+            if not prepared:
+                accel_rows = self._accel_rows()
         r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
         t_s, t_prev_s = self.t_state, self.t_visual_s
         self.t_visual_s = t_s
@@ -353,7 +365,7 @@ class Mekf(Backend):
             if accel_rows is not None:
                 self._kalman_update(*accel_rows)
             if self.rejections >= cfg.reinit_after_rejections:
-                self.flags |= Status.REINITIALISED
+                self.flags |= status_bits.REINITIALISED
                 self.counters["reinitialised"] += 1
                 self.motion.reinitialise(self, visual)
             return
@@ -374,7 +386,7 @@ class Mekf(Backend):
         self.counters["visual_updates"] += 1
 
     def _count_rejection(self) -> None:
-        self.flags |= Status.VISUAL_REJECTED
+        self.flags |= status_bits.VISUAL_REJECTED
         self.counters["visual_rejected"] += 1
         self.rejections += 1
 
@@ -384,7 +396,7 @@ class Mekf(Backend):
         dx, P = kf_update(ZERO_STATE, self.P, residual, R, H)
         if not (np.isfinite(dx).all() and np.isfinite(P).all()):
             self.counters["nonfinite_updates"] += 1
-            self.flags |= Status.UPDATE_NONFINITE
+            self.flags |= status_bits.UPDATE_NONFINITE
             return
         G = reset_jacobian(dx, self.manhattan_initialised)
         self.R_wc, self.R_wm, self.b_c, self.omega_c = inject(
@@ -423,29 +435,24 @@ class Mekf(Backend):
 
     # ------------------------------------------------------------------ output
     def _estimate(self, t_s: float) -> Estimate:
-        dropped = self.stream.counts.dropped
-        if dropped > self._dropped_reported:
-            self.flags |= Status.IMU_DROPPED
-            self._dropped_reported = dropped
         est = self._make_estimate(t_s, self.flags)
-        self.flags = Status.OK
+        self.flags = status_bits.OK
         return est
 
-    def _make_estimate(self, t_s, flags: Status) -> Estimate:
+    def _make_estimate(self, t_s, bits: int) -> Estimate:
+        """The estimate of the state now, stamped `t_s`, with the `Status` of the flag `bits`."""
         if not self.initialised:
-            return Estimate(t_s, np.eye(3), np.eye(3), flags | Status.NOT_INITIALISED)
-        # R_wc, R_wm and b_c lie side by side in `x`: one copy holds all three. The fewest numpy calls
-        # (a frame's estimate runs between solver calls, where each call costs microseconds; a numba
-        # call, cold, costs more than these few).
-        nominal = self.x[X_R_WC:X_P].copy()
-        R_wc, R_wm, b_c = nominal[:_R_WM].reshape(3, 3), nominal[_R_WM:_B_C].reshape(3, 3), nominal[_B_C:]
-        P_th = self.views["P"][TH, TH]
-        cov = P_th + P_th.T
+            return Estimate(t_s, np.eye(3), np.eye(3), status_of(bits | status_bits.NOT_INITIALISED))
+        # The fewest numpy calls (a frame's estimate runs between solver calls, where each call costs
+        # microseconds, and a numba call more): one gather copies R_wc, R_wm, P[TH, TH] and its transpose.
+        R_wc, R_wm, cov, cov_T = self.x.take(_ESTIMATE_INDEX)
+        cov += cov_T
         cov *= 0.5
-        cov += self.persistent_cov
         if not self.motion.uses_imu:
+            cov += self.persistent_cov
             bias_i = None
         else:
+            b_c = self.x.take(_BIAS_INDEX)
             bias_i = b_c if self.imu_is_camera else self.R_ci.T @ b_c
-        return Estimate(t_s, R_wc, cov, flags, R_wm=R_wm if self.manhattan_initialised else None,
+        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm=R_wm if self.manhattan_initialised else None,
                         gyro_bias_rad_s=bias_i)

@@ -27,31 +27,30 @@ import math
 import numpy as np
 
 from ... import jit
+from . import status_bits
 from .accel import chunk_bounds
 from .matrix3 import exp3_into, inv3, matmul3_into
 from .measurements import gravity_model, zero_rate_model
 from ..imu_stream import rows_if_clean
 from .state import orthonormal, reset_jacobian
-from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED,
-                           S_ACCEL_UPDATES, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE, S_REST_UPDATES,
-                           S_T_STATE, X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S,
-                           X_SIZE)
+from .state_buffer import (ROWS_MEASURED, ROWS_NONE, ROWS_NOT_TAKEN, S_ACC_ELAPSED, S_ACC_TIME,
+                           S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_DEFERRED_BITS,
+                           S_DEFERRED_ROWS, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE,
+                           S_REST_UPDATES, S_T_STATE, X_ACC_SUM, X_ACCEL_ROWS, X_AFTER_ACCEL, X_B_C, X_LAST_GYRO, X_LP,
+                           X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S, X_SIZE)
 
 # The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `accel_rows_in_place` return.
-DOWNWEIGHTED, NONFINITE, MEASURED = 1, 2, 4
-"""An accelerometer update was down-weighted; an update's result was not finite (and dropped);
-`accel_rows_in_place` wrote an accelerometer measurement."""
+DOWNWEIGHTED, NONFINITE = status_bits.ACCEL_DOWNWEIGHTED, status_bits.UPDATE_NONFINITE
+"""An accelerometer update was down-weighted; an update's result was not finite (and dropped): the
+bits of the `Status` flags that say so, so that a result is or-ed into the filter's flags as it is."""
+MEASURED = 1 << 30
+"""`accel_rows_in_place` wrote an accelerometer measurement (no `Status` bit)."""
 
 # Layout of the float64 parameter vector `p`.
 (P_Q_GYRO, P_Q_BIAS, P_Q_RATE, P_TRAPEZOID, P_PERIOD, P_DUE, P_DEFER, P_LP_TAU, P_INV_G, P_GRAVITY,
  P_ACC_NOISE, P_NORM_SCALE, P_INNOV_SCALE, P_FLAG_RATIO, P_REST_GYRO, P_REST_ACCEL, P_REST_MIN_S,
  P_REST_STD, P_MF_INIT, P_MF_YAW_RW, P_MF_TILT_RW, P_ORTHO_EVERY, P_RECORD, P_GAP_LIMIT) = range(24)
 P_SIZE = 24
-
-
-def exp3(phi):
-    """`exp3_into` of a (3,) rotation vector, as a new (3, 3) array."""
-    return exp3_into(phi[0], phi[1], phi[2], np.empty((3, 3)))
 
 
 def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoid, q_gyro, q_bias, q_rate,
@@ -134,33 +133,82 @@ def zero_rate_measurement(rest_sums, rest_n, T, b_c, p):
     return zero_rate_model(rest_sums, rest_n, T, b_c, p[P_Q_GYRO], p[P_REST_GYRO], p[P_REST_ACCEL], p[P_REST_STD])
 
 
+def matmul_into(A, B, out):
+    """`out = A @ B` by scalar loops (small matrices: no BLAS call), summed in index order."""
+    for i in range(A.shape[0]):
+        for j in range(B.shape[1]):
+            acc = 0.0
+            for k in range(A.shape[1]):
+                acc += A[i, k] * B[k, j]
+            out[i, j] = acc
+    return out
+
+
 def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
     """Joseph-form update with isotropic measurement noise `var`, then injection into the nominal
     state and the reset of the error (as `Mekf._kalman_update`). Updates the arrays in place and
-    returns the new (R_wc, R_wm); nothing changes but `s[S_NONFINITE]` when the result is not finite."""
-    Rm = var * np.eye(3)
-    PHt = P @ H.T
-    K = PHt @ inv3(H @ PHt + Rm)
-    dx = K @ residual
-    I_KH = np.eye(12) - K @ H
-    P_new = I_KH @ P @ I_KH.T + K @ Rm @ K.T
-    if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(P_new))):
+    returns the new (R_wc, R_wm); nothing changes but `s[S_NONFINITE]` when the result is not finite.
+    Scalar loops that use the structure (a BLAS call per small product costs more than the product,
+    and more still out of the caches, after a solver call): the Joseph form expanded,
+    `(I - K H) P (I - K H)^T + K (var I) K^T = P - K (P H^T)^T - (P H^T) K^T + K S K^T` with `S` the
+    innovation covariance, and the reset `G P G^T` on the rotation blocks only."""
+    PHt = matmul_into(P, H.T, np.empty((12, 3)))
+    S = matmul_into(H, PHt, np.empty((3, 3)))
+    for i in range(3):
+        S[i, i] += var
+    S_inv = inv3(S)
+    K = np.empty((12, 3))
+    KS = np.empty((12, 3))
+    dx = np.empty(12)
+    for i in range(12):
+        for j in range(3):
+            K[i, j] = PHt[i, 0] * S_inv[0, j] + PHt[i, 1] * S_inv[1, j] + PHt[i, 2] * S_inv[2, j]
+        for j in range(3):
+            KS[i, j] = K[i, 0] * S[0, j] + K[i, 1] * S[1, j] + K[i, 2] * S[2, j]
+        dx[i] = K[i, 0] * residual[0] + K[i, 1] * residual[1] + K[i, 2] * residual[2]
+    P_new = np.empty((12, 12))
+    finite = True
+    for i in range(12):
+        finite &= abs(dx[i]) < np.inf
+        for j in range(12):
+            v = (P[i, j] - (K[i, 0] * PHt[j, 0] + K[i, 1] * PHt[j, 1] + K[i, 2] * PHt[j, 2])
+                 - (PHt[i, 0] * K[j, 0] + PHt[i, 1] * K[j, 1] + PHt[i, 2] * K[j, 2])
+                 + (KS[i, 0] * K[j, 0] + KS[i, 1] * K[j, 1] + KS[i, 2] * K[j, 2]))
+            P_new[i, j] = v
+            finite &= abs(v) < np.inf
+    if not finite:
         s[S_NONFINITE] += 1
         return R_wc, R_wm
-    G = reset_jacobian(dx, p[P_MF_INIT] > 0)
-    if p[P_MF_INIT] > 0:
-        R_wm = R_wm @ exp3(dx[6:9])
-    R_wc = R_wc @ exp3(dx[0:3])
+    with_manhattan = p[P_MF_INIT] > 0
+    G = reset_jacobian(dx, with_manhattan)
+    if with_manhattan:
+        R_wm = matmul3_into(R_wm, exp3_into(dx[6], dx[7], dx[8], np.empty((3, 3))), np.empty((3, 3)))
+    R_wc = matmul3_into(R_wc, exp3_into(dx[0], dx[1], dx[2], np.empty((3, 3))), np.empty((3, 3)))
     s[S_PRODUCTS] += 1
     if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
         R_wc, R_wm = orthonormal(R_wc), orthonormal(R_wm)
         s[S_PRODUCTS] = 0
-    b_c += dx[3:6]
+    for i in range(3):
+        b_c[i] += dx[3 + i]
     if s[S_LP_VALID] > 0:
-        lp[0] += lp_J[0] @ dx[3:6]
-        lp[1] += lp_J[1] @ dx[3:6]
-    P_new = G @ P_new @ G.T
-    P[:, :] = 0.5 * (P_new + P_new.T)
+        for st in range(2):
+            for i in range(3):
+                lp[st, i] += lp_J[st, i, 0] * dx[3] + lp_J[st, i, 1] * dx[4] + lp_J[st, i, 2] * dx[5]
+    n_blocks = 2 if with_manhattan else 1  # G is the identity but on the rotation blocks (offsets 0, 6)
+    GP = P_new.copy()  # G P_new: only the rotation blocks' rows change
+    for o in range(0, 6 * n_blocks, 6):
+        for a in range(3):
+            for j in range(12):
+                GP[o + a, j] = (G[o + a, o] * P_new[o, j] + G[o + a, o + 1] * P_new[o + 1, j]
+                                + G[o + a, o + 2] * P_new[o + 2, j])
+    GPG = GP.copy()  # (G P_new) G^T: only their columns change
+    for o in range(0, 6 * n_blocks, 6):
+        for i in range(12):
+            for b in range(3):
+                GPG[i, o + b] = GP[i, o] * G[o + b, o] + GP[i, o + 1] * G[o + b, o + 1] + GP[i, o + 2] * G[o + b, o + 2]
+    for i in range(12):
+        for j in range(12):
+            P[i, j] = 0.5 * (GPG[i, j] + GPG[j, i])
     return R_wc, R_wm
 
 
@@ -225,7 +273,7 @@ def state_views(x):
     last_gyro, acc_sum, lp, lp_J, rest_sums)."""
     return (x[X_S:X_R_WC], x[X_R_WC:X_R_WM].reshape((3, 3)), x[X_R_WM:X_B_C].reshape((3, 3)), x[X_B_C:X_P],
             x[X_P:X_LAST_GYRO].reshape((12, 12)), x[X_LAST_GYRO:X_ACC_SUM], x[X_ACC_SUM:X_LP],
-            x[X_LP:X_LP_J].reshape((2, 3)), x[X_LP_J:X_REST_SUMS].reshape((2, 3, 3)), x[X_REST_SUMS:X_SIZE])
+            x[X_LP:X_LP_J].reshape((2, 3)), x[X_LP_J:X_REST_SUMS].reshape((2, 3, 3)), x[X_REST_SUMS:X_ACCEL_ROWS])
 
 
 def integrate_batch(x, rows, extra_s, p, record_R, record_P):
@@ -237,7 +285,7 @@ def integrate_batch(x, rows, extra_s, p, record_R, record_P):
     With `P_RECORD`, `record_R` (n, 3, 3) receives R_wc after each sample and `record_P` the attitude
     covariance predicted to the end of its chunk. Returns the `DOWNWEIGHTED` | `NONFINITE` bits of
     what happened, or -1, changing nothing, when a step (from `s[S_T_STATE]` on) exceeds
-    `P_GAP_LIMIT` (an IMU gap)."""
+    `P_GAP_LIMIT` (an IMU gap). The batch's last stamp goes to `s[S_IMU_T]`."""
     s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums = state_views(x)
     t, gyro, accel = rows[:, 0], rows[:, 1:4], rows[:, 4:7]
     if has_gap(t, s[S_T_STATE], p[P_GAP_LIMIT]):
@@ -246,16 +294,49 @@ def integrate_batch(x, rows, extra_s, p, record_R, record_P):
     bounds = chunk_bounds(t, s[S_T_STATE], s[S_ACC_ELAPSED], p[P_PERIOD])
     code = integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
                             extra_s, p, record_R, record_P)
-    return code + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
+    code |= NONFINITE if s[S_NONFINITE] > nonfinite_before else 0
+    s[S_IMU_T] = t[t.shape[0] - 1]
+    if s[S_ACCEL_DUE] > 0 and s[S_DEFERRED_ROWS] == ROWS_NOT_TAKEN:  # deferred to the frame at the batch's end
+        code |= prepare_deferred_update(x, p)
+    return code
+
+
+def prepare_deferred_update(x, p):
+    """The accelerometer update deferred to a frame (`P_DEFER`), prepared when it falls due so that
+    the frame, after its solver call, makes no compiled call: the period's measurement is taken
+    (`accel_rows_in_place`: an at-rest update applied, the period consumed) into `x[X_ACCEL_ROWS:]`,
+    for the frame's stacked visual update, and the state after that measurement's update alone goes
+    to `x[X_AFTER_ACCEL:]`, for a frame without one, with the `NONFINITE` bit of that update in
+    `s[S_DEFERRED_BITS]`. `s[S_DEFERRED_ROWS]` says which (`state_buffer.ROWS_*`); `compiled.py`
+    takes them. Returns the `DOWNWEIGHTED` | `NONFINITE` bits of taking the measurement."""
+    code = accel_rows_in_place(x, p, x[X_ACCEL_ROWS:X_SIZE])
+    s = x[X_S:X_R_WC]
+    s[S_DEFERRED_ROWS] = ROWS_MEASURED if code & MEASURED else ROWS_NONE
+    s[S_DEFERRED_BITS] = 0
+    after = x[X_AFTER_ACCEL:X_AFTER_ACCEL + X_SIZE]
+    after[:] = x[0:X_SIZE]
+    after[S_ACCEL_DUE] = 0
+    after[S_DEFERRED_ROWS] = ROWS_NOT_TAKEN
+    if code & MEASURED:
+        s2, R_wc, R_wm, b_c, P, _, _, lp, lp_J, _ = state_views(after)
+        rows = x[X_ACCEL_ROWS:X_SIZE]
+        R_wc_new, R_wm_new = kalman_update(s2, R_wc.copy(), R_wm.copy(), b_c, P, lp, lp_J, rows[0:3], rows[3],
+                                           rows[4:40].reshape((3, 12)), p)
+        R_wc[:, :] = R_wc_new
+        R_wm[:, :] = R_wm_new
+        s[S_DEFERRED_BITS] = NONFINITE if s2[S_NONFINITE] > s[S_NONFINITE] else 0
+    return code & (DOWNWEIGHTED | NONFINITE)
 
 
 def integrate_frame_batch(x, t, gyro, accel, watermark_s, gyro_range_rad_s, t_frame_s, p, record_R, record_P):
     """`integrate_batch` for a batch not yet checked (`t` (n,) s, `gyro` (n, 3) rad/s, `accel` (n, 3)
     m/s^2, camera frame), propagated to a frame at `t_frame_s` s: -2, changing nothing, unless all its
     samples are clean (`imu_stream.rows_if_clean` against `watermark_s` and `gyro_range_rad_s`) and at
-    or before the frame, with the frame no further than `P_GAP_LIMIT` past the last one."""
+    or before the frame, with the frame no further than `P_GAP_LIMIT` past the last one, and no
+    accelerometer update waits (`s[S_ACCEL_DUE]`)."""
     n = t.shape[0]
-    if n == 0 or not t[n - 1] <= t_frame_s or not t_frame_s - t[n - 1] <= p[P_GAP_LIMIT]:
+    if (n == 0 or not t[n - 1] <= t_frame_s or not t_frame_s - t[n - 1] <= p[P_GAP_LIMIT]
+            or x[X_S + S_ACCEL_DUE] > 0):
         return -2
     rows = np.empty((n, 8))
     if not rows_if_clean(t, gyro, accel, watermark_s, gyro_range_rad_s, rows):
@@ -388,6 +469,7 @@ def integrate_segments(x, t, gyro, accel, ends, p, record_R, record_P, out_R, ou
         out_b[i] = b_c
         out_flags[i] = downweighted + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
         start = end
+    s[S_IMU_T] = t[t.shape[0] - 1]
     return 0
 
 
@@ -434,16 +516,17 @@ FRAME_BATCH = None
 """`integrate_frame_batch` compiled, or None."""
 if jit.available():
     try:
-        _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into, exp3,
+        _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into,
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
-                 zero_rate_measurement, kalman_update, accel_rows, accel_and_rest_update, has_gap, chunk_bounds,
-                 integrate_chunks, state_views, rows_if_clean, integrate_batch)
+                 zero_rate_measurement, matmul_into, kalman_update, accel_rows, accel_and_rest_update, has_gap,
+                 chunk_bounds, integrate_chunks, state_views, rows_if_clean, accel_rows_in_place,
+                 prepare_deferred_update, integrate_batch)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = integrate_batch
-        FRAME_BATCH = jit.compiled(integrate_frame_batch, cache=True, error_model="numpy")
+        FRAME_BATCH = jit.compiled(integrate_frame_batch, cache=True, error_model="numpy", nogil=False)  # per frame
         ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
-        ACCEL_ROWS = jit.compiled(accel_rows_in_place, cache=True, error_model="numpy")
+        ACCEL_ROWS = accel_rows_in_place
         SEGMENTS = jit.compiled(integrate_segments, cache=True, error_model="numpy")
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)

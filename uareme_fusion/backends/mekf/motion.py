@@ -16,21 +16,16 @@ from filterpy.kalman import predict as kf_predict
 from scipy.spatial.transform import Rotation
 
 from ...rotations import R_CM_UPRIGHT, WORLD_UP
-from ...types import IMU_COLUMNS as COLUMNS, ImuBatch, Status, VisualRotation, visual_R_wc_covariance
+from ...types import IMU_COLUMNS as COLUMNS, ImuBatch, VisualRotation, visual_R_wc_covariance
+from . import status_bits
 from .accel import PERIOD_TOLERANCE_S, chunk_bounds, tilt_direction
-from .compiled import compiled_path_applies, integrate_compiled, integrate_frame_batch_compiled
+from .compiled import compiled_path_applies, integrate_compiled
 from .config import MekfMode
 from .propagation import constant_rate_model, gyro_chunk, gyro_process_noise, gyro_rates, gyro_transition
 from .propagation import manhattan_walk_noise
 from .state import BG, I3, MF, N_STATE, RATE, TH, ZERO_STATE, orthonormal
 
 _NO_ROWS = np.zeros((0, COLUMNS))
-
-
-def _nothing_waits(filt) -> bool:
-    """No IMU gap, no saturated sample seen and no accelerometer update due: the one-call compiled
-    paths of `propagate_to` may run (otherwise the reference path handles what waits)."""
-    return not filt.in_imu_gap and not filt.stream.saturation_seen and not filt.accel.due
 
 
 class ConstantRateMotion:
@@ -88,11 +83,6 @@ class GyroMotion:
 
     def propagate_to(self, filt, t_s: float) -> None:
         """Integrate IMU samples up to `t_s` (camera clock, s), then hold the last rate."""
-        deferred = filt.take_deferred()
-        if deferred is not None:  # a frame's batch, held unchecked: checked and integrated in one call
-            if _nothing_waits(filt) and integrate_frame_batch_compiled(filt, *deferred, t_s, self.fuses_visual):
-                return
-            filt.add_taken(*deferred)  # not clean, not all before the frame, or a gap: as any batch
         rows = filt.stream.release_rows_until(t_s)
         # The common case of a frame after its samples, in one kernel call: what `integrate_pending`
         # decides (the same test, the same call) for one batch when nothing else waits, without
@@ -108,7 +98,7 @@ class GyroMotion:
 
     def start_from_visual(self, filt, t_s: float, visual: VisualRotation) -> None:
         """No attitude before the accelerometer gives gravity: the frame waits."""
-        filt.flags |= Status.VISUAL_MISSING
+        filt.flags |= status_bits.VISUAL_MISSING
 
     def reinitialise(self, filt, visual: VisualRotation) -> None:
         """A new scene alignment: the Manhattan frame re-initialised nearest the old one."""
@@ -201,11 +191,11 @@ class GyroMotion:
             unknown[0] |= resumed
             unknown_var = float(np.sum((cfg.unknown_rate_std_rad_s * dt[unknown]) ** 2))
             if gap.any():
-                filt.flags |= Status.IMU_GAP
+                filt.flags |= status_bits.IMU_GAP
                 filt.counters["imu_gaps"] += int(gap[:n].sum()) + int(stale and not filt.in_imu_gap)
                 filt.in_imu_gap |= bool(stale)
             if saturated.any():
-                filt.flags |= Status.GYRO_SATURATED
+                filt.flags |= status_bits.GYRO_SATURATED
             dt[gap] = 0.0
             filt.accel.lose_lowpass()
         C, A_bias = gyro_chunk(rate_c, dt)

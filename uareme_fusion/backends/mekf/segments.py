@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...types import Estimates, Status
+from ...types import Estimates
 from ..base import Backend
 from ..imu_stream import check_imu_arrays
+from . import status_bits
 from .compiled import integrate_segments_compiled
 
 
@@ -78,10 +79,10 @@ def _compiled_segments(filt, t, gyro_i, accel_i, ends, start: int) -> Estimates 
     out = integrate_segments_compiled(filt, t, gyro_c, accel_c, ends - start)
     if out is None:
         return None
-    carried, filt.flags = filt.flags, Status.OK  # flags gathered before: the first estimate's
+    carried, filt.flags = filt.flags, status_bits.OK  # flags gathered before: the first estimate's
     R_wc, cov, b_c, status = out
-    status[0] |= int(carried)
+    status[0] |= carried
     if filt.motion.fuses_visual:  # a frame without visual rotation, as `process_frame` flags it
-        status |= int(Status.VISUAL_MISSING)
+        status |= status_bits.VISUAL_MISSING
     filt.stream.watermark_s = float(t[-1])
     return Estimates(t[ends - start - 1].copy(), R_wc, cov, status, None, b_c @ R_ci)
