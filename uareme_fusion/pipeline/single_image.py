@@ -155,9 +155,10 @@ class ImageAnalyser:
         for seen, visual, focal in alone:
             seen = dataclasses.replace(seen, rgb=self._read(seen.path)[0])
             t0 = time.perf_counter()
-            if pooled is not None:
-                visual = solve_with_pooled_K(self.solver, seen.normal_map, seen.segments, pooled)
+            if pooled is not None:  # the frames' floor stays: systematic errors escape the pooled K's std
                 focal = pooled.focal_estimate()
+                visual = unknown_centre_floor(solve_with_pooled_K(self.solver, seen.normal_map, seen.segments, pooled),
+                                              focal, self.focal_config, self.solver)
             yield self._analysis(seen, visual, focal, t0)
 
     def _read(self, path: Path) -> tuple[np.ndarray, float]:

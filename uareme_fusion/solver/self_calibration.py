@@ -62,6 +62,11 @@ class SelfCalibrationConfig:
     min_segments: int = 6
     """Frames with fewer segments take no part."""
     principal_point_prior_fraction: float = 0.02
+    max_principal_point_std_fraction: float = 0.01
+    """The principal point is taken from the fit only when its std (each axis) is below this fraction of
+    the width, half the prior's; otherwise it is held at the centre and f alone is pooled. ICSL at every
+    second frame: icsl_corridor_more (70 frames) std (3.2, 2.3) px; icsl_corridor (40 frames, looking along
+    the corridor) std (10.9, 5.4) px with the principal point 44 px left of the centre."""
     """s_c / width of the principal point's prior (as `FocalConfig.principal_point_std_fraction`)."""
     max_relative_focal_std: float = 0.1
     """Above this std(f)/f the frames could not tell f: nothing is pooled."""
@@ -97,6 +102,8 @@ class PooledIntrinsics:
     """(n_frames, 3, 3) the frames' rotations at the fit (the frames that took part, in order)."""
     used: np.ndarray
     """Indices of those frames among the ones given."""
+    principal_point_estimated: bool = True
+    """False: the frames could not tell it, it is the image centre (f alone was pooled)."""
 
     @property
     def f_px(self) -> float:
@@ -109,42 +116,62 @@ class PooledIntrinsics:
 
     @property
     def origin(self) -> str:
-        return f"estimated from {self.n_frames} frames (focal length and principal point pooled)"
+        what = ("focal length and principal point pooled" if self.principal_point_estimated
+                else "focal length pooled; principal point at the image centre")
+        return f"estimated from {self.n_frames} frames ({what})"
 
     def focal_estimate(self) -> FocalEstimate:
         """As the `FocalEstimate` every frame reports (source "estimated", `origin` says pooled)."""
         std = self.std_px
         return FocalEstimate(self.K, "estimated", std_px=float(std[0]), width=self.width, origin=self.origin,
-                             principal_point_std_px=(float(std[1]), float(std[2])))
+                             principal_point_std_px=(float(std[1]), float(std[2])) if self.principal_point_estimated
+                             else None)
 
     def as_dict(self) -> dict:
         return {"K": self.K.tolist(), "f_px": self.f_px, "principal_point_px": self.K[:2, 2].tolist(),
                 "std_px": {"f": float(self.std_px[0]), "cx": float(self.std_px[1]), "cy": float(self.std_px[2])},
-                "frames": self.n_frames, "origin": self.origin}
+                "frames": self.n_frames, "principal_point_estimated": self.principal_point_estimated,
+                "origin": self.origin}
 
 
 def pool_intrinsics(frames: list[FrameEvidence], f_init_px: float,
                     config: SelfCalibrationConfig | None = None) -> PooledIntrinsics | None:
-    """The K shared by `frames` (module docstring), starting from `f_init_px` and the image centre;
-    None when fewer than `min_frames` frames have segments or f stays undetermined."""
+    """The K shared by `frames` (module docstring), starting from `f_init_px` and the image centre; the
+    principal point stays at the centre (f alone is pooled) unless the frames determine it to
+    `max_principal_point_std_fraction` of the width. None when fewer than `min_frames` frames have
+    segments or f stays undetermined."""
     cfg = config or SelfCalibrationConfig()
     used = [i for i, fr in enumerate(frames) if len(fr.segments) >= cfg.min_segments]
     if len(used) < cfg.min_frames:
         return None
-    problem = _Problem([frames[i] for i in used], cfg)
-    x = problem.solve(problem.start(f_init_px))
-    if x is None or not problem.inside(x):
+    chosen = [frames[i] for i in used]
+    fit = _fit(_Problem(chosen, cfg), f_init_px, cfg)
+    if fit is not None and np.sqrt(np.diag(fit[1])[1:]).max() > cfg.max_principal_point_std_fraction * fit[0].width:
+        fit = _fit(_Problem(chosen, cfg, centre_fixed=True), f_init_px, cfg)
+    if fit is None:
         return None
-    cov = np.maximum(problem.gauss_newton_cov(x), 0.0)
-    cov = np.maximum(cov, _jackknife_cov(problem, x, cfg)) if len(used) >= 2 * cfg.jackknife_groups else cov
+    problem, cov, x = fit
     f = math.exp(x[0])
     J = np.diag([f, 1.0, 1.0])  # d(f, cx, cy) / d(log f, cx, cy)
     cov_px2 = J @ cov @ J
     if not math.sqrt(cov_px2[0, 0]) / f <= cfg.max_relative_focal_std:
         return None
-    seg = frames[used[0]].segments
-    return PooledIntrinsics(pinhole(f, f, x[1], x[2]), cov_px2, len(used), seg.width, seg.height,
-                            problem.rotations(x), np.array(used))
+    return PooledIntrinsics(pinhole(f, f, x[1], x[2]), cov_px2, len(used), problem.width, problem.height,
+                            problem.rotations(x), np.array(used), principal_point_estimated=not problem.centre_fixed)
+
+
+def _fit(problem: "_Problem", f_init_px: float, cfg: SelfCalibrationConfig):
+    """(problem, covariance of theta, x) of one fit, or None when it fails. The covariance is the
+    jackknife's (when there are frames enough) with its variances raised to the Gauss-Newton ones."""
+    x = problem.solve(problem.start(f_init_px))
+    if x is None:
+        return None
+    gauss_newton = problem.gauss_newton_cov()
+    cov = _jackknife_cov(problem, x, cfg) if problem.n_frames >= 2 * cfg.jackknife_groups else gauss_newton
+    cov = cov + np.diag(np.maximum(np.diag(gauss_newton) - np.diag(cov), 0.0))
+    if problem.centre_fixed:
+        cov[1:, :] = cov[:, 1:] = 0.0
+    return problem, cov, x
 
 
 def solve_with_pooled_K(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments | None,
@@ -188,11 +215,15 @@ def _jackknife_cov(problem: "_Problem", x: np.ndarray, cfg: SelfCalibrationConfi
     return (n - 1) / n * d.T @ d
 
 
+_FIXED = 1e-6
+"""The principal point's prior std, as a fraction of its usual one, when it is held at the centre."""
+
+
 class _Problem:
     """The stacked residuals of the module docstring over a list of frames."""
 
-    def __init__(self, frames: list[FrameEvidence], cfg: SelfCalibrationConfig):
-        self.frames, self.cfg = frames, cfg
+    def __init__(self, frames: list[FrameEvidence], cfg: SelfCalibrationConfig, centre_fixed: bool = False):
+        self.frames, self.cfg, self.centre_fixed = frames, cfg, centre_fixed
         self.n_frames = len(frames)
         seg = frames[0].segments
         self.width, self.height = seg.width, seg.height
@@ -208,7 +239,7 @@ class _Problem:
                                    for fr, R, ok in zip(frames, self.R0, self.has_normals)])
         self.L_normals = np.array([_information_root(fr.normals_cov) if ok else np.zeros((3, 3))
                                    for fr, ok in zip(frames, self.has_normals)])
-        self.prior_std_px = cfg.principal_point_prior_fraction * self.width
+        self.prior_std_px = cfg.principal_point_prior_fraction * self.width * (_FIXED if centre_fixed else 1.0)
         lo, hi = (math.log(focal_from_hfov(self.width, a)) for a in cfg.hfov_range_deg[::-1])
         self.log_f_range = (lo, hi)
 
@@ -219,7 +250,7 @@ class _Problem:
 
     def subset(self, keep: np.ndarray) -> "_Problem":
         """The problem over the frames `keep`, starting from their rotations as now."""
-        return _Problem([dataclasses.replace(self.frames[i], R_cm=self.R0[i]) for i in keep], self.cfg)
+        return _Problem([dataclasses.replace(self.frames[i], R_cm=self.R0[i]) for i in keep], self.cfg, self.centre_fixed)
 
     def start(self, f_px: float) -> np.ndarray:
         log_f = np.clip(math.log(f_px), *self.log_f_range)
@@ -344,7 +375,7 @@ class _Problem:
         out[1, :n_seg] = 1.0 / (1.0 + zs / a)
         return out
 
-    def gauss_newton_cov(self, x: np.ndarray) -> np.ndarray:
+    def gauss_newton_cov(self) -> np.ndarray:
         """The (3, 3) block of theta in (J^T W J)^-1 at the last step (W the robust weights)."""
         return np.linalg.pinv(self._information)[:3, :3]
 
