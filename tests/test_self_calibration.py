@@ -119,3 +119,19 @@ def test_icsl_frames_pool_one_K(shared_data):
     assert focal.origin.startswith(f"estimated from {len(paths)} frames")
     assert 480.0 < focal.f_px < 680.0 and np.isfinite(focal.std_px)
     assert np.linalg.norm(focal.K[:2, 2] - [319.5, 239.5]) < 40.0
+
+
+def test_a_stream_without_intrinsics_runs_on_the_K_pooled_over_its_first_frames(tmp_path):
+    from uareme_fusion.pipeline import RunConfig
+    from uareme_fusion.pipeline.cues import FOCAL_ATTEMPTS
+    from uareme_fusion.pipeline.session import run_to_folder
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    _drawn_folder(frames, FOCAL_ATTEMPTS + 2, 7)
+    summary = run_to_folder(frames, tmp_path / "out", RunConfig(backend="single", cues="lines"))
+    intrinsics = summary["intrinsics"]
+    assert intrinsics["intrinsics_origin"].startswith(f"estimated from {FOCAL_ATTEMPTS} frames")
+    assert abs(intrinsics["f_px"] - 520.0) < 0.03 * 520.0
+    assert intrinsics["principal_point_std_px"] is not None  # determined, near the true one (19 px off-centre)
+    assert np.linalg.norm(np.array(intrinsics["K"])[:2, 2] - K_TRUE[:2, 2]) < 4.0
