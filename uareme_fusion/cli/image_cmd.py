@@ -1,5 +1,6 @@
-"""`uareme-fusion image IMAGE... [--json] [--out PNG|DIR] [--force]`: images in; rotation, covariance, up,
-focal length, horizon and an overlay out (the model is loaded once).
+"""`uareme-fusion image IMAGE... [--json] [--out PNG|DIR] [--force] [--same-camera]`: images in; rotation,
+covariance, up, focal length, horizon and an overlay out (the model is loaded once). `--same-camera`:
+one camera's images, K pooled over them (`ImageAnalyser.analyse_same_camera`).
 
 Several images write `<stem>.png` into the --out folder, named as `normals` names its outputs
 (`a.png` and `a.jpg` become `a_png.png` and `a_jpg.png`); a non-empty folder, or an existing overlay

@@ -253,7 +253,8 @@ class _Problem:
 
     def subset(self, keep: np.ndarray) -> "_Problem":
         """The problem over the frames `keep`, starting from their rotations as now."""
-        return _Problem([dataclasses.replace(self.frames[i], R_cm=self.R0[i]) for i in keep], self.cfg, self.centre_fixed)
+        frames = [dataclasses.replace(self.frames[i], R_cm=self.R0[i]) for i in keep]
+        return _Problem(frames, self.cfg, self.centre_fixed)
 
     def start(self, f_px: float) -> np.ndarray:
         log_f = np.clip(math.log(f_px), *self.log_f_range)
