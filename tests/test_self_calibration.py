@@ -135,3 +135,18 @@ def test_a_stream_without_intrinsics_runs_on_the_K_pooled_over_its_first_frames(
     assert abs(intrinsics["f_px"] - 520.0) < 0.03 * 520.0
     assert intrinsics["principal_point_std_px"] is not None  # determined, near the true one (19 px off-centre)
     assert np.linalg.norm(np.array(intrinsics["K"])[:2, 2] - K_TRUE[:2, 2]) < 4.0
+
+
+def test_exact_normals_hold_the_rotations_and_pin_an_off_centre_principal_point():
+    from uareme_fusion.solver.self_calibration import SelfCalibrationConfig
+
+    rng = np.random.default_rng(8)
+    frames = []
+    for R in _views(10, 9):  # few frames: the segments alone leave the principal point loose
+        segments = manhattan_segments(R, K_TRUE, W, H, per_axis=(8, 8, 8), noise_px=1.0, rng=rng)
+        frames.append(FrameEvidence(segments, R @ exp_so3(rng.normal(scale=0.03, size=3)), R, np.eye(3) * 1e-6))
+    config = SelfCalibrationConfig(with_normals=True, max_principal_point_std_fraction=1.0)
+    alone = pool_intrinsics(frames, 470.0, SelfCalibrationConfig(max_principal_point_std_fraction=1.0))
+    held = pool_intrinsics(frames, 470.0, config)
+    assert np.linalg.norm(held.K[:2, 2] - K_TRUE[:2, 2]) < 2.0
+    assert np.all(held.std_px[1:] < 0.5 * alone.std_px[1:])
