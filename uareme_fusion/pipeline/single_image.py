@@ -189,7 +189,8 @@ class ImageAnalyser:
             if given_K is not None or segments is None or not len(segments):
                 K = given_K if given_K is not None else assumed_K(h, w, self.focal_config.assumed_fov_deg)
                 visual = solve_given_K(self.solver, normal_map, segments, K)
-                focal = FocalEstimate(K, "given" if given_K is not None else "assumed", width=w)
+                focal = (FocalEstimate(K, "given", width=w, origin=self.camera.origin) if given_K is not None
+                         else FocalEstimate(K, "assumed", width=w))
                 if given_K is None:
                     visual = unknown_centre_floor(visual, focal, self.focal_config, self.solver)
                 return visual, focal
