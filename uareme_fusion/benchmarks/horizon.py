@@ -137,6 +137,38 @@ def icsl_scores(folders: list[Path], analyser, stride: int = 1) -> dict:
             "hfov_error_percent": 100.0 * abs(np.median(est) - true_hfov) / true_hfov if est else float("nan")}
 
 
+def pooled_scores(folders: list[Path], analyser, stride: int = 1, reference=icsl_depth_reference,
+                  fx_true: float = ICSL_FX, centre_true: tuple[float, float] | None = None) -> dict:
+    """The frames of each folder (one camera, no intrinsics) through `analyser.analyse_same_camera`: K pooled
+    over the folder, each frame solved again with it. Against `reference(path)` (a rotation R_cm, or None
+    to score K only): angle and NEES as `icsl_scores`; the pooled K's HFOV error against `fx_true` and
+    its principal point's distance from `centre_true` (when known)."""
+    angles, nees, sequences = [], [], []
+    for folder in folders:
+        paths = sorted((folder / "rgb").glob("*.png"), key=lambda p: (len(p.stem), p.stem))[::stride]
+        for result in analyser.analyse_same_camera(paths):
+            if reference is not None:
+                a, n = rotation_nees(result.visual.R_cm, result.visual.cov, reference(result.path).R_cm)
+                angles.append(a)
+                nees.append(n)
+        focal = result.focal
+        w = result.rgb.shape[1]
+        true_hfov = math.degrees(2 * math.atan2(w / 2, fx_true))
+        pp = focal.K[:2, 2]
+        sequences.append({"folder": folder.name, "frames": len(paths), "origin": focal.origin or focal.source,
+                          "f_px": focal.f_px, "f_std_px": focal.std_px, "principal_point_px": pp.tolist(),
+                          "principal_point_std_px": focal.principal_point_std_px,
+                          "principal_point_error_px": None if centre_true is None
+                          else float(np.linalg.norm(pp - np.asarray(centre_true))),
+                          "hfov_error_percent": 100.0 * abs(focal.hfov_deg - true_hfov) / true_hfov})
+    out = {"sequences": sequences, "frames": sum(s["frames"] for s in sequences),
+           "hfov_error_percent": float(np.mean([s["hfov_error_percent"] for s in sequences]))}
+    if angles:
+        out.update({"mean_angle_deg": float(np.mean(angles)), "median_angle_deg": float(np.median(angles)),
+                    "nees_mean": float(np.mean(nees))})
+    return out
+
+
 def icl_scores(folder: Path, cues: str) -> dict:
     """`eval` of the RGB-only single-frame backend on ICL-NUIM kt3 (learned normals), and the FOV
     estimated from the first frames without the dataset's intrinsics."""
@@ -222,6 +254,9 @@ def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, i
     icsl = icsl_scores(icsl_folders, analyser, icsl_stride)
     icsl_given = icsl_scores(icsl_folders, ImageAnalyser(cues=cues, camera=CameraModel(
         ICSL_CORRIDOR_K, np.zeros(0), origin="the dataset's published intrinsics")), icsl_stride)
+    icsl_pooled = pooled_scores(icsl_folders, analyser, icsl_stride)
+    icl_pooled = pooled_scores([data / "icl_nuim_office_kt3"], analyser, icsl_stride, reference=None, fx_true=ICL_FX,
+                               centre_true=(319.5, 239.5))
     icl = icl_scores(data / "icl_nuim_office_kt3", cues)
     icsl_rgb = sorted((data / "icsl_corridor_more" / "rgb").glob("*.png"))
     sequences = {"ICL kt3": rgb_sequence(data / "icl_nuim_office_kt3", cues),
@@ -236,6 +271,8 @@ def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, i
         table.add_row(f"ICSL RGB-only NEES mean, {how}", f"{scores['nees_mean']:.2f}", "<= 6", "")
     table.add_row("ICSL HFOV error", f"{icsl['hfov_error_percent']:.1f} % ({icsl['median_hfov_deg']:.1f} deg)",
                   "<= 5 %", f"true {icsl['true_hfov_deg']:.1f} deg")
+    _pooled_rows(table, "ICSL", icsl_pooled, f"per image {icsl['mean_angle_deg']:.2f} deg")
+    _pooled_rows(table, "ICL kt3", icl_pooled, "")
     table.add_row("ICL kt3 RGB-only ARE mean", f"{icl['are_mean_deg']:.2f} deg", "<= 1.5 deg", "paper 2.72 deg")
     table.add_row("ICL kt3 RGB-only NEES mean", f"{icl['nees_mean']:.2f}", "1.5 .. 6", "")
     table.add_row("ICL kt3 HFOV error", f"{icl['hfov_error_percent']:.1f} % ({icl['median_hfov_deg']:.1f} deg)",
@@ -251,7 +288,25 @@ def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, i
                           "" if name == "single" else f"ARE <= single ({single:.2f})",
                           "" if name == "single" else f"{row['are_mean_deg'] - single:+.2f} deg vs single")
     console.print(table)
-    return {"ecd": ecd, "icsl": icsl, "icsl_given_K": icsl_given, "icl_kt3": icl, "backends_rgb_only": backends}
+    return {"ecd": ecd, "icsl": icsl, "icsl_given_K": icsl_given, "icsl_pooled_K": icsl_pooled, "icl_kt3": icl,
+            "icl_kt3_pooled_K": icl_pooled, "backends_rgb_only": backends}
+
+
+def _pooled_rows(table: Table, name: str, scores: dict, baseline: str) -> None:
+    """The rows of one `pooled_scores`: the rotations (when scored) and each sequence's pooled K."""
+    if "mean_angle_deg" in scores:
+        table.add_row(f"{name} RGB vs depth rotation, no intrinsics, K pooled over each sequence, mean "
+                      f"({scores['frames']} frames)", f"{scores['mean_angle_deg']:.2f} deg", "<= 2 deg",
+                      f"median {scores['median_angle_deg']:.2f} deg; {baseline}")
+        table.add_row(f"{name} RGB-only NEES mean, K pooled", f"{scores['nees_mean']:.2f}", "<= 6", "")
+    for seq in scores["sequences"]:
+        std = seq["principal_point_std_px"]
+        pp = (f"c ({seq['principal_point_px'][0]:.1f}, {seq['principal_point_px'][1]:.1f})"
+              + (f" +- ({std[0]:.1f}, {std[1]:.1f})" if std else "") + " px")
+        error = "" if seq["principal_point_error_px"] is None else f", {seq['principal_point_error_px']:.1f} px off"
+        table.add_row(f"{name} {seq['folder']}: HFOV error of the pooled K",
+                      f"{seq['hfov_error_percent']:.1f} % (f {seq['f_px']:.1f} +- {seq['f_std_px']:.1f} px)", "<= 5 %",
+                      f"{pp}{error}; {seq['origin']}")
 
 
 def _table(title: str) -> Table:

@@ -1,5 +1,6 @@
-"""`uareme-fusion image IMAGE... [--json] [--out PNG|DIR] [--force]`: images in; rotation, covariance, up,
-focal length, horizon and an overlay out (the model is loaded once).
+"""`uareme-fusion image IMAGE... [--json] [--out PNG|DIR] [--force] [--same-camera]`: images in; rotation,
+covariance, up, focal length, horizon and an overlay out (the model is loaded once). `--same-camera`:
+one camera's images, K pooled over them (`ImageAnalyser.analyse_same_camera`).
 
 Several images write `<stem>.png` into the --out folder, named as `normals` names its outputs
 (`a.png` and `a.jpg` become `a_png.png` and `a_jpg.png`); a non-empty folder, or an existing overlay
@@ -35,6 +36,9 @@ def image_command(
     fov_deg: float = typer.Option(60.0, "--fov-deg",
                                   help="Horizontal field of view assumed when the scene cannot tell the focal length."),
     intrinsics: Optional[str] = _o["intrinsics"],
+    same_camera: bool = typer.Option(False, "--same-camera", help="The images come from one camera: without "
+                                     "--intrinsics its focal length and principal point are pooled over all of "
+                                     "them, then each image is solved again with that K (two passes)."),
     force: bool = typer.Option(False, "--force", help="Write into a non-empty --out folder, or replace an "
                                "existing --out image (overlays of the same name are replaced)."),
 ) -> None:
@@ -58,8 +62,8 @@ def image_command(
                 raise InputError(f"--out {out} exists; pass --force to replace it")
             targets = [out]
     analyser = ImageAnalyser(normals, cues, camera=camera, assumed_fov_deg=fov_deg)
-    for path, target in zip(paths, targets):
-        result = analyser.analyse(path)
+    results = analyser.analyse_same_camera(paths) if same_camera else map(analyser.analyse, paths)
+    for target, result in zip(targets, results):
         if target is not None:
             make_output_folder(target.parent)
             write_image_atomic(target, image_overlay(result)[..., ::-1])

@@ -3,7 +3,8 @@
 The line cue detects segments in each frame and hands them, with the frame's intrinsics, to the
 joint solver (`solver/joint.py`). Without intrinsics, the focal length is estimated from the scene
 (`solver/focal.py`) on the first `FOCAL_ATTEMPTS` frames; the stream uses the median of the
-confident per-frame estimates (one camera per stream), and keeps it after those frames.
+confident per-frame estimates (one camera per stream) meanwhile, then the K pooled over those frames
+(`solver/self_calibration.py`: f, and the principal point when they determine it), and keeps it.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
 from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
                             unknown_centre_floor)
 from ..solver.joint import JointSolver
+from ..solver.self_calibration import FrameEvidence, pool_intrinsics
 from ..solver import solve_manhattan
 from ..types import Frame, NormalMap, VisualRotation
 
@@ -42,7 +44,8 @@ class CueSolver:
     """The visual rotation of each frame from its normal map and/or its segments (one joint solve).
 
     Intrinsics: the frame's K when it has one; otherwise f estimated from the scene on the first
-    frames that tell it (then kept: one camera per stream), the assumed field of view until then.
+    frames that tell it, then pooled over them (then kept: one camera per stream), the assumed field of
+    view until then.
     `focal` is the `FocalEstimate` in use.
     """
 
@@ -54,6 +57,7 @@ class CueSolver:
         self.focal: FocalEstimate | None = None
         self._attempts = 0
         self._focal_px: list[float] = []
+        self._evidence: list[FrameEvidence] = []
 
     def solve(self, frame: Frame, normal_map: NormalMap | None, R_init=None) -> VisualRotation | None:
         """None when neither cue is usable (a blank frame and no normals)."""
@@ -71,6 +75,7 @@ class CueSolver:
         if segments is not None and len(segments) and self._attempts < FOCAL_ATTEMPTS:
             self._attempts += 1
             visual, focal = solve_with_focal(self.solver, normal_map, segments, R_init, self.focal_config, t_s=frame.t_s)
+            self._evidence.append(FrameEvidence(segments, visual.R_cm))
             if focal.source == "estimated":
                 self._focal_px.append(focal.f_px)
             if len(self._focal_px) >= 3:
@@ -78,6 +83,10 @@ class CueSolver:
             elif focal.source == "estimated" or self.focal is None or self.focal.source == "assumed":
                 self.focal = focal
                 return visual
+            if self._attempts == FOCAL_ATTEMPTS:
+                pooled = pool_intrinsics(self._evidence, self.focal.f_px)
+                self.focal = pooled.focal_estimate() if pooled is not None else self.focal
+                self._evidence = []
         if self.focal is None:
             h, w = (segments.height, segments.width) if segments is not None else normal_map.normals.shape[:2]
             self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)

@@ -11,7 +11,9 @@ is `l ~ K^-T up_c` in pixels, scaled so that [a, b] is unit (a x + b y + c = 0, 
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,6 +34,7 @@ from ..solver.atlanta import AtlantaHorizon, estimate_horizon
 from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal, unknown_centre_floor
 from ..solver.joint import JointSolver
 from ..solver.manhattan import up_candidate
+from ..solver.self_calibration import FrameEvidence, SelfCalibrationConfig, pool_intrinsics, solve_with_pooled_K
 from ..types import Frame, NormalMap, VisualRotation
 from .cues import DEFAULT_CUES, parse_cues
 from .stages import CappedNormals, make_normal_estimator
@@ -118,43 +121,106 @@ class ImageAnalyser:
         self.camera = camera
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.solver = JointSolver()
+        self.calibration_config = SelfCalibrationConfig()
 
     def analyse(self, path: str | Path, rgb: np.ndarray | None = None) -> ImageAnalysis:
-        path = Path(path)
+        seen = self._observe(Path(path), rgb)
+        t0 = time.perf_counter()
+        visual, focal = self._solve_alone(seen)
+        return self._analysis(seen, visual, focal, t0)
+
+    def analyse_same_camera(self, paths: list[str | Path]) -> Iterator[ImageAnalysis]:
+        """`analyse` of images from ONE camera with one K: without given intrinsics, in two passes: each
+        image solved alone, then the focal length and principal point pooled over all of them
+        (`solver/self_calibration.py`) and each image solved again with that K (its `focal` says so).
+        When the images cannot tell a shared K (too few with segments), each keeps its own answer.
+        All images must have the same size (an InputError names the first that does not)."""
+        paths = [Path(p) for p in paths]
+        if self.camera is not None or self.detector is None or len(paths) < 2:
+            yield from (self.analyse(p) for p in paths)
+            return
+        alone, evidence, size = [], [], None
+        for path in paths:
+            seen = self._observe(path, None)
+            size = size or seen.rgb.shape[:2]
+            if seen.rgb.shape[:2] != size:
+                raise InputError(f"{path}: {seen.rgb.shape[1]}x{seen.rgb.shape[0]} px, but {paths[0]} is "
+                                 f"{size[1]}x{size[0]}: one camera's images have one size")
+            visual, focal = self._solve_alone(seen)
+            alone.append((_Seen(seen.path, None, seen.normal_map, seen.segments, None, seen.timing_ms), visual, focal))
+            evidence.append(FrameEvidence(seen.segments, visual.R_cm))
+        estimated = [focal.f_px for _, _, focal in alone if focal.source == "estimated"]
+        f_init = float(np.median(estimated)) if estimated else alone[0][2].f_px
+        pooled = pool_intrinsics(evidence, f_init, self.calibration_config)
+        for seen, visual, focal in alone:
+            seen = dataclasses.replace(seen, rgb=self._read(seen.path)[0])
+            t0 = time.perf_counter()
+            if pooled is not None:  # the frames' floor stays: systematic errors escape the pooled K's std
+                focal = pooled.focal_estimate()
+                visual = unknown_centre_floor(solve_with_pooled_K(self.solver, seen.normal_map, seen.segments, pooled),
+                                              focal, self.focal_config, self.solver)
+            yield self._analysis(seen, visual, focal, t0)
+
+    def _read(self, path: Path) -> tuple[np.ndarray, float]:
+        """The image as analysed (decoded smaller when huge) and that scale."""
+        return read_rgb(path, ANALYSIS_MAX_PIXELS), 1.0 / reduction_for(image_size(path), ANALYSIS_MAX_PIXELS)[0]
+
+    def _observe(self, path: Path, rgb: np.ndarray | None) -> "_Seen":
+        """The image (undistorted with given intrinsics), its normal map and its segments."""
         given_K, scale = None, 1.0
         if rgb is None:
-            rgb = read_rgb(path, ANALYSIS_MAX_PIXELS)
-            scale = 1.0 / reduction_for(image_size(path), ANALYSIS_MAX_PIXELS)[0]
+            rgb, scale = self._read(path)
         if self.camera is not None:  # K is in the file's pixels; the analysed image may be decoded smaller
             camera = scaled_camera(self.camera, scale)
             rgb = undistorted_image(camera, rgb)
             given_K = check_K(camera.K)
-        h, w = rgb.shape[:2]
         t0 = time.perf_counter()
         normal_map = self.estimator.estimate_frame(Frame(0.0, rgb=rgb, index=0)) if self.estimator else None
         t1 = time.perf_counter()
         segments = self.detector.detect(rgb) if self.detector else None
         t2 = time.perf_counter()
+        return _Seen(path, rgb, normal_map, segments, given_K, {"normals": 1e3 * (t1 - t0), "lines": 1e3 * (t2 - t1)})
+
+    def _solve_alone(self, seen: "_Seen") -> tuple[VisualRotation, FocalEstimate]:
+        """The rotation and K of one image by itself (K given, estimated from its segments, or assumed)."""
+        h, w = seen.rgb.shape[:2]
+        normal_map, segments, given_K = seen.normal_map, seen.segments, seen.given_K
         try:
             if given_K is not None or segments is None or not len(segments):
                 K = given_K if given_K is not None else assumed_K(h, w, self.focal_config.assumed_fov_deg)
                 visual = solve_given_K(self.solver, normal_map, segments, K)
-                focal = FocalEstimate(K, "given" if given_K is not None else "assumed", width=w)
+                focal = (FocalEstimate(K, "given", width=w, origin=self.camera.origin) if given_K is not None
+                         else FocalEstimate(K, "assumed", width=w))
                 if given_K is None:
                     visual = unknown_centre_floor(visual, focal, self.focal_config, self.solver)
-            else:
-                visual, focal = solve_with_focal(self.solver, normal_map, segments, config=self.focal_config)
+                return visual, focal
+            return solve_with_focal(self.solver, normal_map, segments, config=self.focal_config)
         except InputError:
-            raise InputError(f"{path}: no confident normals and no line segments in this image "
+            raise InputError(f"{seen.path}: no confident normals and no line segments in this image "
                              "(blank or dark?)") from None
+
+    def _analysis(self, seen: "_Seen", visual: VisualRotation, focal: FocalEstimate, t0: float) -> ImageAnalysis:
+        """Up and the horizon (the segments' Atlanta horizon when they show one) of a solved image;
+        `t0` when its solve began."""
+        segments = seen.segments
         _, up_c = up_candidate(visual.R_cm)
         atlanta = estimate_horizon(segments, focal.K, up_c) if segments is not None else None
         if atlanta is not None:
             up_c = atlanta.up_c(focal.K)
-        t3 = time.perf_counter()
-        return ImageAnalysis(path, rgb, normal_map, segments, visual, up_c, focal,
-                             {"normals": 1e3 * (t1 - t0), "lines": 1e3 * (t2 - t1), "solver": 1e3 * (t3 - t2)},
-                             atlanta)
+        timing = {**seen.timing_ms, "solver": 1e3 * (time.perf_counter() - t0)}
+        return ImageAnalysis(seen.path, seen.rgb, seen.normal_map, segments, visual, up_c, focal, timing, atlanta)
+
+
+@dataclass(frozen=True)
+class _Seen:
+    """An image as read, undistorted (`given_K`: the given intrinsics in its pixels) and measured."""
+
+    path: Path
+    rgb: np.ndarray | None
+    normal_map: NormalMap | None
+    segments: LineSegments | None
+    given_K: np.ndarray | None
+    timing_ms: dict
 
 
 def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0,

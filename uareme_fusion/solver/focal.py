@@ -56,6 +56,10 @@ class FocalEstimate:
     std_px: float = float("nan")
     """Standard deviation of f in pixels (estimated only)."""
     width: int = 0
+    origin: str = ""
+    """How K was obtained, in words (e.g. "estimated from 110 frames ..." for a pooled K)."""
+    principal_point_std_px: tuple[float, float] | None = None
+    """Standard deviations of (cx, cy) in pixels when the principal point was estimated (pooled)."""
 
     @property
     def f_px(self) -> float:
@@ -67,7 +71,10 @@ class FocalEstimate:
 
     def as_dict(self) -> dict:
         return {"K": self.K.tolist(), "hfov_deg": self.hfov_deg, "focal_source": self.source,
-                "f_px": self.f_px, "f_std_px": None if not np.isfinite(self.std_px) else self.std_px}
+                "f_px": self.f_px, "f_std_px": None if not np.isfinite(self.std_px) else self.std_px,
+                "intrinsics_origin": self.origin or self.source,
+                "principal_point_std_px": None if self.principal_point_std_px is None
+                else list(self.principal_point_std_px)}
 
 
 def segment_moments(segments: LineSegments, K: np.ndarray) -> LineMoments:
@@ -99,7 +106,7 @@ def unknown_centre_floor(visual: VisualRotation, focal: FocalEstimate, config: F
     if "lines" not in visual.cues:
         return visual
     std_rad = config.principal_point_std_fraction * focal.width / focal.f_px
-    return _replace_cov(visual, solver, visual.cov + std_rad**2 * np.eye(3))
+    return replace_cov(visual, solver, visual.cov + std_rad**2 * np.eye(3))
 
 
 def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s) -> tuple[VisualRotation, FocalEstimate]:
@@ -133,7 +140,7 @@ def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s) -> tuple[V
     K = centred_K(f, h, w)
     visual = solve_given_K(solver, normal_map, segments, K, rotations[i], t_s)
     slope = _rotation_slope(solver, normal_map, segments, f, visual.R_cm, t_s)
-    visual = _replace_cov(visual, solver, visual.cov + std_log_f**2 * np.outer(slope, slope))
+    visual = replace_cov(visual, solver, visual.cov + std_log_f**2 * np.outer(slope, slope))
     return visual, FocalEstimate(K, "estimated", std_px=f * std_log_f, width=w)
 
 
@@ -166,11 +173,17 @@ def pixel_consistency(segments: LineSegments, K: np.ndarray, R_cm: np.ndarray, n
 def _rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, f_px: float, R_cm, t_s,
                     h: float = 0.02) -> np.ndarray:
     """d delta / d log f: how the solved rotation moves (right perturbation, rad) as f changes."""
-    ends = [solve_given_K(solver, normal_map, segments, centred_K(f_px * math.exp(s * h), segments.height,
-                                                                   segments.width), R_cm, t_s).R_cm for s in (1, -1)]
+    return rotation_slope(solver, normal_map, segments, lambda s: centred_K(f_px * math.exp(s), segments.height,
+                                                                             segments.width), R_cm, t_s, h)
+
+
+def rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, K_at, R_cm, t_s, h: float) -> np.ndarray:
+    """d delta / d s (3,) by central differences: how the solved rotation moves (right perturbation, rad)
+    as the intrinsics follow `K_at(s)` from `K_at(0)` (the K that gave `R_cm`), steps of +-h."""
+    ends = [solve_given_K(solver, normal_map, segments, K_at(s * h), R_cm, t_s).R_cm for s in (1, -1)]
     return log_so3(R_cm.T @ ends[0]) / (2 * h) - log_so3(R_cm.T @ ends[1]) / (2 * h)
 
 
-def _replace_cov(visual: VisualRotation, solver: JointSolver, cov: np.ndarray) -> VisualRotation:
+def replace_cov(visual: VisualRotation, solver: JointSolver, cov: np.ndarray) -> VisualRotation:
     """`visual` with the covariance `cov` (symmetrised, eigenvalues clipped to [0, the solver's cap])."""
     return dataclasses.replace(visual, cov=capped_covariance(cov, solver.config))

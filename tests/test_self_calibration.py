@@ -1,0 +1,152 @@
+"""One camera's K pooled over frames: recovery of an off-centre principal point, undetermined views,
+the covariance it passes to each frame, a folder of images and the `image --same-camera` option."""
+
+import dataclasses
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from helpers import cli
+from uareme_fusion.errors import InputError
+from uareme_fusion.pinhole import pinhole
+from uareme_fusion.pipeline.single_image import ImageAnalyser
+from uareme_fusion.rotations import exp_so3
+from uareme_fusion.sim.line_segments import manhattan_segments
+from uareme_fusion.solver.joint import JointSolver
+from uareme_fusion.solver.self_calibration import (FrameEvidence, PooledIntrinsics, pool_intrinsics,
+                                                   solve_with_pooled_K)
+
+W, H = 640, 480
+K_TRUE = pinhole(520.0, 520.0, 333.0, 226.0)
+"""Principal point 13.5 px right of and 13.5 px above the image centre (319.5, 239.5)."""
+
+
+def _views(n: int, seed: int) -> list[np.ndarray]:
+    """Camera rotations looking about a room: yaw, pitch and roll spread over tens of degrees."""
+    rng = np.random.default_rng(seed)
+    return [exp_so3(rng.uniform([-0.3, -0.5, -0.15], [0.3, 0.5, 0.15])) for _ in range(n)]
+
+
+def test_pooled_K_recovers_an_off_centre_principal_point_and_the_focal_length():
+    rng = np.random.default_rng(0)
+    frames = []
+    for R in _views(20, 1):
+        segments = manhattan_segments(R, K_TRUE, W, H, per_axis=(15, 15, 15), noise_px=0.7, clutter=5, rng=rng)
+        frames.append(FrameEvidence(segments, R @ exp_so3(rng.normal(scale=0.03, size=3))))  # ~2 deg off
+    pooled = pool_intrinsics(frames, f_init_px=470.0)
+    assert pooled is not None and pooled.n_frames == 20
+    assert abs(pooled.f_px - 520.0) < 0.03 * 520.0  # clutter (10 % of the segments) pulls f by about 2 %
+    assert np.linalg.norm(pooled.K[:2, 2] - K_TRUE[:2, 2]) < 5.0  # the centre is 19 px away
+    assert np.all(pooled.std_px < [15.0, 4.0, 4.0]) and np.all(pooled.std_px > 0)
+    assert pooled.origin.startswith("estimated from 20 frames")
+    assert pooled.focal_estimate().as_dict()["intrinsics_origin"] == pooled.origin
+
+
+def test_frames_that_cannot_tell_the_focal_length_pool_nothing():
+    # Camera axes along the room's: two vanishing points at infinity in every frame, f is free.
+    rng = np.random.default_rng(2)
+    frames = [FrameEvidence(manhattan_segments(np.eye(3), K_TRUE, W, H, noise_px=0.5, rng=rng), np.eye(3))
+              for _ in range(8)]
+    assert pool_intrinsics(frames, f_init_px=500.0) is None
+    assert pool_intrinsics(frames[:2], f_init_px=500.0) is None  # too few frames
+
+
+def test_a_frame_solved_with_the_pooled_K_carries_its_uncertainty():
+    R = _views(1, 3)[0]
+    segments = manhattan_segments(R, K_TRUE, W, H, noise_px=0.5, rng=np.random.default_rng(4))
+    sure = PooledIntrinsics(K_TRUE, np.diag([1.0, 0.01, 0.01]), 30, W, H, np.eye(3)[None], np.zeros(1, int))
+    unsure = PooledIntrinsics(K_TRUE, np.diag([400.0, 100.0, 100.0]), 30, W, H, np.eye(3)[None], np.zeros(1, int))
+    solver = JointSolver()
+    a, b = (solve_with_pooled_K(solver, None, segments, p) for p in (sure, unsure))
+    assert np.allclose(a.R_cm, b.R_cm)
+    # A 10 px std on the principal point is at most 10 / 520 rad = 1.1 deg about the camera's x and y axes
+    # (less where the segments pin the rotation otherwise); a sure K adds next to nothing.
+    extra_deg = np.degrees(np.sqrt(np.diag(b.cov) - np.diag(a.cov)))
+    assert np.all((0.3 < extra_deg[:2]) & (extra_deg[:2] < 1.5))
+    base = solve_with_pooled_K(solver, None, segments, dataclasses.replace(sure, cov_px2=np.zeros((3, 3))))
+    assert np.all(np.degrees(np.sqrt(np.diag(a.cov) - np.diag(base.cov))) < 0.1)
+
+
+def _drawn_folder(folder, n: int, seed: int) -> list:
+    """`n` images of Manhattan segments drawn dark on white with K_TRUE (what LSD finds again)."""
+    rng = np.random.default_rng(seed)
+    paths = []
+    for i, R in enumerate(_views(n, seed)):
+        image = np.full((H, W, 3), 235, np.uint8)
+        for (x1, y1), (x2, y2) in manhattan_segments(R, K_TRUE, W, H, per_axis=(12, 12, 12), noise_px=0.0,
+                                                       length_m=(1.0, 3.0), rng=rng).endpoints_px:
+            cv2.line(image, (round(x1 * 16), round(y1 * 16)), (round(x2 * 16), round(y2 * 16)), (30, 30, 30), 2,
+                     cv2.LINE_AA, shift=4)
+        paths.append(folder / f"frame{i:02d}.png")
+        cv2.imwrite(str(paths[-1]), image)
+    return paths
+
+
+def test_a_folder_from_one_camera_reports_the_pooled_K(tmp_path):
+    paths = _drawn_folder(tmp_path, 16, 5)
+    analyser = ImageAnalyser(cues="lines")
+    alone = analyser.analyse(paths[0]).focal
+    results = list(analyser.analyse_same_camera(paths))
+    assert [r.path for r in results] == paths
+    focal = results[0].focal
+    assert all(np.array_equal(r.focal.K, focal.K) for r in results)
+    assert focal.origin.startswith("estimated from 16 frames")
+    assert np.allclose(alone.K[:2, 2], [319.5, 239.5])  # one image alone: the centre
+    assert np.linalg.norm(focal.K[:2, 2] - K_TRUE[:2, 2]) < 4.0
+    assert abs(focal.f_px - 520.0) < 0.03 * 520.0
+    doc = results[3].as_dict()
+    assert doc["intrinsics_origin"] == focal.origin and len(doc["principal_point_std_px"]) == 2
+
+
+def test_image_same_camera_prints_the_pooled_K_and_refuses_mixed_sizes(tmp_path):
+    paths = _drawn_folder(tmp_path, 12, 6)
+    proc = cli("image", tmp_path, "--same-camera", "--cues", "lines", "--json")
+    assert proc.returncode == 0, proc.stderr
+    docs = [json.loads(line) for line in proc.stdout.splitlines()]
+    assert len(docs) == 12 and docs[0]["intrinsics_origin"].startswith("estimated from 12 frames")
+    cv2.imwrite(str(tmp_path / "small.png"), cv2.resize(cv2.imread(str(paths[0])), (320, 240)))
+    with pytest.raises(InputError, match="one camera's images have one size"):
+        list(ImageAnalyser(cues="lines").analyse_same_camera(sorted(tmp_path.glob("*.png"))))
+
+
+def test_icsl_frames_pool_one_K(shared_data):
+    """A few real ICSL corridor frames (published fx 537.6, principal point (316.2, 245.5))."""
+    paths = sorted((shared_data / "icsl_corridor_more" / "rgb").glob("*.png"))[::12]
+    results = list(ImageAnalyser(cues="lines").analyse_same_camera(paths))
+    focal = results[0].focal
+    assert focal.origin.startswith(f"estimated from {len(paths)} frames")
+    assert 480.0 < focal.f_px < 680.0 and np.isfinite(focal.std_px)
+    assert np.linalg.norm(focal.K[:2, 2] - [319.5, 239.5]) < 40.0
+
+
+def test_a_stream_without_intrinsics_runs_on_the_K_pooled_over_its_first_frames(tmp_path):
+    from uareme_fusion.pipeline import RunConfig
+    from uareme_fusion.pipeline.cues import FOCAL_ATTEMPTS
+    from uareme_fusion.pipeline.session import run_to_folder
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    _drawn_folder(frames, FOCAL_ATTEMPTS + 2, 7)
+    summary = run_to_folder(frames, tmp_path / "out", RunConfig(backend="single", cues="lines"))
+    intrinsics = summary["intrinsics"]
+    assert intrinsics["intrinsics_origin"].startswith(f"estimated from {FOCAL_ATTEMPTS} frames")
+    assert abs(intrinsics["f_px"] - 520.0) < 0.03 * 520.0
+    assert intrinsics["principal_point_std_px"] is not None  # determined, near the true one (19 px off-centre)
+    assert np.linalg.norm(np.array(intrinsics["K"])[:2, 2] - K_TRUE[:2, 2]) < 4.0
+
+
+def test_exact_normals_hold_the_rotations_and_pin_an_off_centre_principal_point():
+    from uareme_fusion.solver.self_calibration import SelfCalibrationConfig
+
+    rng = np.random.default_rng(8)
+    frames = []
+    for R in _views(10, 9):  # few frames: the segments alone leave the principal point loose
+        segments = manhattan_segments(R, K_TRUE, W, H, per_axis=(8, 8, 8), noise_px=1.0, rng=rng)
+        frames.append(FrameEvidence(segments, R @ exp_so3(rng.normal(scale=0.03, size=3)), R, np.eye(3) * 1e-6))
+    config = SelfCalibrationConfig(with_normals=True, max_principal_point_std_fraction=1.0)
+    alone = pool_intrinsics(frames, 470.0, SelfCalibrationConfig(max_principal_point_std_fraction=1.0))
+    held = pool_intrinsics(frames, 470.0, config)
+    assert np.linalg.norm(held.K[:2, 2] - K_TRUE[:2, 2]) < 2.0
+    assert np.all(held.std_px[1:] < 0.5 * alone.std_px[1:])
