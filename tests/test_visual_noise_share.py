@@ -71,8 +71,12 @@ def test_a_shaking_camera_is_motion_not_independent_error():
     assert max(smoother_nees, mekf_nees) < 6.0
 
 
+def _errors(name: str, seq: VisualSequence, **overrides) -> dict:
+    return errors_over_time(run_backend(make_backend(name, overrides=overrides), seq), seq.R_wc_true)
+
+
 def _are_nees(name: str, seq: VisualSequence, **overrides) -> tuple[float, float]:
-    err = errors_over_time(run_backend(make_backend(name, overrides=overrides), seq), seq.R_wc_true)
+    err = _errors(name, seq, **overrides)
     return float(err["are_deg"].mean()), float(err["nees"].mean())
 
 
@@ -94,14 +98,10 @@ def test_independent_frame_errors_are_still_averaged(name):
     `single` does), independent frame errors are averaged as by the plain filter."""
     seq = _sequence(0.0)
     settled = slice(2 * MIN_SAMPLES, None)
-    single_are = _are(name="single", seq=seq)[settled].mean()
-    are = _are(name, seq)[settled].mean()
-    plain_are = _are(name, seq, visual_noise_share_frames=0)[settled].mean()
+    single_are = _errors("single", seq)["are_deg"][settled].mean()
+    are = _errors(name, seq)["are_deg"][settled].mean()
+    plain_are = _errors(name, seq, visual_noise_share_frames=0)["are_deg"][settled].mean()
     assert are < 0.9 * single_are and are <= plain_are + 0.05
-
-
-def _are(name: str, seq: VisualSequence, **overrides) -> np.ndarray:
-    return errors_over_time(run_backend(make_backend(name, overrides=overrides), seq), seq.R_wc_true)["are_deg"]
 
 
 def test_real_icsl_stream_rgb_only_filters_no_worse_than_single(shared_data, tmp_path):
