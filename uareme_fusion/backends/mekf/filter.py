@@ -370,7 +370,7 @@ class Mekf(Backend):
             R_vis = R_vis * self.noise_share.share
             labelled = visual.symmetric_to(self.R_wc.T @ self.R_wm)
             persistent = self.noise_share.take(t_s, labelled)
-            if persistent is not None:  # always, past the gate (a finite covariance)
+            if persistent is not None:  # always, past the covariance check
                 self.persistent_cov = persistent
                 risen = self.noise_share.rise_R_wc_covariance(labelled)
         d = np.sqrt(d2)
