@@ -10,9 +10,11 @@ proposals both prefer, until no two clusters share a proposal. Each cluster hold
 the segments' weight gives a VP by weighted least squares over its segments, scored like a
 sequential one (S, the weight of all segments that point at it).
 
-ECD (103 photos, hand-labelled groups): VPs that match a hand-labelled group (60 % of its length
-within 2 deg) are 70 % of J-linkage's, 81 % of sequential consensus's; J-linkage's
-VPs complement the sequential ones rather than replace them (`solver/atlanta.py`).
+J-linkage's VPs complement the sequential ones rather than replace them (`solver/atlanta.py`). On
+ECD (103 photos; a hand-labelled group of 3 or more lines is found when 60 % of its length points
+within 2 deg of a VP): sequential consensus alone finds 63 % of the groups and 81 % of its VPs
+match one; with J-linkage's distinct VPs added, 68 % and 72 % (the horizon's robust height weighs
+the extra false ones down).
 """
 
 from __future__ import annotations
