@@ -11,8 +11,8 @@ and t (pixels along n from c, negative below the centre) is where the horizontal
 1. the zenith by consensus over pairs of near-vertical segments, with a prior on the camera's roll
    (`solver/zenith.py`); the first guess `up_c` (from the Manhattan solve) is one proposal; n from it;
 2. t: horizontal VPs by sequential consensus over the intersections of the other segments
-   (`solver/horizontal_vps.py`) and by J-linkage over them (`solver/vp_linkage.py`: it finds VPs
-   that the first's greedy removal of segments hides), each with the covariance of its position. t maximises
+   (`solver/horizontal_vps.py`), each with the covariance of its position, and those J-linkage finds
+   besides (`solver/vp_linkage.py`: VPs that the greedy removal of segments hides). t maximises
    log P(t) + sum_k log(pi_k N(v_k; t, s_k^2) + (1 - pi_k) / L): a VP at height v_k = n . (x_k - c)
    is on the horizon with probability pi_k = S_k / (S_k + `vp_inlier_support`) (S_k its support),
    else anywhere in the searched range L; s_k^2 = n^T C_k n + `vp_floor`^2 + (r u_k)^2, C_k its
@@ -87,7 +87,9 @@ class AtlantaConfig:
     compares. Chosen on ECD's odd-numbered images (1000 / 2000 / 3000: AUC 89.3 / 88.5 / 89.2 %;
     even-numbered 89.1 / 88.3 / 89.3 %); sequential consensus alone: odd 88.3, even 88.1 %."""
     max_candidate_vps: int = 6
-    """Horizontal VPs, of both groupings, that the horizon's height weighs (module docstring, step 2)."""
+    """Horizontal VPs, of both groupings, that the horizon's height weighs (module docstring, step 2).
+    ECD odd-numbered images, 2000 randomly drawn proposals: 4 / 6 / 8 candidates AUC 87.7 / 89.5 / 89.5 %.
+    The AUC moves by about +-0.5 % with the proposals drawn (three draws: 89.2-89.5 % odd)."""
     min_vp_share: float = 0.08
     """A horizontal VP needs segments holding this share of the non-vertical segments' weight."""
     prior_hfov_deg: float = 55.0

@@ -8,7 +8,8 @@ segment's preference set is the set of proposals (intersections of segment pairs
 whose preference sets are closest in Jaccard distance are merged, the merged cluster keeping the
 proposals both prefer, until no two clusters share a proposal. Each cluster holding `min_share` of
 the segments' weight gives a VP by weighted least squares over its segments, scored like a
-sequential one (S, the weight of all segments that point at it).
+sequential one (S, the weight of all segments that point at it). `inlier_sigmas` 2 was chosen on
+ECD's odd-numbered images (2 / 3 / 4: AUC 87.4 / 86.7 / 85.3 % with J-linkage's VPs alone).
 
 J-linkage's VPs complement the sequential ones rather than replace them (`solver/atlanta.py`). On
 ECD (103 photos; a hand-labelled group of 3 or more lines is found when 60 % of its length points
