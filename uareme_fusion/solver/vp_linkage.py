@@ -37,23 +37,22 @@ def _preference_sets(ends: np.ndarray, angle_std_rad: np.ndarray, proposals: np.
     return (miss_angles(ends, props) < inlier_sigmas * angle_std_rad[None]).T
 
 
-def _jaccard_distances(pref: np.ndarray) -> np.ndarray:
-    """(N, N) Jaccard distances between the rows of `pref`, inf on the diagonal and for empty sets."""
-    p = pref.astype(np.float32)
-    both = p @ p.T
-    count = p.sum(axis=1)
-    either = count[:, None] + count[None] - both
-    d = 1.0 - both / np.maximum(either, 1.0)
-    d[either == 0] = np.inf
-    np.fill_diagonal(d, np.inf)
-    return d
+def _jaccard_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(len(a), len(b)) Jaccard distances between the bool rows of `a` and of `b`; inf where either
+    set is empty (a cluster that prefers no proposal merges with nothing)."""
+    a, b = a.astype(np.float32), b.astype(np.float32)
+    both = a @ b.T
+    either = a.sum(axis=1)[:, None] + b.sum(axis=1)[None] - both
+    empty = (a.sum(axis=1)[:, None] == 0) | (b.sum(axis=1)[None] == 0)
+    return np.where(empty, np.inf, 1.0 - both / np.maximum(either, 1.0))
 
 
 def linkage_clusters(pref: np.ndarray) -> list[np.ndarray]:
     """Segment clusters (index arrays) of J-linkage over preference sets `pref` (N, P)."""
     pref = pref.copy()
     n = len(pref)
-    dist = _jaccard_distances(pref)
+    dist = _jaccard_distances(pref, pref)
+    np.fill_diagonal(dist, np.inf)
     members = [[i] for i in range(n)]
     alive = np.ones(n, bool)
     while True:
@@ -66,13 +65,7 @@ def linkage_clusters(pref: np.ndarray) -> list[np.ndarray]:
         dist[b, :] = dist[:, b] = np.inf
         others = np.flatnonzero(alive)
         others = others[others != a]
-        p = pref[others].astype(np.float32)
-        both = p @ pref[a].astype(np.float32)
-        either = p.sum(axis=1) + pref[a].sum() - both
-        d = np.where(either > 0, 1.0 - both / np.maximum(either, 1.0), np.inf)
-        if not pref[a].any():
-            d[:] = np.inf
-        dist[a, others] = dist[others, a] = d
+        dist[a, others] = dist[others, a] = _jaccard_distances(pref[others], pref[a : a + 1])[:, 0]
     return [np.array(members[i]) for i in np.flatnonzero(alive)]
 
 
