@@ -9,12 +9,13 @@ whose preference sets are closest in Jaccard distance are merged, the merged clu
 proposals both prefer, until no two clusters share a proposal. Each cluster holding `min_share` of
 the segments' weight gives a VP by weighted least squares over its segments, scored like a
 sequential one (S, the weight of all segments that point at it). `inlier_sigmas` 2 was chosen on
-ECD's odd-numbered images (2 / 3 / 4: AUC 87.4 / 86.7 / 85.3 % with J-linkage's VPs alone).
+ECD's odd-numbered images (2 / 3 / 4: AUC 87.4 / 86.7 / 85.3 % with J-linkage's VPs alone, 2000
+proposals drawn at random).
 
 J-linkage's VPs complement the sequential ones rather than replace them (`solver/atlanta.py`). On
 ECD (103 photos; a hand-labelled group of 3 or more lines is found when 60 % of its length points
 within 2 deg of a VP): sequential consensus alone finds 63 % of the groups and 81 % of its VPs
-match one; with J-linkage's distinct VPs added, 68 % and 72 % (the horizon's robust height weighs
+match one; with J-linkage's distinct VPs added, 69 % and 70 % (the horizon's robust height weighs
 the extra false ones down).
 """
 
@@ -70,10 +71,11 @@ def linkage_clusters(pref: np.ndarray) -> list[np.ndarray]:
 
 
 def linkage_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, angle_std_rad: np.ndarray,
-                proposals: np.ndarray, max_vps: int = 3, min_share: float = 0.08, min_angle_deg: float = 1.0,
-                max_proposals: int = 2000, inlier_sigmas: float = 2.0) -> list[VanishingPoint]:
-    """Up to `max_vps` VPs of segments `ends` (N, 2, 2) with `lines` (N, 3, [a, b] unit) by J-linkage
-    over the homogeneous `proposals` (P, 3), strongest first (module docstring)."""
+                proposals: np.ndarray, max_vps: int | None = None, min_share: float = 0.08,
+                min_angle_deg: float = 1.0, max_proposals: int = 1000,
+                inlier_sigmas: float = 2.0) -> list[VanishingPoint]:
+    """Up to `max_vps` (None: all) VPs of segments `ends` (N, 2, 2) with `lines` (N, 3, [a, b] unit)
+    by J-linkage over the homogeneous `proposals` (P, 3), strongest first (module docstring)."""
     if len(proposals) == 0:
         return []
     s = np.maximum(angle_std_rad, math.radians(min_angle_deg))
@@ -86,4 +88,4 @@ def linkage_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, angle_
         support = float(weights @ vp_likelihood(miss_angles(ends, point[None])[0], s))
         found.append(VanishingPoint(point, support, len(idx), point_covariance(ends[idx], point, s[idx])))
     found.sort(key=lambda v: -v.support)
-    return found[:max_vps]
+    return found if max_vps is None else found[:max_vps]
