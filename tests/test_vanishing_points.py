@@ -1,4 +1,5 @@
-"""Zenith and horizontal vanishing points by consensus (solver/zenith.py, solver/horizontal_vps.py)."""
+"""Zenith and horizontal vanishing points by consensus and J-linkage (solver/zenith.py,
+solver/horizontal_vps.py, solver/vp_linkage.py)."""
 
 import math
 
@@ -8,6 +9,7 @@ from uareme_fusion.overlay.camera import assumed_K
 from uareme_fusion.rotations import exp_so3
 from uareme_fusion.sim.line_segments import manhattan_segments
 from uareme_fusion.solver.horizontal_vps import horizontal_vps
+from uareme_fusion.solver.vp_linkage import linkage_vps
 from uareme_fusion.solver.zenith import estimate_zenith, miss_angles, segment_lines
 
 W, H = 640, 480
@@ -83,3 +85,23 @@ def test_horizontal_vps_of_two_directions_in_order_of_support():
         members = slice(0, 30) if axis == 0 else slice(30, 45)
         assert np.median(miss_angles(ends[members], vp.point[None])) < math.radians(0.5)
         assert abs(vp.n_inliers - (30 if axis == 0 else 15)) <= 2
+
+
+def test_linkage_finds_both_horizontal_vps_among_clutter():
+    rng = np.random.default_rng(5)
+    K = assumed_K(H, W, 60.0)
+    R_cw = exp_so3(np.radians([-8.0, 0.0, 0.0])) @ LEVEL @ exp_so3(np.radians([0.0, 0.0, 35.0]))
+    segments = manhattan_segments(R_cw, K, W, H, per_axis=(25, 15, 0), noise_px=0.3, clutter=25, rng=rng)
+    ends, scale = _centred(segments, K)
+    lines = segment_lines(ends)
+    i, j = np.triu_indices(len(ends), 1)
+    found = linkage_vps(ends, segments.weights, lines, np.full(len(ends), 1e-3), np.cross(lines[i], lines[j]))
+    truths = [_vp_centred(R_cw[:, axis], K, scale) for axis in (0, 1)]
+    assert len(found) >= 2
+    for axis, truth in enumerate(truths):
+        best = min(found, key=lambda vp: _angle_deg(vp.point, truth))
+        assert _angle_deg(best.point, truth) < 0.5
+        assert abs(best.n_inliers - (25 if axis == 0 else 15)) <= 3
+    # The two strongest are the two directions, not clutter.
+    assert {int(np.argmin([_angle_deg(vp.point, t) for t in truths])) for vp in found[:2]} == {0, 1}
+    assert all(min(_angle_deg(vp.point, t) for t in truths) < 0.5 for vp in found[:2])
