@@ -113,10 +113,9 @@ class MekfConfig(GyroNoiseConfig):
     visual_noise_share_frames: float = Field(30.0, ge=0, le=1e6)
     """Visual-only mode: frames over which the independent share of the visual covariance is
     averaged (`backends/visual_noise_share.py`); only that share is fused, the rest is added to the
-    reported covariance (0 = off: every frame's error independent). Real ICSL-more, RGB only, against
-    `single`'s 1.9178 deg: ARE 1.9168 (NEES 2.64; 1.9475 / 3.78 off); ICL kt3 0.2858 (single 0.2882,
-    off 0.2808); simulated 40 s walks without IMU, 20 % of frames dropped, seeds 0 / 1: 1.493 / 1.448
-    (single 1.594 / 1.565)."""
+    reported covariance (0 = off: every frame's error independent). Real ICSL corridor, RGB only:
+    ARE 2.176 -> 2.149 deg against `single`'s 2.141 (NEES 4.55 -> 3.19); ICL kt3 0.282 -> 0.284 (single
+    0.289); simulated walks without IMU 2.123 / 2.043 -> 2.124 / 2.048."""
     visual_gate_chi2: float = Field(16.27, gt=0, le=1e6)
     """Mahalanobis gate on the 3-dof visual residual (16.27 = chi-square 99.9 %)."""
     visual_huber_sigma: float = Field(2.0, ge=1e-3, le=1e6)

@@ -17,7 +17,7 @@ from ...errors import InputError
 from ...types import Estimate, Estimates, ImuBatch, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
-from ..visual_noise_share import VisualNoiseShare, is_covariance
+from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
 from .compiled import (KERNEL, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters,
@@ -28,7 +28,7 @@ from .measurements import (correlated_noise_scale, gravity_model, stack, vertica
 from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
 from .status_bits import status_of
-from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, RATE, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
+from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
 from .state_buffer import (S_IMU_T, S_PRODUCTS, S_T_STATE, X_B_C, X_P, X_R_WC, X_R_WM, BufferArray, BufferScalar,
                            field_views, new_state_buffer)
 
@@ -353,19 +353,12 @@ class Mekf(Backend):
             prepared, accel_rows = take_prepared_accel_rows(self) if self.compiled else (False, None)
             if not prepared:
                 accel_rows = self._accel_rows()
-        shared = not self.motion.uses_imu and self.noise_share.enabled
-        if shared and not is_covariance(visual.cov):  # no share of it to fuse (and, visual only, no
-            self._count_rejection()  # accelerometer rows to apply)
-            return
         r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
         t_s, t_prev_s = self.t_state, self.t_visual_s
         self.t_visual_s = t_s
         if t_prev_s is not None:
             R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
-        # The gate and Huber weigh the frame's full error, and the error the state carries from the
-        # frames before (visual only, `persistent_cov`: not the frame's own when the view changed).
-        H_th = H[:, TH]
-        S = H @ self.P @ H.T + H_th @ self.persistent_cov @ H_th.T + R_vis
+        S = H @ self.P @ H.T + R_vis  # the gate and Huber weigh the frame's full error
         d2 = float(r @ np.linalg.solve(S, r))
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
             self._count_rejection()
@@ -377,14 +370,12 @@ class Mekf(Backend):
                 self.motion.reinitialise(self, visual)
             return
         self.rejections = 0
-        risen = np.zeros((3, 3))
+        shared = not self.motion.uses_imu and self.noise_share.enabled
         if shared:  # fuse the independent share only (as estimated over the previous frames)
             R_vis = R_vis * self.noise_share.share
-            labelled = visual.symmetric_to(self.R_wc.T @ self.R_wm)
-            persistent = self.noise_share.take(t_s, labelled)
-            if persistent is not None:  # always, past the covariance check
+            persistent = self.noise_share.take(t_s, visual.symmetric_to(self.R_wc.T @ self.R_wm))
+            if persistent is not None:  # always, past the gate (a finite covariance)
                 self.persistent_cov = persistent
-                risen = self.noise_share.rise_R_wc_covariance(labelled)
         d = np.sqrt(d2)
         if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_sigma)
@@ -392,14 +383,6 @@ class Mekf(Backend):
         vertical = (vertical_model(self.R_wm, cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad)
                     if self.motion.uses_imu else None)
         self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
-        rose = bool(risen.any())
-        if rose:  # the share lam gained leaves the persistent term for the state's covariance
-            self.P[TH, TH] += risen
-        if shared and (rose or not self.noise_share.settled):
-            # Frames fused as (more) exact than they may be: the rate between them is not known.
-            self.omega_c = np.zeros(3)
-            self.P[RATE, :] = self.P[:, RATE] = 0.0
-            self.P[RATE, RATE] = self.config.rate_initial_std_rad_s**2 * I3
         self.counters["visual_updates"] += 1
 
     def _count_rejection(self) -> None:
@@ -473,4 +456,3 @@ class Mekf(Backend):
             bias_i = b_c if self.imu_is_camera else self.R_ci.T @ b_c
         return Estimate(t_s, R_wc, cov, status_of(bits), R_wm=R_wm if self.manhattan_initialised else None,
                         gyro_bias_rad_s=bias_i)
-
