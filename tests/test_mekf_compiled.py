@@ -210,7 +210,7 @@ def test_update_prepared_when_due_same_as_reference_with_or_without_a_frame():
         for f in (filt, ref):
             f.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
             f.propagate_to(t_f - 0.0005 if k % 11 == 5 else t_f)  # now and then the frame comes later
-        if filt.x[state_buffer.S_DEFERRED_ROWS] != state_buffer.ROWS_NOT_TAKEN:
+        if filt.x[state_buffer.S_DEFERRED_ROWS] != state_buffer.NONE_PREPARED:
             prepared += 1
             if prepared % 2:
                 filt.counters  # read (and moved out of the state buffer) before the frame takes the update

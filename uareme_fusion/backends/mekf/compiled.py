@@ -13,7 +13,7 @@ from . import kernels as K
 from .accel import PERIOD_TOLERANCE_S
 from .kernels import KERNEL
 from .state import I3, ORTHONORMALISE_EVERY
-from .state_buffer import (ROWS_MEASURED, ROWS_NOT_TAKEN, S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES,
+from .state_buffer import (PREPARED_MEASURED, NONE_PREPARED, S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES,
                            S_DEFERRED_BITS, S_DEFERRED_ROWS, S_NONFINITE, S_REST_UPDATES, X_ACCEL_ROWS, X_AFTER_ACCEL,
                            X_SIZE)
 
@@ -119,7 +119,7 @@ def integrate_frame_batch_compiled(filt, stream, t, gyro_c, accel_c, t_frame_s: 
     watermark, below the gyro range) and at or before the frame, with no IMU gap and no
     accelerometer update waiting. A frame's path: the fewest Python steps around the one call."""
     recording = filt.config.record_imu_estimates
-    record_R, record_P = _record_buffers(filt, t.shape[0]) if recording else (_NO_RECORD, _NO_RECORD)
+    record_R, record_P = _record_buffers(filt, t.shape[0])
     code = K.FRAME_BATCH(filt.x, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s, t_frame_s,
                          _parameters(filt, True), record_R, record_P)
     if code < 0:
@@ -175,8 +175,8 @@ def take_prepared_accel_rows(filt):
     taken = x[S_DEFERRED_ROWS]
     if not taken:
         return False, None
-    x[S_DEFERRED_ROWS] = ROWS_NOT_TAKEN
-    if taken != ROWS_MEASURED:
+    x[S_DEFERRED_ROWS] = NONE_PREPARED
+    if taken != PREPARED_MEASURED:
         return True, None
     residual, H, _, _ = _deferred_views(filt)
     return True, (residual, x[X_ACCEL_ROWS + 3] * I3, H)

@@ -33,7 +33,7 @@ from .matrix3 import exp3_into, inv3, matmul3_into
 from .measurements import gravity_model, zero_rate_model
 from ..imu_stream import rows_if_clean
 from .state import orthonormal, reset_jacobian
-from .state_buffer import (ROWS_MEASURED, ROWS_NONE, ROWS_NOT_TAKEN, S_ACC_ELAPSED, S_ACC_TIME,
+from .state_buffer import (PREPARED_MEASURED, PREPARED_NO_MEASUREMENT, NONE_PREPARED, S_ACC_ELAPSED, S_ACC_TIME,
                            S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_DEFERRED_BITS,
                            S_DEFERRED_ROWS, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE,
                            S_REST_UPDATES, S_T_STATE, X_ACC_SUM, X_ACCEL_ROWS, X_AFTER_ACCEL, X_B_C, X_LAST_GYRO, X_LP,
@@ -296,7 +296,7 @@ def integrate_batch(x, rows, extra_s, p, record_R, record_P):
                             extra_s, p, record_R, record_P)
     code |= NONFINITE if s[S_NONFINITE] > nonfinite_before else 0
     s[S_IMU_T] = t[t.shape[0] - 1]
-    if s[S_ACCEL_DUE] > 0 and s[S_DEFERRED_ROWS] == ROWS_NOT_TAKEN:  # deferred to the frame at the batch's end
+    if s[S_ACCEL_DUE] > 0 and s[S_DEFERRED_ROWS] == NONE_PREPARED:  # deferred to the frame at the batch's end
         code |= prepare_deferred_update(x, p)
     return code
 
@@ -307,16 +307,16 @@ def prepare_deferred_update(x, p):
     (`accel_rows_in_place`: an at-rest update applied, the period consumed) into `x[X_ACCEL_ROWS:]`,
     for the frame's stacked visual update, and the state after that measurement's update alone goes
     to `x[X_AFTER_ACCEL:]`, for a frame without one, with the `NONFINITE` bit of that update in
-    `s[S_DEFERRED_BITS]`. `s[S_DEFERRED_ROWS]` says which (`state_buffer.ROWS_*`); `compiled.py`
+    `s[S_DEFERRED_BITS]`. `s[S_DEFERRED_ROWS]` says which (`state_buffer.*PREPARED*`); `compiled.py`
     takes them. Returns the `DOWNWEIGHTED` | `NONFINITE` bits of taking the measurement."""
     code = accel_rows_in_place(x, p, x[X_ACCEL_ROWS:X_SIZE])
     s = x[X_S:X_R_WC]
-    s[S_DEFERRED_ROWS] = ROWS_MEASURED if code & MEASURED else ROWS_NONE
+    s[S_DEFERRED_ROWS] = PREPARED_MEASURED if code & MEASURED else PREPARED_NO_MEASUREMENT
     s[S_DEFERRED_BITS] = 0
     after = x[X_AFTER_ACCEL:X_AFTER_ACCEL + X_SIZE]
     after[:] = x[0:X_SIZE]
     after[S_ACCEL_DUE] = 0
-    after[S_DEFERRED_ROWS] = ROWS_NOT_TAKEN
+    after[S_DEFERRED_ROWS] = NONE_PREPARED
     if code & MEASURED:
         s2, R_wc, R_wm, b_c, P, _, _, lp, lp_J, _ = state_views(after)
         rows = x[X_ACCEL_ROWS:X_SIZE]

@@ -23,15 +23,16 @@ import numpy as np
 # Scalars in x[X_S]: state time (s), accelerometer period (time covered, time elapsed, s), products
 # since the last re-orthonormalisation, low-pass valid (0/1), rest samples and rest start (s), the
 # update counters the kernels keep (harvested by `Mekf.counters`), a deferred update due (0/1), its
-# measurement taken already (`ROWS_*`) and the `Status` bits of its update alone, the time of the
+# measurement taken already (`*PREPARED*`) and the `Status` bits of its update alone, the time of the
 # newest integrated IMU sample (s, camera clock; -inf before any).
 S_T_STATE, S_ACC_TIME, S_ACC_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
 S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE, S_NONFINITE = range(7, 13)
 S_DEFERRED_ROWS, S_DEFERRED_BITS, S_IMU_T = 13, 14, 15
 S_SIZE = 16
-ROWS_NOT_TAKEN, ROWS_MEASURED, ROWS_NONE = 0, 1, 2
-"""`s[S_DEFERRED_ROWS]`: the deferred update's measurement is not taken yet; it is in `accel_rows`
-(and the state after its update alone after the fields); it was taken and there is none (near free fall)."""
+NONE_PREPARED, PREPARED_MEASURED, PREPARED_NO_MEASUREMENT = 0, 1, 2
+"""`s[S_DEFERRED_ROWS]`: no deferred update is prepared (or it was taken); one is prepared with its
+measurement in `accel_rows` (and the state after its update alone after the fields); one is prepared
+and has no measurement (near free fall)."""
 
 FIELDS = (("s", (S_SIZE,)), ("R_wc", (3, 3)), ("R_wm", (3, 3)), ("b_c", (3,)), ("P", (12, 12)),
           ("last_gyro", (3,)), ("acc_sum", (3,)), ("lp", (2, 3)), ("lp_J", (2, 3, 3)), ("rest_sums", (8,)),
