@@ -10,7 +10,7 @@ import pytest
 
 from helpers import cli
 from uareme_fusion.errors import InputError
-from uareme_fusion.pinhole import pinhole
+from uareme_fusion.pinhole import focal_from_hfov, pinhole
 from uareme_fusion.pipeline.single_image import ImageAnalyser
 from uareme_fusion.rotations import exp_so3
 from uareme_fusion.sim.line_segments import manhattan_segments
@@ -51,6 +51,16 @@ def test_frames_that_cannot_tell_the_focal_length_pool_nothing():
               for _ in range(8)]
     assert pool_intrinsics(frames, f_init_px=500.0) is None
     assert pool_intrinsics(frames[:2], f_init_px=500.0) is None  # too few frames
+
+
+def test_a_focal_length_beyond_the_searched_range_pools_nothing():
+    # A 20 deg HFOV camera (f 1815 px): the fit runs into the 30 deg bound (f 1194 px) and stops there.
+    f_true = focal_from_hfov(W, 20.0)
+    K = pinhole(f_true, f_true, 319.5, 239.5)
+    rng = np.random.default_rng(10)
+    frames = [FrameEvidence(manhattan_segments(R, K, W, H, per_axis=(15, 15, 15), noise_px=0.7, rng=rng),
+                            R @ exp_so3(rng.normal(scale=0.03, size=3))) for R in _views(20, 1)]
+    assert pool_intrinsics(frames, f_init_px=700.0) is None
 
 
 def test_a_frame_solved_with_the_pooled_K_carries_its_uncertainty():

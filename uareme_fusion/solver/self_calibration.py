@@ -74,7 +74,8 @@ class SelfCalibrationConfig:
     max_relative_focal_std: float = 0.1
     """Above this std(f)/f the frames could not tell f: nothing is pooled."""
     hfov_range_deg: tuple[float, float] = (30.0, 120.0)
-    """Fields of view searched (as `FocalConfig.hfov_range_deg`); a fit that ends at either is refused."""
+    """Fields of view searched (as `FocalConfig.hfov_range_deg`); a fit that ends at either (log f within
+    `_AT_BOUND` of it) is refused: the frames then say only that f lies beyond."""
     with_normals: bool = False
     """Hold each frame's rotation by its normals-only rotation too (FrameEvidence.normals_*). Off: the
     learned normals' own bias then moves K (ICL kt3, rendered, true f 481.2 and centre (319.5, 239.5):
@@ -221,6 +222,10 @@ def _jackknife_cov(problem: "_Problem", x: np.ndarray, cfg: SelfCalibrationConfi
 _FIXED = 1e-6
 """The principal point's prior std, as a fraction of its usual one, when it is held at the centre."""
 
+_AT_BOUND = 1e-3
+"""log f this close to a bound of the searched range: the fit ran into it (LM only takes steps that stay
+inside, so it stops there rather than leaving)."""
+
 
 class _Problem:
     """The stacked residuals of the module docstring over a list of frames."""
@@ -250,6 +255,11 @@ class _Problem:
         """Whether f ended inside the searched range and (cx, cy) inside the image."""
         lo, hi = self.log_f_range
         return bool(lo < x[0] < hi and 0.0 <= x[1] <= self.width - 1 and 0.0 <= x[2] <= self.height - 1)
+
+    def at_bound(self, x: np.ndarray) -> bool:
+        """Whether log f ended within `_AT_BOUND` of either end of the searched range."""
+        lo, hi = self.log_f_range
+        return bool(min(x[0] - lo, hi - x[0]) < _AT_BOUND)
 
     def subset(self, keep: np.ndarray) -> "_Problem":
         """The problem over the frames `keep`, starting from their rotations as now."""
@@ -322,11 +332,11 @@ class _Problem:
 
     def solve(self, x: np.ndarray, rounds: int | None = None) -> np.ndarray | None:
         """Rounds of (nearest axes at x, robust least squares, R0 re-centred on the result); None when a
-        fit fails or f leaves the searched range."""
+        fit fails or f leaves the searched range or ends at its bound."""
         for _ in range(rounds or self.cfg.rounds):
             axes = self.nearest_axes(x)
             x_new = self._levenberg_marquardt(x, axes)
-            if x_new is None or not self.inside(x_new):
+            if x_new is None or not self.inside(x_new) or self.at_bound(x_new):
                 return None
             moved = np.abs(np.append(math.exp(x[0]) - math.exp(x_new[0]), x[1:3] - x_new[1:3])).max()
             self.R0 = self.rotations(x_new)
