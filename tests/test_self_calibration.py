@@ -14,6 +14,7 @@ from uareme_fusion.pinhole import focal_from_hfov, pinhole
 from uareme_fusion.pipeline.single_image import ImageAnalyser
 from uareme_fusion.rotations import exp_so3
 from uareme_fusion.sim.line_segments import manhattan_segments
+from uareme_fusion.solver.focal import centred_K
 from uareme_fusion.solver.joint import JointSolver
 from uareme_fusion.solver.self_calibration import (FrameEvidence, PooledIntrinsics, pool_intrinsics,
                                                    solve_with_pooled_K)
@@ -161,3 +162,25 @@ def test_exact_normals_hold_the_rotations_and_pin_an_off_centre_principal_point(
     held = pool_intrinsics(frames, 470.0, config)
     assert np.linalg.norm(held.K[:2, 2] - K_TRUE[:2, 2]) < 2.0
     assert np.all(held.std_px[1:] < 0.5 * alone.std_px[1:])
+
+
+def test_a_stream_pools_K_even_when_no_frame_alone_tells_the_focal_length(tmp_path, monkeypatch):
+    from uareme_fusion.pipeline import cues
+    from uareme_fusion.solver.focal import FocalEstimate
+    from uareme_fusion.types import Frame
+
+    attempts = 6
+    monkeypatch.setattr(cues, "FOCAL_ATTEMPTS", attempts)
+    solve_with_focal = cues.solve_with_focal
+
+    def never_confident(*args, **kwargs):  # every frame alone falls back to the assumed field of view
+        visual, focal = solve_with_focal(*args, **kwargs)
+        return visual, FocalEstimate(centred_K(focal_from_hfov(W, 60.0), H, W), "assumed", width=W)
+
+    monkeypatch.setattr(cues, "solve_with_focal", never_confident)
+    stream = cues.CueSolver(lines=True)
+    for i, path in enumerate(_drawn_folder(tmp_path, attempts + 1, 7)):
+        assert stream.solve(Frame(t_s=0.1 * i, rgb=cv2.imread(str(path))[..., ::-1].copy()), None) is not None
+        assert stream.focal.source == ("assumed" if i < attempts - 1 else "estimated")
+    assert stream.focal.origin.startswith(f"estimated from {attempts} frames")
+    assert abs(stream.focal.f_px - 520.0) < 0.03 * 520.0

@@ -78,15 +78,18 @@ class CueSolver:
             self._evidence.append(FrameEvidence(segments, visual.R_cm))
             if focal.source == "estimated":
                 self._focal_px.append(focal.f_px)
+            own = None  # the frame's own solve, kept while the stream has no K of its own yet
             if len(self._focal_px) >= 3:
                 self.focal = stream_focal(self._focal_px, segments.height, segments.width)
             elif focal.source == "estimated" or self.focal is None or self.focal.source == "assumed":
-                self.focal = focal
-                return visual
-            if self._attempts == FOCAL_ATTEMPTS:
+                self.focal, own = focal, visual
+            if self._attempts == FOCAL_ATTEMPTS:  # also when no frame was confident: the pool may still tell
                 pooled = pool_intrinsics(self._evidence, self.focal.f_px)
-                self.focal = pooled.focal_estimate() if pooled is not None else self.focal
                 self._evidence = []
+                if pooled is not None:
+                    self.focal, own = pooled.focal_estimate(), None
+            if own is not None:
+                return own
         if self.focal is None:
             h, w = (segments.height, segments.width) if segments is not None else normal_map.normals.shape[:2]
             self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
