@@ -147,6 +147,9 @@ def test_a_stream_without_intrinsics_runs_on_the_K_pooled_over_its_first_frames(
     assert abs(intrinsics["f_px"] - 520.0) < 0.03 * 520.0
     assert intrinsics["principal_point_std_px"] is not None  # determined, near the true one (19 px off-centre)
     assert np.linalg.norm(np.array(intrinsics["K"])[:2, 2] - K_TRUE[:2, 2]) < 4.0
+    switch = intrinsics["pooled_from"]  # the last attempt's frame (the first frames hold segments)
+    assert switch["frame"] == FOCAL_ATTEMPTS - 1 and switch["before"].startswith("the median of")
+    assert 0.8 * 520.0 < switch["f_px_before"] < 1.2 * 520.0
 
 
 def test_exact_normals_hold_the_rotations_and_pin_an_off_centre_principal_point():

@@ -9,6 +9,8 @@ confident per-frame estimates (one camera per stream) meanwhile, then the K pool
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from ..errors import ConfigError, InputError
@@ -20,6 +22,8 @@ from ..solver.joint import JointSolver
 from ..solver.self_calibration import FrameEvidence, pool_intrinsics
 from ..solver import solve_manhattan
 from ..types import Frame, NormalMap, VisualRotation
+
+log = logging.getLogger(__name__)
 
 VALID_CUES = ("normals", "lines")
 DEFAULT_CUES = "normals,lines"
@@ -58,9 +62,13 @@ class CueSolver:
         self._attempts = 0
         self._focal_px: list[float] = []
         self._evidence: list[FrameEvidence] = []
+        self._frames = 0
+        self.pooled_switch: dict | None = None
+        """When the pooled K took over (the stream's frame index and time) and what was used before."""
 
     def solve(self, frame: Frame, normal_map: NormalMap | None, R_init=None) -> VisualRotation | None:
         """None when neither cue is usable (a blank frame and no normals)."""
+        self._frames += 1
         segments = self.detector.detect(frame.rgb) if self.detector is not None and frame.rgb is not None else None
         try:
             return self._solve(frame, normal_map, segments, R_init)
@@ -87,7 +95,8 @@ class CueSolver:
                 pooled = pool_intrinsics(self._evidence, self.focal.f_px)
                 self._evidence = []
                 if pooled is not None:
-                    self.focal, own = pooled.focal_estimate(), None
+                    self._switch_to(pooled.focal_estimate(), frame)
+                    own = None
             if own is not None:
                 return own
         if self.focal is None:
@@ -95,6 +104,25 @@ class CueSolver:
             self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
         visual = solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t_s=frame.t_s)
         return unknown_centre_floor(visual, self.focal, self.focal_config, self.solver)
+
+
+    def _switch_to(self, pooled: FocalEstimate, frame: Frame) -> None:
+        """Use the pooled K from `frame` on; record and log the change (one line)."""
+        n = len(self._focal_px)
+        before = ("the assumed field of view" if n == 0 else "each frame's own estimate" if n < 3
+                  else f"the median of {n} frames' estimates")
+        index = frame.index if frame.index >= 0 else self._frames - 1
+        self.pooled_switch = {"frame": index, "t_s": frame.t_s, "before": before, "f_px_before": self.focal.f_px}
+        log.warning("intrinsics: from frame %d (t %.3f s) on, K %s (f %.1f px) replaces %s (f %.1f px)",
+                    index, frame.t_s, pooled.origin, pooled.f_px, before, self.focal.f_px)
+        self.focal = pooled
+
+    def intrinsics_summary(self) -> dict:
+        """`focal.as_dict()` for summary.json, with `pooled_from` when a pooled K took over mid-stream."""
+        doc = self.focal.as_dict()
+        if self.pooled_switch is not None:
+            doc["pooled_from"] = self.pooled_switch
+        return doc
 
 
 def stream_focal(focal_px: list[float], height: int, width: int) -> FocalEstimate:
