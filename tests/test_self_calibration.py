@@ -187,3 +187,19 @@ def test_a_stream_pools_K_even_when_no_frame_alone_tells_the_focal_length(tmp_pa
         assert stream.focal.source == ("assumed" if i < attempts - 1 else "estimated")
     assert stream.focal.origin.startswith(f"estimated from {attempts} frames")
     assert abs(stream.focal.f_px - 520.0) < 0.03 * 520.0
+
+
+def test_frames_of_another_size_are_refused_by_the_pool_and_by_a_stream(tmp_path):
+    from uareme_fusion.pipeline.cues import CueSolver
+    from uareme_fusion.types import Frame
+
+    rng = np.random.default_rng(11)
+    frames = [FrameEvidence(manhattan_segments(R, K_TRUE, W, H, rng=rng), R) for R in _views(4, 12)]
+    small = manhattan_segments(np.eye(3), K_TRUE / 2.0 + np.diag([0, 0, 0.5]), W // 2, H // 2, rng=rng)
+    with pytest.raises(InputError, match="frame 4: 320x240 px, but frame 0 is 640x480"):
+        pool_intrinsics(frames + [FrameEvidence(small, np.eye(3))], f_init_px=500.0)
+    stream = CueSolver(lines=True)
+    rgb = cv2.imread(str(_drawn_folder(tmp_path, 1, 13)[0]))[..., ::-1].copy()
+    assert stream.solve(Frame(t_s=0.0, rgb=rgb, index=0), None) is not None
+    with pytest.raises(InputError, match=r"frame 1 \(t 0.100 s\): 320x240 px, but the stream's camera is 640x480"):
+        stream.solve(Frame(t_s=0.1, rgb=cv2.resize(rgb, (320, 240)), index=1), None)

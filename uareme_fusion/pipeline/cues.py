@@ -63,17 +63,31 @@ class CueSolver:
         self._focal_px: list[float] = []
         self._evidence: list[FrameEvidence] = []
         self._frames = 0
+        self._size: tuple[int, int] | None = None
+        """(width, height) of the stream's camera: the first frame without K that has an image."""
         self.pooled_switch: dict | None = None
         """When the pooled K took over (the stream's frame index and time) and what was used before."""
 
     def solve(self, frame: Frame, normal_map: NormalMap | None, R_init=None) -> VisualRotation | None:
         """None when neither cue is usable (a blank frame and no normals)."""
         self._frames += 1
+        self._check_size(frame)
         segments = self.detector.detect(frame.rgb) if self.detector is not None and frame.rgb is not None else None
         try:
             return self._solve(frame, normal_map, segments, R_init)
         except InputError:
             return None
+
+    def _check_size(self, frame: Frame) -> None:
+        """A one-line InputError when a frame without K differs in size from the stream's camera."""
+        if frame.K is not None or frame.rgb is None:
+            return
+        size = (frame.rgb.shape[1], frame.rgb.shape[0])
+        self._size = self._size or size
+        if size != self._size:
+            index = frame.index if frame.index >= 0 else self._frames - 1
+            raise InputError(f"frame {index} (t {frame.t_s:.3f} s): {size[0]}x{size[1]} px, but the stream's "
+                             f"camera is {self._size[0]}x{self._size[1]} px: one camera's frames have one size")
 
     def _solve(self, frame: Frame, normal_map, segments: LineSegments | None, R_init) -> VisualRotation:
         if frame.K is not None:

@@ -42,6 +42,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation
 
+from ..errors import InputError
 from ..lines.detect import LineSegments
 from ..pinhole import focal_from_hfov, pinhole
 from ..rotations import nearest_symmetric
@@ -143,8 +144,14 @@ def pool_intrinsics(frames: list[FrameEvidence], f_init_px: float,
     """The K shared by `frames` (module docstring), starting from `f_init_px` and the image centre; the
     principal point stays at the centre (f alone is pooled) unless the frames determine it to
     `max_principal_point_std_fraction` of the width. None when fewer than `min_frames` frames have
-    segments or f stays undetermined."""
+    segments or f stays undetermined; an InputError when the frames' image sizes differ (one camera, one
+    size)."""
     cfg = config or SelfCalibrationConfig()
+    sizes = [(fr.segments.width, fr.segments.height) for fr in frames]
+    odd = next((i for i, size in enumerate(sizes) if size != sizes[0]), None)
+    if odd is not None:
+        raise InputError(f"frame {odd}: {sizes[odd][0]}x{sizes[odd][1]} px, but frame 0 is "
+                         f"{sizes[0][0]}x{sizes[0][1]}: one camera's frames have one size")
     used = [i for i, fr in enumerate(frames) if len(fr.segments) >= cfg.min_segments]
     if len(used) < cfg.min_frames:
         return None
