@@ -203,3 +203,11 @@ def test_frames_of_another_size_are_refused_by_the_pool_and_by_a_stream(tmp_path
     assert stream.solve(Frame(t_s=0.0, rgb=rgb, index=0), None) is not None
     with pytest.raises(InputError, match=r"frame 1 \(t 0.100 s\): 320x240 px, but the stream's camera is 640x480"):
         stream.solve(Frame(t_s=0.1, rgb=cv2.resize(rgb, (320, 240)), index=1), None)
+
+
+def test_the_pooled_bench_refuses_a_folder_without_frames(tmp_path):
+    from uareme_fusion.benchmarks.horizon import pooled_scores
+
+    (tmp_path / "empty" / "rgb").mkdir(parents=True)
+    with pytest.raises(InputError, match="no PNG frames"):
+        pooled_scores([tmp_path / "empty"], ImageAnalyser(cues="lines"))
