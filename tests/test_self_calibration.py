@@ -211,3 +211,24 @@ def test_the_pooled_bench_refuses_a_folder_without_frames(tmp_path):
     (tmp_path / "empty" / "rgb").mkdir(parents=True)
     with pytest.raises(InputError, match="no PNG frames"):
         pooled_scores([tmp_path / "empty"], ImageAnalyser(cues="lines"))
+
+
+def test_the_analytic_jacobian_matches_finite_differences_at_delta_zero():
+    from uareme_fusion.solver.self_calibration import SelfCalibrationConfig, _Problem
+
+    rng = np.random.default_rng(14)
+    frames = []
+    for R in _views(3, 15):  # the normals' rotation 3 deg from the frame's: J_r^-1 matters in their rows
+        R0 = R @ exp_so3(rng.normal(scale=0.03, size=3))
+        segments = manhattan_segments(R, K_TRUE, W, H, per_axis=(6, 6, 6), noise_px=1.0, rng=rng)
+        frames.append(FrameEvidence(segments, R0, R @ exp_so3(rng.normal(scale=0.05, size=3)),
+                                    np.diag([1e-4, 2e-4, 4e-4])))
+    problem = _Problem(frames, SelfCalibrationConfig(with_normals=True))
+    x = np.concatenate([[np.log(505.0)], [325.0, 231.0], np.zeros(9)])
+    axes = problem.nearest_axes(x)
+    analytic = problem.jacobian(x, axes).toarray()
+    step = 1e-6
+    numeric = np.stack([(problem.residuals(x + step * e, axes) - problem.residuals(x - step * e, axes)) / (2 * step)
+                        for e in np.eye(len(x))], axis=1)
+    scale = np.abs(numeric).max()
+    assert scale > 1.0 and np.abs(analytic - numeric).max() < 1e-5 * scale

@@ -45,7 +45,7 @@ from scipy.spatial.transform import Rotation
 from ..errors import InputError
 from ..lines.detect import LineSegments
 from ..pinhole import focal_from_hfov, pinhole
-from ..rotations import nearest_symmetric
+from ..rotations import nearest_symmetric, skew
 from ..types import NormalMap, VisualRotation
 from .focal import FocalEstimate, replace_cov, rotation_slope, solve_given_K
 from .joint import JointSolver
@@ -309,8 +309,9 @@ class _Problem:
         return np.concatenate([lines / self.cfg.endpoint_noise_px, normals, prior])
 
     def jacobian(self, x: np.ndarray, axes: np.ndarray) -> csr_matrix:
-        """d residuals / d x (sparse), exact for the segments and the prior; for delta_i taken at
-        delta_i = 0 (`solve` re-centres R0 on every round, so the steps stay small)."""
+        """d residuals / d x (sparse); for each delta_i as a right perturbation of the current R_i, i.e. exact
+        at delta_i = 0 (`solve` re-centres R0 on every round, so the steps stay small). The normals' rows
+        are L_i^T J_r^-1(phi_i), phi_i = Log(R_Ni^T R_i)."""
         f = math.exp(x[0])
         u, v, l = self._segment_geometry(x, axes)
         den = np.maximum(np.hypot(l[:, 0], l[:, 1]), 1e-12)
@@ -330,7 +331,8 @@ class _Problem:
         block = np.arange(3 * F)
         rows.append(n_seg + np.repeat(block, 3))
         cols.append((3 + 3 * (block // 3)[:, None] + np.arange(3)).ravel())
-        vals.append(self.L_normals.reshape(-1))
+        phi = Rotation.from_matrix(np.swapaxes(self.R_normals, 1, 2) @ self.rotations(x)).as_rotvec()
+        vals.append((self.L_normals @ _right_jacobian_inverse(phi)).reshape(-1))
         rows.append(n_seg + 3 * F + np.array([0, 1]))
         cols.append(np.array([1, 2]))
         vals.append(np.full(2, 1.0 / self.prior_std_px))
@@ -399,6 +401,16 @@ class _Problem:
     def gauss_newton_cov(self) -> np.ndarray:
         """The (3, 3) block of theta in (J^T W J)^-1 at the last step (W the robust weights)."""
         return np.linalg.pinv(self._information)[:3, :3]
+
+
+def _right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
+    """J_r^-1(phi) (n, 3, 3) of rotation vectors phi (n, 3): Log(Exp(phi) Exp(d)) = phi + J_r^-1(phi) d + O(d^2)."""
+    theta = np.linalg.norm(phi, axis=1)
+    P = skew(phi)
+    small = theta < 1e-4
+    t = np.where(small, 1.0, theta)
+    c = np.where(small, 1.0 / 12.0, 1.0 / t**2 - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
+    return np.eye(3) + 0.5 * P + c[:, None, None] * P @ P
 
 
 def _information_root(cov: np.ndarray) -> np.ndarray:
