@@ -67,8 +67,8 @@ def test_a_focal_length_beyond_the_searched_range_pools_nothing():
 def test_a_frame_solved_with_the_pooled_K_carries_its_uncertainty():
     R = _views(1, 3)[0]
     segments = manhattan_segments(R, K_TRUE, W, H, noise_px=0.5, rng=np.random.default_rng(4))
-    sure = PooledIntrinsics(K_TRUE, np.diag([1.0, 0.01, 0.01]), 30, W, H, np.eye(3)[None], np.zeros(1, int))
-    unsure = PooledIntrinsics(K_TRUE, np.diag([400.0, 100.0, 100.0]), 30, W, H, np.eye(3)[None], np.zeros(1, int))
+    sure = PooledIntrinsics(K_TRUE, np.diag([1.0, 0.01, 0.01]), 30, W, H)
+    unsure = PooledIntrinsics(K_TRUE, np.diag([400.0, 100.0, 100.0]), 30, W, H)
     solver = JointSolver()
     a, b = (solve_with_pooled_K(solver, None, segments, p) for p in (sure, unsure))
     assert np.allclose(a.R_cm, b.R_cm)

@@ -4,7 +4,8 @@ The line cue detects segments in each frame and hands them, with the frame's int
 joint solver (`solver/joint.py`). Without intrinsics, the focal length is estimated from the scene
 (`solver/focal.py`) on the first `FOCAL_ATTEMPTS` frames; the stream uses the median of the
 confident per-frame estimates (one camera per stream) meanwhile, then the K pooled over those frames
-(`solver/self_calibration.py`: f, and the principal point when they determine it), and keeps it.
+(`solver/self_calibration.py`: f, and the principal point when they determine it), and keeps it
+(summary.json's `intrinsics.pooled_from` says from which frame, and what it replaced).
 """
 
 from __future__ import annotations
@@ -41,7 +42,9 @@ def parse_cues(spec: str | tuple | list) -> tuple[str, ...]:
 
 
 FOCAL_ATTEMPTS = 30
-"""Frames on which a stream without intrinsics estimates f; afterwards the median is kept."""
+"""Frames (with segments) on which a stream without intrinsics estimates f; at the last of them the K
+pooled over them all (`pool_intrinsics`) takes over and is kept (the median of the confident estimates,
+or the assumed field of view, stays when the pool cannot tell)."""
 
 
 class CueSolver:

@@ -60,7 +60,10 @@ class SelfCalibrationConfig:
     rounds: int = 4
     """Axis assignments re-chosen this many times (fewer when K settles to `settled_px`)."""
     settled_px: float = 0.05
+    """A round that moves f, cx and cy each by less than this (pixels) ends the rounds."""
     jackknife_groups: int = 8
+    """Consecutive blocks of frames the jackknife leaves out in turn (count); with fewer than twice as
+    many frames the Gauss-Newton covariance alone is reported."""
     min_frames: int = 3
     """Fewer frames with segments than this: nothing is pooled."""
     min_segments: int = 6
@@ -103,10 +106,6 @@ class PooledIntrinsics:
     n_frames: int
     width: int
     height: int
-    R_cm: np.ndarray
-    """(n_frames, 3, 3) the frames' rotations at the fit (the frames that took part, in order)."""
-    used: np.ndarray
-    """Indices of those frames among the ones given."""
     principal_point_estimated: bool = True
     """False: the frames could not tell it, it is the image centre (f alone was pooled)."""
 
@@ -168,7 +167,7 @@ def pool_intrinsics(frames: list[FrameEvidence], f_init_px: float,
     if not math.sqrt(cov_px2[0, 0]) / f <= cfg.max_relative_focal_std:
         return None
     return PooledIntrinsics(pinhole(f, f, x[1], x[2]), cov_px2, len(used), problem.width, problem.height,
-                            problem.rotations(x), np.array(used), principal_point_estimated=not problem.centre_fixed)
+                            principal_point_estimated=not problem.centre_fixed)
 
 
 def _fit(problem: "_Problem", f_init_px: float, cfg: SelfCalibrationConfig):
@@ -281,8 +280,9 @@ class _Problem:
         return self.R0 @ Rotation.from_rotvec(x[3:].reshape(-1, 3)).as_matrix()
 
     def _segment_geometry(self, x: np.ndarray, axes: np.ndarray):
-        """Per segment, at its axis `axes[j]`: u = R_i r-hat_k (N, 3), the vanishing point v = K u, the line
-        l = m x v through its midpoint m (homogeneous), and its half vector h = (x2 - x1) / 2 (N, 3)."""
+        """(u, v, l) per segment at its axis `axes[j]` (each (N, 3)): u = R_i r-hat_k, the vanishing point
+        v = K u and the line l = m x v through its midpoint m (homogeneous); its half vector
+        (x2 - x1) / 2 is `self.half`."""
         f = math.exp(x[0])
         u = self.rotations(x)[self.frame_of, :, axes]
         v = u @ pinhole(f, f, x[1], x[2]).T
