@@ -80,11 +80,12 @@ def test_a_frame_solved_with_the_pooled_K_carries_its_uncertainty():
     assert np.all(np.degrees(np.sqrt(np.diag(a.cov) - np.diag(base.cov))) < 0.1)
 
 
-def _drawn_folder(folder, n: int, seed: int) -> list:
-    """`n` images of Manhattan segments drawn dark on white with K_TRUE (what LSD finds again)."""
+def _drawn_folder(folder, n: int, seed: int, views: list[np.ndarray] | None = None) -> list:
+    """`n` images of Manhattan segments drawn dark on white with K_TRUE (what LSD finds again), seen from
+    `views` (default `_views(n, seed)`)."""
     rng = np.random.default_rng(seed)
     paths = []
-    for i, R in enumerate(_views(n, seed)):
+    for i, R in enumerate(views or _views(n, seed)):
         image = np.full((H, W, 3), 235, np.uint8)
         for (x1, y1), (x2, y2) in manhattan_segments(R, K_TRUE, W, H, per_axis=(12, 12, 12), noise_px=0.0,
                                                        length_m=(1.0, 3.0), rng=rng).endpoints_px:
@@ -232,3 +233,14 @@ def test_the_analytic_jacobian_matches_finite_differences_at_delta_zero():
                         for e in np.eye(len(x))], axis=1)
     scale = np.abs(numeric).max()
     assert scale > 1.0 and np.abs(analytic - numeric).max() < 1e-5 * scale
+
+
+def test_image_same_camera_says_when_each_image_keeps_its_own_K(tmp_path):
+    paths = _drawn_folder(tmp_path, 3, 16, views=[np.eye(3)] * 3)  # camera axes along the room's: f is free
+    proc = cli("image", tmp_path, "--same-camera", "--cues", "lines", "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.strip() == ("warning: --same-camera: the 3 images (3 with 6+ line segments) could not tell "
+                                   "one K (fewer than 3 with segments, or f undetermined or outside 30-120 deg HFOV), "
+                                   "each image keeps its own K")
+    proc = cli("image", paths[0], "--same-camera", "--cues", "lines", "--json")
+    assert proc.returncode == 0 and proc.stderr.strip() == "warning: --same-camera: one image, each image keeps its own K"
