@@ -124,13 +124,18 @@ def test_image_same_camera_prints_the_pooled_K_and_refuses_mixed_sizes(tmp_path)
 
 
 def test_icsl_frames_pool_one_K(shared_data):
-    """A few real ICSL corridor frames (published fx 537.6, principal point (316.2, 245.5))."""
+    """Seven real ICSL corridor frames (published fx 537.6, principal point (316.2, 245.5)). The pooled f
+    runs about 5 % long there, an error common to all frames: f 567.5 +- 15.2 px over these 7 (the
+    principal point held at the centre, 6.9 px from the published one), 562.7 +- 9.6 over 70 frames
+    (`bench horizon`). The bounds keep 10 px to spare over that: |f - 537.6| < 40 px (7.4 %) and within 3
+    reported std. The assumed 60 deg FOV (f 554.3) would pass the f bound too; the origin says it was pooled."""
     paths = sorted((shared_data / "icsl_corridor_more" / "rgb").glob("*.png"))[::20]
     results = list(ImageAnalyser(cues="lines").analyse_same_camera(paths))
     focal = results[0].focal
     assert focal.origin.startswith(f"estimated from {len(paths)} frames")
-    assert 480.0 < focal.f_px < 680.0 and np.isfinite(focal.std_px)
-    assert np.linalg.norm(focal.K[:2, 2] - [319.5, 239.5]) < 40.0
+    assert abs(focal.f_px - 537.6) < 40.0 and 5.0 < focal.std_px < 30.0
+    assert abs(focal.f_px - 537.6) < 3.0 * focal.std_px
+    assert np.linalg.norm(focal.K[:2, 2] - [316.2, 245.5]) < 10.0
 
 
 def test_a_stream_without_intrinsics_runs_on_the_K_pooled_over_its_first_frames(tmp_path, monkeypatch):
