@@ -207,8 +207,14 @@ def test_frames_of_another_size_are_refused_by_the_pool_and_by_a_stream(tmp_path
     stream = CueSolver(lines=True)
     rgb = cv2.imread(str(_drawn_folder(tmp_path, 1, 13)[0]))[..., ::-1].copy()
     assert stream.solve(Frame(t_s=0.0, rgb=rgb, index=0), None) is not None
+    assert stream.focal.source == "estimated" and stream.focal.width == W  # the stream's K, from the scene
     with pytest.raises(InputError, match=r"frame 1 \(t 0.100 s\): 320x240 px, but the stream's camera is 640x480"):
         stream.solve(Frame(t_s=0.1, rgb=cv2.resize(rgb, (320, 240)), index=1), None)
+    assumed = CueSolver(lines=True, assumed_fov_deg=60.0)  # no K from the scene yet: another size is solved alone
+    blank = np.full((H, W, 3), 235, np.uint8)
+    assumed.solve(Frame(t_s=0.0, rgb=blank, index=0), None)
+    assert assumed.solve(Frame(t_s=0.1, rgb=cv2.resize(rgb, (320, 240)), index=1), None) is not None
+    assert assumed.focal.source == "assumed" and assumed.focal.width == W and assumed._attempts == 0
 
 
 def test_the_pooled_bench_refuses_a_folder_without_frames(tmp_path):

@@ -67,30 +67,43 @@ class CueSolver:
         self._evidence: list[FrameEvidence] = []
         self._frames = 0
         self._size: tuple[int, int] | None = None
-        """(width, height) of the stream's camera: the first frame without K that has an image."""
+        """(width, height) of the stream's camera: the first frame without K that has an image. Frames of
+        another size are refused once the K is from the scene, solved alone (assumed FOV) before."""
         self.pooled_switch: dict | None = None
         """When the pooled K took over (the stream's frame index and time) and what was used before."""
 
     def solve(self, frame: Frame, normal_map: NormalMap | None, R_init=None) -> VisualRotation | None:
         """None when neither cue is usable (a blank frame and no normals)."""
         self._frames += 1
-        self._check_size(frame)
+        other_size = self._other_size(frame)
         segments = self.detector.detect(frame.rgb) if self.detector is not None and frame.rgb is not None else None
         try:
+            if other_size:
+                return self._solve_alone(frame, normal_map, segments, R_init)
             return self._solve(frame, normal_map, segments, R_init)
         except InputError:
             return None
 
-    def _check_size(self, frame: Frame) -> None:
-        """A one-line InputError when a frame without K differs in size from the stream's camera."""
+    def _other_size(self, frame: Frame) -> bool:
+        """Whether a frame without K differs in size from the stream's camera (the first such frame's);
+        a one-line InputError when it does and the stream's K came from the scene (it holds for one size)."""
         if frame.K is not None or frame.rgb is None:
-            return
+            return False
         size = (frame.rgb.shape[1], frame.rgb.shape[0])
         self._size = self._size or size
-        if size != self._size:
+        if size != self._size and self.focal is not None and self.focal.source == "estimated":
             index = frame.index if frame.index >= 0 else self._frames - 1
             raise InputError(f"frame {index} (t {frame.t_s:.3f} s): {size[0]}x{size[1]} px, but the stream's "
                              f"camera is {self._size[0]}x{self._size[1]} px: one camera's frames have one size")
+        return size != self._size
+
+    def _solve_alone(self, frame: Frame, normal_map, segments: LineSegments | None, R_init) -> VisualRotation:
+        """A frame of another size while the stream's K is not from the scene: the assumed field of view at
+        its own size; it takes no part in the stream's focal length."""
+        h, w = frame.rgb.shape[:2]
+        focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
+        visual = solve_given_K(self.solver, normal_map, segments, focal.K, R_init, t_s=frame.t_s)
+        return unknown_centre_floor(visual, focal, self.focal_config, self.solver)
 
     def _solve(self, frame: Frame, normal_map, segments: LineSegments | None, R_init) -> VisualRotation:
         if frame.K is not None:
@@ -121,7 +134,6 @@ class CueSolver:
             self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
         visual = solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t_s=frame.t_s)
         return unknown_centre_floor(visual, self.focal, self.focal_config, self.solver)
-
 
     def _switch_to(self, pooled: FocalEstimate, frame: Frame) -> None:
         """Use the pooled K from `frame` on; record and log the change (one line)."""
