@@ -146,13 +146,16 @@ def pooled_scores(folders: list[Path], analyser, stride: int = 1, reference=icsl
     angles, nees, sequences = [], [], []
     for folder in folders:
         paths = sorted((folder / "rgb").glob("*.png"), key=lambda p: (len(p.stem), p.stem))[::stride]
-        for result in analyser.analyse_same_camera(paths):
+        results = list(analyser.analyse_same_camera(paths))
+        if not results:
+            raise InputError(f"{folder / 'rgb'}: no PNG frames to pool a K over")
+        for result in results:
             if reference is not None:
                 a, n = rotation_nees(result.visual.R_cm, result.visual.cov, reference(result.path).R_cm)
                 angles.append(a)
                 nees.append(n)
-        focal = result.focal
-        w = result.rgb.shape[1]
+        focal = results[-1].focal
+        w = results[-1].rgb.shape[1]
         true_hfov = math.degrees(2 * math.atan2(w / 2, fx_true))
         pp = focal.K[:2, 2]
         sequences.append({"folder": folder.name, "frames": len(paths), "origin": focal.origin or focal.source,

@@ -62,7 +62,9 @@ def image_command(
                 raise InputError(f"--out {out} exists; pass --force to replace it")
             targets = [out]
     analyser = ImageAnalyser(normals, cues, camera=camera, assumed_fov_deg=fov_deg)
-    results = analyser.analyse_same_camera(paths) if same_camera else map(analyser.analyse, paths)
+    results = (analyser.analyse_same_camera(paths, warn=lambda line: typer.echo(f"warning: --same-camera: {line}",
+                                                                               err=True))
+               if same_camera else map(analyser.analyse, paths))
     for target, result in zip(targets, results):
         if target is not None:
             make_output_folder(target.parent)

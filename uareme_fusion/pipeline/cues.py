@@ -4,10 +4,13 @@ The line cue detects segments in each frame and hands them, with the frame's int
 joint solver (`solver/joint.py`). Without intrinsics, the focal length is estimated from the scene
 (`solver/focal.py`) on the first `FOCAL_ATTEMPTS` frames; the stream uses the median of the
 confident per-frame estimates (one camera per stream) meanwhile, then the K pooled over those frames
-(`solver/self_calibration.py`: f, and the principal point when they determine it), and keeps it.
+(`solver/self_calibration.py`: f, and the principal point when they determine it), and keeps it
+(summary.json's `intrinsics.pooled_from` says from which frame, and what it replaced).
 """
 
 from __future__ import annotations
+
+import logging
 
 import numpy as np
 
@@ -20,6 +23,8 @@ from ..solver.joint import JointSolver
 from ..solver.self_calibration import FrameEvidence, pool_intrinsics
 from ..solver import solve_manhattan
 from ..types import Frame, NormalMap, VisualRotation
+
+log = logging.getLogger(__name__)
 
 VALID_CUES = ("normals", "lines")
 DEFAULT_CUES = "normals,lines"
@@ -37,7 +42,9 @@ def parse_cues(spec: str | tuple | list) -> tuple[str, ...]:
 
 
 FOCAL_ATTEMPTS = 30
-"""Frames on which a stream without intrinsics estimates f; afterwards the median is kept."""
+"""Frames (with segments) on which a stream without intrinsics estimates f; at the last of them the K
+pooled over them all (`pool_intrinsics`) takes over and is kept (the median of the confident estimates,
+or the assumed field of view, stays when the pool cannot tell)."""
 
 
 class CueSolver:
@@ -58,14 +65,45 @@ class CueSolver:
         self._attempts = 0
         self._focal_px: list[float] = []
         self._evidence: list[FrameEvidence] = []
+        self._frames = 0
+        self._size: tuple[int, int] | None = None
+        """(width, height) of the stream's camera: the first frame without K that has an image. Frames of
+        another size are refused once the K is from the scene, solved alone (assumed FOV) before."""
+        self.pooled_switch: dict | None = None
+        """When the pooled K took over (the stream's frame index and time) and what was used before."""
 
     def solve(self, frame: Frame, normal_map: NormalMap | None, R_init=None) -> VisualRotation | None:
         """None when neither cue is usable (a blank frame and no normals)."""
+        self._frames += 1
+        other_size = self._other_size(frame)
         segments = self.detector.detect(frame.rgb) if self.detector is not None and frame.rgb is not None else None
         try:
+            if other_size:
+                return self._solve_alone(frame, normal_map, segments, R_init)
             return self._solve(frame, normal_map, segments, R_init)
         except InputError:
             return None
+
+    def _other_size(self, frame: Frame) -> bool:
+        """Whether a frame without K differs in size from the stream's camera (the first such frame's);
+        a one-line InputError when it does and the stream's K came from the scene (it holds for one size)."""
+        if frame.K is not None or frame.rgb is None:
+            return False
+        size = (frame.rgb.shape[1], frame.rgb.shape[0])
+        self._size = self._size or size
+        if size != self._size and self.focal is not None and self.focal.source == "estimated":
+            index = frame.index if frame.index >= 0 else self._frames - 1
+            raise InputError(f"frame {index} (t {frame.t_s:.3f} s): {size[0]}x{size[1]} px, but the stream's "
+                             f"camera is {self._size[0]}x{self._size[1]} px: one camera's frames have one size")
+        return size != self._size
+
+    def _solve_alone(self, frame: Frame, normal_map, segments: LineSegments | None, R_init) -> VisualRotation:
+        """A frame of another size while the stream's K is not from the scene: the assumed field of view at
+        its own size; it takes no part in the stream's focal length."""
+        h, w = frame.rgb.shape[:2]
+        focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
+        visual = solve_given_K(self.solver, normal_map, segments, focal.K, R_init, t_s=frame.t_s)
+        return unknown_centre_floor(visual, focal, self.focal_config, self.solver)
 
     def _solve(self, frame: Frame, normal_map, segments: LineSegments | None, R_init) -> VisualRotation:
         if frame.K is not None:
@@ -78,20 +116,42 @@ class CueSolver:
             self._evidence.append(FrameEvidence(segments, visual.R_cm))
             if focal.source == "estimated":
                 self._focal_px.append(focal.f_px)
+            own = None  # the frame's own solve, kept while the stream has no K of its own yet
             if len(self._focal_px) >= 3:
                 self.focal = stream_focal(self._focal_px, segments.height, segments.width)
             elif focal.source == "estimated" or self.focal is None or self.focal.source == "assumed":
-                self.focal = focal
-                return visual
-            if self._attempts == FOCAL_ATTEMPTS:
+                self.focal, own = focal, visual
+            if self._attempts == FOCAL_ATTEMPTS:  # also when no frame was confident: the pool may still tell
                 pooled = pool_intrinsics(self._evidence, self.focal.f_px)
-                self.focal = pooled.focal_estimate() if pooled is not None else self.focal
                 self._evidence = []
+                if pooled is not None:
+                    self._switch_to(pooled.focal_estimate(), frame)
+                    own = None
+            if own is not None:
+                return own
         if self.focal is None:
             h, w = (segments.height, segments.width) if segments is not None else normal_map.normals.shape[:2]
             self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
         visual = solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t_s=frame.t_s)
         return unknown_centre_floor(visual, self.focal, self.focal_config, self.solver)
+
+    def _switch_to(self, pooled: FocalEstimate, frame: Frame) -> None:
+        """Use the pooled K from `frame` on; record and log the change (one line)."""
+        n = len(self._focal_px)
+        before = ("the assumed field of view" if n == 0 else "each frame's own estimate" if n < 3
+                  else f"the median of {n} frames' estimates")
+        index = frame.index if frame.index >= 0 else self._frames - 1
+        self.pooled_switch = {"frame": index, "t_s": frame.t_s, "before": before, "f_px_before": self.focal.f_px}
+        log.warning("intrinsics: from frame %d (t %.3f s) on, K %s (f %.1f px) replaces %s (f %.1f px)",
+                    index, frame.t_s, pooled.origin, pooled.f_px, before, self.focal.f_px)
+        self.focal = pooled
+
+    def intrinsics_summary(self) -> dict:
+        """`focal.as_dict()` for summary.json, with `pooled_from` when a pooled K took over mid-stream."""
+        doc = self.focal.as_dict()
+        if self.pooled_switch is not None:
+            doc["pooled_from"] = self.pooled_switch
+        return doc
 
 
 def stream_focal(focal_px: list[float], height: int, width: int) -> FocalEstimate:

@@ -120,7 +120,7 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
     with stop_signals.writing():  # a signal now waits until summary.json is complete
         summary = summary_document(stats, cfg, command, source)
         if pipeline.cues is not None and pipeline.cues.focal is not None:  # K given, estimated or assumed
-            summary["intrinsics"] = pipeline.cues.focal.as_dict()
+            summary["intrinsics"] = pipeline.cues.intrinsics_summary()
         for sink in extra_sinks:
             summary.update(getattr(sink, "summary", dict)())
         if check is not None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -129,14 +129,20 @@ class ImageAnalyser:
         visual, focal = self._solve_alone(seen)
         return self._analysis(seen, visual, focal, t0)
 
-    def analyse_same_camera(self, paths: list[str | Path]) -> Iterator[ImageAnalysis]:
+    def analyse_same_camera(self, paths: list[str | Path],
+                            warn: Callable[[str], None] | None = None) -> Iterator[ImageAnalysis]:
         """`analyse` of images from ONE camera with one K: without given intrinsics, in two passes: each
         image solved alone, then the focal length and principal point pooled over all of them
         (`solver/self_calibration.py`) and each image solved again with that K (its `focal` says so).
-        When the images cannot tell a shared K (too few with segments), each keeps its own answer.
+        When the images cannot tell a shared K (too few with segments), each keeps its own answer, and
+        `warn` (when given) gets one line saying why; so it does without the line cue or with one image.
         All images must have the same size (an InputError names the first that does not)."""
         paths = [Path(p) for p in paths]
-        if self.camera is not None or self.detector is None or len(paths) < 2:
+        why = (None if self.camera is not None else "no line cue (--cues)" if self.detector is None
+               else "one image" if len(paths) < 2 else None)
+        if self.camera is not None or why is not None:
+            if why is not None and warn is not None:
+                warn(f"{why}, each image keeps its own K")
             yield from (self.analyse(p) for p in paths)
             return
         alone, evidence, size = [], [], None
@@ -152,6 +158,12 @@ class ImageAnalyser:
         estimated = [focal.f_px for _, _, focal in alone if focal.source == "estimated"]
         f_init = float(np.median(estimated)) if estimated else alone[0][2].f_px
         pooled = pool_intrinsics(evidence, f_init, self.calibration_config)
+        if pooled is None and warn is not None:
+            cfg = self.calibration_config
+            lined = sum(seen.segments is not None and len(seen.segments) >= cfg.min_segments for seen, _, _ in alone)
+            warn(f"the {len(paths)} images ({lined} with {cfg.min_segments}+ line segments) could "
+                 f"not tell one K (fewer than {cfg.min_frames} with segments, or f undetermined or outside "
+                 f"{cfg.hfov_range_deg[0]:g}-{cfg.hfov_range_deg[1]:g} deg HFOV), each image keeps its own K")
         for seen, visual, focal in alone:
             seen = dataclasses.replace(seen, rgb=self._read(seen.path)[0])
             t0 = time.perf_counter()

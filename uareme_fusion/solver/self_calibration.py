@@ -42,9 +42,10 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation
 
+from ..errors import InputError
 from ..lines.detect import LineSegments
 from ..pinhole import focal_from_hfov, pinhole
-from ..rotations import nearest_symmetric
+from ..rotations import nearest_symmetric, skew
 from ..types import NormalMap, VisualRotation
 from .focal import FocalEstimate, replace_cov, rotation_slope, solve_given_K
 from .joint import JointSolver
@@ -59,7 +60,10 @@ class SelfCalibrationConfig:
     rounds: int = 4
     """Axis assignments re-chosen this many times (fewer when K settles to `settled_px`)."""
     settled_px: float = 0.05
+    """A round that moves f, cx and cy each by less than this (pixels) ends the rounds."""
     jackknife_groups: int = 8
+    """Consecutive blocks of frames the jackknife leaves out in turn (count); with fewer than twice as
+    many frames the Gauss-Newton covariance alone is reported."""
     min_frames: int = 3
     """Fewer frames with segments than this: nothing is pooled."""
     min_segments: int = 6
@@ -74,7 +78,8 @@ class SelfCalibrationConfig:
     max_relative_focal_std: float = 0.1
     """Above this std(f)/f the frames could not tell f: nothing is pooled."""
     hfov_range_deg: tuple[float, float] = (30.0, 120.0)
-    """Fields of view searched (as `FocalConfig.hfov_range_deg`); a fit that ends at either is refused."""
+    """Fields of view searched (as `FocalConfig.hfov_range_deg`); a fit that ends at either (log f within
+    `_AT_BOUND` of it) is refused: the frames then say only that f lies beyond."""
     with_normals: bool = False
     """Hold each frame's rotation by its normals-only rotation too (FrameEvidence.normals_*). Off: the
     learned normals' own bias then moves K (ICL kt3, rendered, true f 481.2 and centre (319.5, 239.5):
@@ -101,10 +106,6 @@ class PooledIntrinsics:
     n_frames: int
     width: int
     height: int
-    R_cm: np.ndarray
-    """(n_frames, 3, 3) the frames' rotations at the fit (the frames that took part, in order)."""
-    used: np.ndarray
-    """Indices of those frames among the ones given."""
     principal_point_estimated: bool = True
     """False: the frames could not tell it, it is the image centre (f alone was pooled)."""
 
@@ -142,8 +143,14 @@ def pool_intrinsics(frames: list[FrameEvidence], f_init_px: float,
     """The K shared by `frames` (module docstring), starting from `f_init_px` and the image centre; the
     principal point stays at the centre (f alone is pooled) unless the frames determine it to
     `max_principal_point_std_fraction` of the width. None when fewer than `min_frames` frames have
-    segments or f stays undetermined."""
+    segments or f stays undetermined; an InputError when the frames' image sizes differ (one camera, one
+    size)."""
     cfg = config or SelfCalibrationConfig()
+    sizes = [(fr.segments.width, fr.segments.height) for fr in frames]
+    odd = next((i for i, size in enumerate(sizes) if size != sizes[0]), None)
+    if odd is not None:
+        raise InputError(f"frame {odd}: {sizes[odd][0]}x{sizes[odd][1]} px, but frame 0 is "
+                         f"{sizes[0][0]}x{sizes[0][1]}: one camera's frames have one size")
     used = [i for i, fr in enumerate(frames) if len(fr.segments) >= cfg.min_segments]
     if len(used) < cfg.min_frames:
         return None
@@ -160,7 +167,7 @@ def pool_intrinsics(frames: list[FrameEvidence], f_init_px: float,
     if not math.sqrt(cov_px2[0, 0]) / f <= cfg.max_relative_focal_std:
         return None
     return PooledIntrinsics(pinhole(f, f, x[1], x[2]), cov_px2, len(used), problem.width, problem.height,
-                            problem.rotations(x), np.array(used), principal_point_estimated=not problem.centre_fixed)
+                            principal_point_estimated=not problem.centre_fixed)
 
 
 def _fit(problem: "_Problem", f_init_px: float, cfg: SelfCalibrationConfig):
@@ -221,6 +228,10 @@ def _jackknife_cov(problem: "_Problem", x: np.ndarray, cfg: SelfCalibrationConfi
 _FIXED = 1e-6
 """The principal point's prior std, as a fraction of its usual one, when it is held at the centre."""
 
+_AT_BOUND = 1e-3
+"""log f this close to a bound of the searched range: the fit ran into it (LM only takes steps that stay
+inside, so it stops there rather than leaving)."""
+
 
 class _Problem:
     """The stacked residuals of the module docstring over a list of frames."""
@@ -251,6 +262,11 @@ class _Problem:
         lo, hi = self.log_f_range
         return bool(lo < x[0] < hi and 0.0 <= x[1] <= self.width - 1 and 0.0 <= x[2] <= self.height - 1)
 
+    def at_bound(self, x: np.ndarray) -> bool:
+        """Whether log f ended within `_AT_BOUND` of either end of the searched range."""
+        lo, hi = self.log_f_range
+        return bool(min(x[0] - lo, hi - x[0]) < _AT_BOUND)
+
     def subset(self, keep: np.ndarray) -> "_Problem":
         """The problem over the frames `keep`, starting from their rotations as now."""
         frames = [dataclasses.replace(self.frames[i], R_cm=self.R0[i]) for i in keep]
@@ -264,8 +280,9 @@ class _Problem:
         return self.R0 @ Rotation.from_rotvec(x[3:].reshape(-1, 3)).as_matrix()
 
     def _segment_geometry(self, x: np.ndarray, axes: np.ndarray):
-        """Per segment, at its axis `axes[j]`: u = R_i r-hat_k (N, 3), the vanishing point v = K u, the line
-        l = m x v through its midpoint m (homogeneous), and its half vector h = (x2 - x1) / 2 (N, 3)."""
+        """(u, v, l) per segment at its axis `axes[j]` (each (N, 3)): u = R_i r-hat_k, the vanishing point
+        v = K u and the line l = m x v through its midpoint m (homogeneous); its half vector
+        (x2 - x1) / 2 is `self.half`."""
         f = math.exp(x[0])
         u = self.rotations(x)[self.frame_of, :, axes]
         v = u @ pinhole(f, f, x[1], x[2]).T
@@ -292,8 +309,9 @@ class _Problem:
         return np.concatenate([lines / self.cfg.endpoint_noise_px, normals, prior])
 
     def jacobian(self, x: np.ndarray, axes: np.ndarray) -> csr_matrix:
-        """d residuals / d x (sparse), exact for the segments and the prior; for delta_i taken at
-        delta_i = 0 (`solve` re-centres R0 on every round, so the steps stay small)."""
+        """d residuals / d x (sparse); for each delta_i as a right perturbation of the current R_i, i.e. exact
+        at delta_i = 0 (`solve` re-centres R0 on every round, so the steps stay small). The normals' rows
+        are L_i^T J_r^-1(phi_i), phi_i = Log(R_Ni^T R_i)."""
         f = math.exp(x[0])
         u, v, l = self._segment_geometry(x, axes)
         den = np.maximum(np.hypot(l[:, 0], l[:, 1]), 1e-12)
@@ -313,7 +331,8 @@ class _Problem:
         block = np.arange(3 * F)
         rows.append(n_seg + np.repeat(block, 3))
         cols.append((3 + 3 * (block // 3)[:, None] + np.arange(3)).ravel())
-        vals.append(self.L_normals.reshape(-1))
+        phi = Rotation.from_matrix(np.swapaxes(self.R_normals, 1, 2) @ self.rotations(x)).as_rotvec()
+        vals.append((self.L_normals @ _right_jacobian_inverse(phi)).reshape(-1))
         rows.append(n_seg + 3 * F + np.array([0, 1]))
         cols.append(np.array([1, 2]))
         vals.append(np.full(2, 1.0 / self.prior_std_px))
@@ -322,11 +341,11 @@ class _Problem:
 
     def solve(self, x: np.ndarray, rounds: int | None = None) -> np.ndarray | None:
         """Rounds of (nearest axes at x, robust least squares, R0 re-centred on the result); None when a
-        fit fails or f leaves the searched range."""
+        fit fails or f leaves the searched range or ends at its bound."""
         for _ in range(rounds or self.cfg.rounds):
             axes = self.nearest_axes(x)
             x_new = self._levenberg_marquardt(x, axes)
-            if x_new is None or not self.inside(x_new):
+            if x_new is None or not self.inside(x_new) or self.at_bound(x_new):
                 return None
             moved = np.abs(np.append(math.exp(x[0]) - math.exp(x_new[0]), x[1:3] - x_new[1:3])).max()
             self.R0 = self.rotations(x_new)
@@ -382,6 +401,16 @@ class _Problem:
     def gauss_newton_cov(self) -> np.ndarray:
         """The (3, 3) block of theta in (J^T W J)^-1 at the last step (W the robust weights)."""
         return np.linalg.pinv(self._information)[:3, :3]
+
+
+def _right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
+    """J_r^-1(phi) (n, 3, 3) of rotation vectors phi (n, 3): Log(Exp(phi) Exp(d)) = phi + J_r^-1(phi) d + O(d^2)."""
+    theta = np.linalg.norm(phi, axis=1)
+    P = skew(phi)
+    small = theta < 1e-4
+    t = np.where(small, 1.0, theta)
+    c = np.where(small, 1.0 / 12.0, 1.0 / t**2 - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
+    return np.eye(3) + 0.5 * P + c[:, None, None] * P @ P
 
 
 def _information_root(cov: np.ndarray) -> np.ndarray:
