@@ -40,7 +40,7 @@ from ..lines.detect import LineSegments
 from ..pinhole import focal_from_hfov
 from .horizontal_vps import VanishingPoint, horizontal_vps
 from .vp_linkage import linkage_vps
-from .zenith import ZenithConfig, estimate_zenith, miss_angles, point_covariance, segment_lines
+from .zenith import ZenithConfig, estimate_zenith, miss_angles, segment_lines
 
 
 _SAME_VP_DEG = 0.5
@@ -230,9 +230,7 @@ def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
     found = estimate_zenith(ends, w, sigma_angle, zenith, half_size, cfg.zenith)
     n_vertical, zenith_cov = 0.0, None
     if found is not None and found.n_effective >= cfg.min_vertical_effective:
-        zenith, n_vertical = found.point, found.n_effective
-        zenith_cov = point_covariance(ends[found.inliers], zenith,
-                                      np.maximum(sigma_angle[found.inliers], math.radians(cfg.zenith.min_angle_deg)))
+        zenith, n_vertical, zenith_cov = found.point, found.n_effective, found.cov
     # The sky direction in the image: up ~ K^-1 zenith (the sign kept from `up_c`) has up[:2] ~ zenith[:2].
     n = zenith[:2].copy()
     if np.linalg.norm(n) < 1e-12:  # looking straight up or down: no horizon in view

@@ -49,6 +49,9 @@ class Zenith:
     """Boolean mask of the segments that point at it."""
     n_effective: float
     """Kish effective number of the inlier segments."""
+    cov: np.ndarray | None
+    """2x2 covariance of the finite zenith point[:2] / point[2] from its inliers (`point_covariance`);
+    None at infinity or when singular."""
 
 
 def segment_lines(ends: np.ndarray) -> np.ndarray:
@@ -148,4 +151,5 @@ def estimate_zenith(ends: np.ndarray, weights: np.ndarray, angle_std_rad: np.nda
         z = least_squares_vp(lines[inliers], weights[inliers] / s_all[inliers] ** 2)
     z = z if z[:2] @ guess[:2] >= 0 else -z
     wv = weights[inliers]
-    return Zenith(z, inliers, float(wv.sum() ** 2 / max(float(wv @ wv), 1e-300)))
+    return Zenith(z, inliers, float(wv.sum() ** 2 / max(float(wv @ wv), 1e-300)),
+                  point_covariance(ends[inliers], z, s_all[inliers]))
