@@ -131,12 +131,6 @@ class PooledIntrinsics:
                              principal_point_std_px=(float(std[1]), float(std[2])) if self.principal_point_estimated
                              else None)
 
-    def as_dict(self) -> dict:
-        return {"K": self.K.tolist(), "f_px": self.f_px, "principal_point_px": self.K[:2, 2].tolist(),
-                "std_px": {"f": float(self.std_px[0]), "cx": float(self.std_px[1]), "cy": float(self.std_px[2])},
-                "frames": self.n_frames, "principal_point_estimated": self.principal_point_estimated,
-                "origin": self.origin}
-
 
 def pool_intrinsics(frames: list[FrameEvidence], f_init_px: float,
                     config: SelfCalibrationConfig | None = None) -> PooledIntrinsics | None:
@@ -289,20 +283,24 @@ class _Problem:
         l = np.cross(self.mid, v)
         return u, v, l
 
+    def _end_distances(self, l: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(signed distance (N,) in pixels of each segment's end point from its line `l` (N, 3, through
+        its midpoint), the norm of l's [a, b] it was divided by)."""
+        den = np.maximum(np.hypot(l[:, 0], l[:, 1]), 1e-12)
+        return np.einsum("ni,ni->n", l, self.half) / den, den
+
     def axis_distances(self, x: np.ndarray) -> np.ndarray:
         """d_jk (N, 3) in pixels: the distance of segment j's end point from the line through its midpoint
         and the vanishing point K r_k of axis k (finite or not)."""
-        f = math.exp(x[0])
-        v = np.einsum("ij,njk->nik", pinhole(f, f, x[1], x[2]), self.rotations(x)[self.frame_of])
-        l = np.cross(self.mid[:, :, None], v, axisa=1, axisb=1, axisc=1)
-        return np.einsum("nik,ni->nk", l, self.half) / np.maximum(np.hypot(l[:, 0], l[:, 1]), 1e-12)
+        n = len(self.ends)
+        return np.stack([self._end_distances(self._segment_geometry(x, np.full(n, k))[2])[0] for k in range(3)],
+                        axis=1)
 
     def nearest_axes(self, x: np.ndarray) -> np.ndarray:
         return np.argmin(np.abs(self.axis_distances(x)), axis=1)
 
     def residuals(self, x: np.ndarray, axes: np.ndarray) -> np.ndarray:
-        _, _, l = self._segment_geometry(x, axes)
-        lines = np.einsum("ni,ni->n", l, self.half) / np.maximum(np.hypot(l[:, 0], l[:, 1]), 1e-12)
+        lines = self._end_distances(self._segment_geometry(x, axes)[2])[0]
         d = Rotation.from_matrix(np.swapaxes(self.R_normals, 1, 2) @ self.rotations(x)).as_rotvec()
         normals = np.einsum("fij,fj->fi", self.L_normals, d).ravel()
         prior = (x[1:3] - self.centre) / self.prior_std_px
@@ -314,9 +312,8 @@ class _Problem:
         are L_i^T J_r^-1(phi_i), phi_i = Log(R_Ni^T R_i)."""
         f = math.exp(x[0])
         u, v, l = self._segment_geometry(x, axes)
-        den = np.maximum(np.hypot(l[:, 0], l[:, 1]), 1e-12)
-        num = np.einsum("ni,ni->n", l, self.half)
-        dr_dl = (self.half / den[:, None] - (num / den**3)[:, None] * l * [1.0, 1.0, 0.0]) / self.cfg.endpoint_noise_px
+        distance, den = self._end_distances(l)
+        dr_dl = (self.half / den[:, None] - (distance / den**2)[:, None] * l * [1.0, 1.0, 0.0]) / self.cfg.endpoint_noise_px
         dr_dv = np.cross(dr_dl, self.mid)  # dr/dl . (m x dv) = (dr/dl x m) . dv
         d_theta = np.stack([dr_dv[:, 0] * f * u[:, 0] + dr_dv[:, 1] * f * u[:, 1],
                             dr_dv[:, 0] * u[:, 2], dr_dv[:, 1] * u[:, 2]], axis=1)
