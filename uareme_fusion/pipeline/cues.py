@@ -92,18 +92,28 @@ class CueSolver:
         size = (frame.rgb.shape[1], frame.rgb.shape[0])
         self._size = self._size or size
         if size != self._size and self.focal is not None and self.focal.source == "estimated":
-            index = frame.index if frame.index >= 0 else self._frames - 1
-            raise InputError(f"frame {index} (t {frame.t_s:.3f} s): {size[0]}x{size[1]} px, but the stream's "
+            raise InputError(f"frame {self._index(frame)} (t {frame.t_s:.3f} s): {size[0]}x{size[1]} px, but the stream's "
                              f"camera is {self._size[0]}x{self._size[1]} px: one camera's frames have one size")
         return size != self._size
 
     def _solve_alone(self, frame: Frame, normal_map, segments: LineSegments | None, R_init) -> VisualRotation:
         """A frame of another size while the stream's K is not from the scene: the assumed field of view at
         its own size; it takes no part in the stream's focal length."""
-        h, w = frame.rgb.shape[:2]
-        focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
-        visual = solve_given_K(self.solver, normal_map, segments, focal.K, R_init, t_s=frame.t_s)
+        return self._solve_at(self._assumed(*frame.rgb.shape[:2]), normal_map, segments, R_init, frame.t_s)
+
+    def _assumed(self, h: int, w: int) -> FocalEstimate:
+        """The assumed field of view's K for an h x w image."""
+        return FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
+
+    def _solve_at(self, focal: FocalEstimate, normal_map, segments: LineSegments | None, R_init,
+                  t_s: float) -> VisualRotation:
+        """The joint solve with `focal`'s K, with the floor of a principal point not given."""
+        visual = solve_given_K(self.solver, normal_map, segments, focal.K, R_init, t_s=t_s)
         return unknown_centre_floor(visual, focal, self.focal_config, self.solver)
+
+    def _index(self, frame: Frame) -> int:
+        """The frame's index in its source, or its count in this stream when it has none."""
+        return frame.index if frame.index >= 0 else self._frames - 1
 
     def _solve(self, frame: Frame, normal_map, segments: LineSegments | None, R_init) -> VisualRotation:
         if frame.K is not None:
@@ -131,16 +141,15 @@ class CueSolver:
                 return own
         if self.focal is None:
             h, w = (segments.height, segments.width) if segments is not None else normal_map.normals.shape[:2]
-            self.focal = FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
-        visual = solve_given_K(self.solver, normal_map, segments, self.focal.K, R_init, t_s=frame.t_s)
-        return unknown_centre_floor(visual, self.focal, self.focal_config, self.solver)
+            self.focal = self._assumed(h, w)
+        return self._solve_at(self.focal, normal_map, segments, R_init, frame.t_s)
 
     def _switch_to(self, pooled: FocalEstimate, frame: Frame) -> None:
         """Use the pooled K from `frame` on; record and log the change (one line)."""
         n = len(self._focal_px)
         before = ("the assumed field of view" if n == 0 else "each frame's own estimate" if n < 3
                   else f"the median of {n} frames' estimates")
-        index = frame.index if frame.index >= 0 else self._frames - 1
+        index = self._index(frame)
         self.pooled_switch = {"frame": index, "t_s": frame.t_s, "before": before, "f_px_before": self.focal.f_px}
         log.warning("intrinsics: from frame %d (t %.3f s) on, K %s (f %.1f px) replaces %s (f %.1f px)",
                     index, frame.t_s, pooled.origin, pooled.f_px, before, self.focal.f_px)
