@@ -9,8 +9,8 @@ returned `Estimate`. `run_scenario` times `process_imu` + `propagate_to` (its IM
 `Mekf._visual_update` less the accelerometer rows it stacks into the same Kalman update (those are
 the accelerometer update's cost, which the figure counts). On the compiled path those rows are
 mostly computed before the frame, in the call that propagates to it (`propagate_to`, counted), when
-the update falls due there; the visual update then only takes them (`take_prepared_accel_rows`, two
-views and a product, left in the visual update's time).
+the update falls due there; the visual update then only takes them (`accel_rows_compiled`: two views
+and a product, counted as accelerometer cost like the rows computed there).
 The clock is part of what is measured: a read of the thread's CPU time is a system call, about 3 us
 of CPU time when a solver ran before it, so about 0.5-1 us per IMU sample of the 30 fps figure is
 the timing's own.

@@ -83,8 +83,6 @@ def harvest_kernel_counters(x: np.ndarray, counters: dict[str, int]) -> None:
             x[index] = 0.0
             x[X_AFTER_ACCEL + index] -= count
 
-
-_STATUS_RESULTS = K.DOWNWEIGHTED | K.NONFINITE
 """The bits of a kernel's result that are `Status` bits (`kernels.DOWNWEIGHTED`, `kernels.NONFINITE`)."""
 
 
@@ -165,33 +163,23 @@ def _deferred_views(filt) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
     return views
 
 
-def take_prepared_accel_rows(filt):
-    """`(True, rows)` for an accelerometer measurement prepared when its update fell due at the end of
-    a batch (`kernels.prepare_deferred_update`), taken as it is: `rows` `(residual (3,), R (3, 3), H (3,
-    12))` as `accel_rows_compiled` gives them, or None (near free fall); `(False, None)` when none was
-    prepared (the caller then computes it, `Mekf._accel_rows`). The residual and H are views of the
-    state buffer, valid until the next update falls due."""
-    x = filt.x
-    taken = x[S_DEFERRED_ROWS]
-    if not taken:
-        return False, None
-    x[S_DEFERRED_ROWS] = NONE_PREPARED
-    if taken != PREPARED_MEASURED:
-        return True, None
-    residual, H, _, _ = _deferred_views(filt)
-    return True, (residual, x[X_ACCEL_ROWS + 3] * I3, H)
-
-
 def accel_rows_compiled(filt):
     """The accelerometer measurement of the period just completed, for a stacked update, compiled in
     the filter's state buffer (an at-rest update applied first): as `Mekf._accel_rows`, `(residual (3,),
-    R (3, 3), H (3, 12))` or None near free fall. The residual and H are views of the buffer, valid
-    until the next update falls due."""
+    R (3, 3), H (3, 12))` or None near free fall. One prepared when the update fell due at the end of a
+    batch (`kernels.prepare_deferred_update`, its flags already raised) is taken as it is. The residual
+    and H are views of the buffer, valid until the next update falls due."""
     x = filt.x
-    code = K.ACCEL_ROWS(x, _parameters(filt, False), filt.views["accel_rows"])
-    filt.flags |= code & _STATUS_RESULTS
-    if not code & K.MEASURED:
-        return None
+    prepared = x[S_DEFERRED_ROWS]
+    if prepared:
+        x[S_DEFERRED_ROWS] = NONE_PREPARED
+        if prepared != PREPARED_MEASURED:
+            return None
+    else:
+        code = K.ACCEL_ROWS(x, _parameters(filt, False), filt.views["accel_rows"])
+        filt.flags |= code & K.STATUS_RESULTS
+        if not code & K.MEASURED:
+            return None
     residual, H, _, _ = _deferred_views(filt)
     return residual, x[X_ACCEL_ROWS + 3] * I3, H
 

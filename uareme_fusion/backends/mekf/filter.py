@@ -21,7 +21,7 @@ from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
 from .compiled import (KERNEL, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters,
-                       integrate_frame_batch_compiled, take_prepared_accel_rows)
+                       integrate_frame_batch_compiled)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
                            visual_model)
@@ -350,9 +350,7 @@ class Mekf(Backend):
         accel_rows = None
         if self.accel.due:  # the period's measurement: prepared when it fell due (compiled), or now
             self.accel.due = False
-            prepared, accel_rows = take_prepared_accel_rows(self) if self.compiled else (False, None)
-            if not prepared:
-                accel_rows = self._accel_rows()
+            accel_rows = self._accel_rows()
         r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
         t_s, t_prev_s = self.t_state, self.t_visual_s
         self.t_visual_s = t_s

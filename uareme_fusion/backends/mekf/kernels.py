@@ -43,6 +43,8 @@ from .state_buffer import (PREPARED_MEASURED, PREPARED_NO_MEASUREMENT, NONE_PREP
 DOWNWEIGHTED, NONFINITE = status_bits.ACCEL_DOWNWEIGHTED, status_bits.UPDATE_NONFINITE
 """An accelerometer update was down-weighted; an update's result was not finite (and dropped): the
 bits of the `Status` flags that say so, so that a result is or-ed into the filter's flags as it is."""
+STATUS_RESULTS = DOWNWEIGHTED | NONFINITE
+"""The result bits that are `Status` flags."""
 MEASURED = 1 << 30
 """`accel_rows_in_place` wrote an accelerometer measurement (no `Status` bit)."""
 
@@ -325,7 +327,7 @@ def prepare_deferred_update(x, p):
         R_wc[:, :] = R_wc_new
         R_wm[:, :] = R_wm_new
         s[S_DEFERRED_BITS] = NONFINITE if s2[S_NONFINITE] > s[S_NONFINITE] else 0
-    return code & (DOWNWEIGHTED | NONFINITE)
+    return code & STATUS_RESULTS
 
 
 def integrate_frame_batch(x, t, gyro, accel, watermark_s, gyro_range_rad_s, t_frame_s, p, record_R, record_P):
