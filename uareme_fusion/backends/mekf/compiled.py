@@ -121,8 +121,7 @@ def stage_compiled(filt, t, gyro_c, accel_c) -> int:
     in order, later than the stream's watermark, below the gyro range) and the batch spans less than
     an accelerometer period and the reorder window (a batch that long may release samples)."""
     stream = filt._stream
-    return K.STAGE(filt._stage, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s,
-                   filt.config.accel_update_period_s + stream.reorder_window_s)
+    return K.STAGE(filt._stage, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s, filt.stage_span_s)
 
 
 def integrate_staged_compiled(filt, n: int, t_frame_s: float) -> bool:
@@ -131,7 +130,7 @@ def integrate_staged_compiled(filt, n: int, t_frame_s: float) -> bool:
     frame. False, changing nothing, when a sample lies past the frame, the frame lies past the gap
     limit, a step is an IMU gap, or an accelerometer update waits. A frame's path: the fewest Python
     steps around the one call."""
-    record_R, record_P = _record_buffers(filt, n)
+    record_R, record_P = _record_buffers(filt, n) if filt.config.record_imu_estimates else (_NO_RECORD, _NO_RECORD)
     code = K.INTEGRATE_STAGED(filt.x, filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
     if code < 0:
         return False

@@ -125,6 +125,7 @@ class Mekf(Backend):
         self._stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
         self._stage = np.empty((STAGE_ROWS, 8)) if self.compiled else None  # a frame's samples (`process_imu`)
         self._staged = 0  # how many
+        self.stage_span_s = cfg.accel_update_period_s + self._stream.reorder_window_s  # a staged batch spans less
         self._set_motion(motion_for(cfg.mode))
         self._mode_resolved = cfg.mode != MekfMode.AUTO
         self.x = new_state_buffer()  # R_wc = R_wm = I, b_c = 0, P = 0, t_state None
