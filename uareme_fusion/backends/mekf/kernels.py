@@ -32,7 +32,7 @@ from .accel import chunk_bounds
 from .matrix3 import exp3_into, inv3, matmul3_into
 from .measurements import gravity_model, zero_rate_model
 from ..imu_stream import rows_if_clean
-from .state import orthonormal, reset_jacobian
+from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
 from .state_buffer import (PREPARED_MEASURED, PREPARED_NO_MEASUREMENT, NONE_PREPARED, S_ACC_ELAPSED, S_ACC_TIME,
                            S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_DEFERRED_BITS,
                            S_DEFERRED_ROWS, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE,
@@ -197,15 +197,20 @@ def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
         for st in range(2):
             for i in range(3):
                 lp[st, i] += lp_J[st, i, 0] * dx[3] + lp_J[st, i, 1] * dx[4] + lp_J[st, i, 2] * dx[5]
-    n_blocks = 2 if with_manhattan else 1  # G is the identity but on the rotation blocks (offsets 0, 6)
+    # G is the identity but on the rotation blocks (`state.reset_jacobian`), the Manhattan one only
+    # `with_manhattan`.
     GP = P_new.copy()  # G P_new: only the rotation blocks' rows change
-    for o in range(0, 6 * n_blocks, 6):
+    for o in ROTATION_BLOCKS:
+        if o != ROTATION_BLOCKS[0] and not with_manhattan:
+            break
         for a in range(3):
             for j in range(12):
                 GP[o + a, j] = (G[o + a, o] * P_new[o, j] + G[o + a, o + 1] * P_new[o + 1, j]
                                 + G[o + a, o + 2] * P_new[o + 2, j])
     GPG = GP.copy()  # (G P_new) G^T: only their columns change
-    for o in range(0, 6 * n_blocks, 6):
+    for o in ROTATION_BLOCKS:
+        if o != ROTATION_BLOCKS[0] and not with_manhattan:
+            break
         for i in range(12):
             for b in range(3):
                 GPG[i, o + b] = GP[i, o] * G[o + b, o] + GP[i, o + 1] * G[o + b, o + 1] + GP[i, o + 2] * G[o + b, o + 2]
