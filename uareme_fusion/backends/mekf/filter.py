@@ -29,8 +29,8 @@ from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
 from .status_bits import status_of
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
-from .state_buffer import (S_IMU_T, S_PRODUCTS, S_T_STATE, X_B_C, X_P, X_R_WC, X_R_WM, BufferArray,
-                           BufferScalar, field_views, new_state_buffer)
+from .state_buffer import (S_IMU_T, S_PRODUCTS, S_T_STATE, X_B_C, X_P, X_R_WC, X_R_WM, BufferArray, BufferScalar,
+                           field_views, new_state_buffer)
 
 
 _P_TH = X_P + N_STATE * np.arange(N_STATE)[TH, None] + np.arange(N_STATE)[TH]  # where P[TH, TH] lies in `x`
@@ -38,6 +38,7 @@ _ESTIMATE_INDEX = np.stack([np.arange(X_R_WC, X_R_WM).reshape(3, 3), np.arange(X
                             _P_TH.T, np.tile(np.arange(X_B_C, X_P), (3, 1))])
 """Where R_wc, R_wm, P[TH, TH], its transpose and b_c (in each row) lie in the state buffer `x` (5, 3, 3):
 one `take` copies them."""
+_NEW, _SET = object.__new__, object.__setattr__
 
 
 def new_estimate(t_s, R_wc, cov, status, R_wm, gyro_bias_rad_s) -> Estimate:
@@ -47,9 +48,6 @@ def new_estimate(t_s, R_wc, cov, status, R_wm, gyro_bias_rad_s) -> Estimate:
     _SET(est, "__dict__", {"t_s": t_s, "R_wc": R_wc, "cov": cov, "status": status, "R_wm": R_wm,
                            "gyro_bias_rad_s": gyro_bias_rad_s})
     return est
-
-
-_NEW, _SET = object.__new__, object.__setattr__
 
 
 def _shape(a) -> tuple:
