@@ -12,7 +12,8 @@ the compiled path those rows are mostly computed before the frame, in the call t
 (`propagate_to`, counted), when the update falls due there; the frame then only takes them.
 The clock is part of what is measured: a read of the thread's CPU time is a system call, about 3 us
 of CPU time when a solver ran before it, so about 0.5-1 us per IMU sample of the 30 fps figure is
-the timing's own.
+the timing's own (a backend that does nothing, timed the same way, measured 1.2-1.4 us per sample
+on the 2-core machine shared by four other jobs).
 """
 
 from __future__ import annotations
