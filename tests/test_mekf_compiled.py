@@ -239,3 +239,16 @@ def test_a_kernel_compiles_where_no_cache_folder_is_writable(tmp_path, monkeypat
     kernel = jit.compiled(_doubled, cache=True)
     assert type(kernel._cache).__name__ == "NullCache"
     assert kernel(np.arange(3.0)).tolist() == [0.0, 2.0, 4.0]
+
+
+def test_kernels_see_the_fields_that_python_sees():
+    """`kernels.state_views` (the kernels' fields of the state buffer) and `state_buffer.field_views`
+    (Python's) are the same views of `x`, field by field, in the order of `state_buffer.FIELDS`."""
+    x = state_buffer.new_state_buffer()
+    x[:] = np.arange(x.size)
+    python_views = state_buffer.field_views(x)
+    kernel_views = getattr(kernels.state_views, "py_func", kernels.state_views)(x)
+    assert len(kernel_views) == len(state_buffer.FIELDS) - 1  # all but `accel_rows`, which the kernels slice
+    for view, (name, shape) in zip(kernel_views, state_buffer.FIELDS):
+        assert view.shape == shape and np.shares_memory(view, x)
+        assert np.array_equal(view, python_views[name])

@@ -108,23 +108,35 @@ def integrate_compiled(filt, rows: np.ndarray, extra_s: float, defer: bool) -> b
     return True
 
 
-def integrate_frame_batch_compiled(filt, stream, t, gyro_c, accel_c, t_frame_s: float) -> bool:
-    """A batch that `process_imu` held unchecked (`t` (n,) s, `gyro_c` (n, 3) rad/s, `accel_c` (n, 3)
-    m/s^2, camera frame), nothing else in the reorder buffer `stream` (the filter's `ImuStream`):
-    checked as `ImuStream.add` checks it and integrated to the frame at `t_frame_s`, in one kernel
-    call (`kernels.integrate_frame_batch`); an update falling due at its end is prepared for the frame.
-    False, changing nothing, unless every sample is clean (finite, in order, later than the stream's
-    watermark, below the gyro range) and at or before the frame, with no IMU gap and no
-    accelerometer update waiting. A frame's path: the fewest Python steps around the one call."""
-    recording = filt.config.record_imu_estimates
-    record_R, record_P = _record_buffers(filt, t.shape[0])
-    code = K.FRAME_BATCH(filt.x, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s, t_frame_s,
-                         _parameters(filt, True), record_R, record_P)
+STAGE_ROWS = 512
+"""Rows of a filter's stage (`Mekf._stage`, `stage_compiled`): a frame's samples up to 15 kHz at 30 fps."""
+
+
+def stage_compiled(filt, t, gyro_c, accel_c) -> int:
+    """A frame's batch from `process_imu` (`t` (n,) s, `gyro_c` (n, 3) rad/s, `accel_c` (n, 3) m/s^2,
+    camera frame, shapes checked), nothing else held in the filter's reorder buffer: checked as
+    `ImuStream.add` checks it and copied into the filter's stage (the caller may reuse its arrays),
+    where it waits for the frame (`integrate_staged_compiled`), in one kernel call
+    (`kernels.stage_batch`). Returns n, or 0 (nothing staged) unless every sample is clean (finite,
+    in order, later than the stream's watermark, below the gyro range) and the batch spans less than
+    an accelerometer period and the reorder window (a batch that long may release samples)."""
+    stream = filt._stream
+    return K.STAGE(filt._stage, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s, filt.stage_span_s)
+
+
+def integrate_staged_compiled(filt, n: int, t_frame_s: float) -> bool:
+    """The `n` samples staged by `stage_compiled`, integrated to the frame at `t_frame_s` (s) in one
+    kernel call (`kernels.integrate_staged`); an update falling due at their end is prepared for the
+    frame. False, changing nothing, when a sample lies past the frame, the frame lies past the gap
+    limit, a step is an IMU gap, or an accelerometer update waits. A frame's path: the fewest Python
+    steps around the one call."""
+    record_R, record_P = _record_buffers(filt, n) if filt.config.record_imu_estimates else (_NO_RECORD, _NO_RECORD)
+    code = K.INTEGRATE_STAGED(filt.x, filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
     if code < 0:
         return False
-    stream.released_elsewhere(t_frame_s)
-    if recording:
-        filt.record_t.append(t.copy())
+    filt._stream.released_elsewhere(t_frame_s)
+    if record_R.shape[0]:
+        filt.record_t.append(filt._stage[:n, 0].copy())
         filt.record_R.append(record_R)
         filt.record_P.append(record_P)
     filt.flags |= code

@@ -20,8 +20,8 @@ from ..imu_stream import ImuStream, check_imu_arrays
 from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
-from .compiled import (KERNEL, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters,
-                       integrate_frame_batch_compiled)
+from .compiled import (KERNEL, STAGE_ROWS, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters,
+                       integrate_staged_compiled, stage_compiled)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
                            visual_model)
@@ -33,11 +33,21 @@ from .state_buffer import (S_IMU_T, S_PRODUCTS, S_T_STATE, X_B_C, X_P, X_R_WC, X
                            field_views, new_state_buffer)
 
 
-_P_TH = X_P + N_STATE * np.arange(3)[:, None] + np.arange(3)  # where P[TH, TH] lies in `x`
+_P_TH = X_P + N_STATE * np.arange(N_STATE)[TH, None] + np.arange(N_STATE)[TH]  # where P[TH, TH] lies in `x`
 _ESTIMATE_INDEX = np.stack([np.arange(X_R_WC, X_R_WM).reshape(3, 3), np.arange(X_R_WM, X_B_C).reshape(3, 3), _P_TH,
-                            _P_TH.T])
-"""Where R_wc, R_wm, P[TH, TH] and its transpose lie in the state buffer `x` (4, 3, 3): one `take` copies them."""
-_BIAS_INDEX = np.arange(X_B_C, X_P)
+                            _P_TH.T, np.tile(np.arange(X_B_C, X_P), (3, 1))])
+"""Where R_wc, R_wm, P[TH, TH], its transpose and b_c (in each row) lie in the state buffer `x` (5, 3, 3):
+one `take` copies them."""
+_NEW, _SET = object.__new__, object.__setattr__
+
+
+def new_estimate(t_s, R_wc, cov, status, R_wm, gyro_bias_rad_s) -> Estimate:
+    """`Estimate(t_s, R_wc, cov, status, R_wm, gyro_bias_rad_s)`, its fields set at once: a frozen
+    dataclass's `__init__` sets them one call each (about 2 us of a frame's path, against 1)."""
+    est = _NEW(Estimate)
+    _SET(est, "__dict__", {"t_s": t_s, "R_wc": R_wc, "cov": cov, "status": status, "R_wm": R_wm,
+                           "gyro_bias_rad_s": gyro_bias_rad_s})
+    return est
 
 
 def _shape(a) -> tuple:
@@ -111,8 +121,10 @@ class Mekf(Backend):
         self.trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
         self.compiled = cfg.compiled and KERNEL is not None
         self._stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
-        self._deferred: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # see `process_imu`
-        self.motion = motion_for(cfg.mode)
+        self._stage = np.empty((STAGE_ROWS, 8)) if self.compiled else None  # a frame's samples (`process_imu`)
+        self._staged = 0  # how many
+        self.stage_span_s = cfg.accel_update_period_s + self._stream.reorder_window_s  # a staged batch spans less
+        self._set_motion(motion_for(cfg.mode))
         self._mode_resolved = cfg.mode != MekfMode.AUTO
         self.x = new_state_buffer()  # R_wc = R_wm = I, b_c = 0, P = 0, t_state None
         self.views = field_views(self.x)
@@ -154,7 +166,12 @@ class Mekf(Backend):
         """Fix an `auto` filter's mode (once: later calls and explicit modes are left alone)."""
         if not self._mode_resolved:
             self._mode_resolved = True
-            self.motion = motion_for(mode)
+            self._set_motion(motion_for(mode))
+
+    def _set_motion(self, motion) -> None:
+        self.motion = motion
+        # Whether a frame's IMU batch may wait in the stage for the frame's one compiled call (`process_imu`).
+        self._stages_frames = self.compiled and self.imu_is_camera and motion.uses_imu and motion.fuses_visual
 
     # ------------------------------------------------------------------ public API
     def process_imu(self, t_s, gyro_rad_s, accel_m_s2) -> None:
@@ -166,17 +183,15 @@ class Mekf(Backend):
             return
         if self.config.imu_time_offset_s:
             t_s = np.asarray(t_s, float) + self.config.imu_time_offset_s
-        if self._deferred is not None:
-            self._add_deferred()
-        if self.compiled and self.initialised and self.motion.fuses_visual and self.imu_is_camera:
+        if self._staged:
+            self._add_staged()
+        if self._stages_frames and self.initialised and not self.pending and not self._stream.held_count:
             t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
-            n = t.shape[0]
-            # A frame's worth, nothing else waiting: held as it is until the frame checks and integrates
-            # it in one compiled call (`propagate_to`); any other use of the stream adds it first, as
-            # below (a batch this short releases nothing on its own).
-            if (n and not self.pending and self._stream.held_count == 0
-                    and t.item(n - 1) - t.item(0) < self.config.accel_update_period_s + self._stream.reorder_window_s):
-                self._deferred = (t.copy(), gyro.copy(), accel.copy())  # the caller may reuse its arrays
+            # A frame's worth, clean, nothing else waiting: checked and copied into the stage in one
+            # compiled call, where it waits for the frame's one compiled call (`propagate_to`); any
+            # other use of the stream adds it first, as below (a batch this short releases nothing).
+            self._staged = stage_compiled(self, t, gyro, accel)
+            if self._staged:
                 return
             t_s, gyro_rad_s, accel_m_s2 = t, gyro, accel  # checked: `ImuStream.add` takes them as they are
         self._add(t_s, gyro_rad_s, accel_m_s2)
@@ -196,15 +211,16 @@ class Mekf(Backend):
             if self.pending_span_s >= self.config.accel_update_period_s:
                 self.motion.integrate_pending(self)
 
-    def _add_deferred(self) -> None:
-        deferred, self._deferred = self._deferred, None
-        self._add(*deferred)
+    def _add_staged(self) -> None:
+        """The batch staged for the next frame (clean: see `process_imu`) into the reorder buffer."""
+        rows, self._staged = self._stage[:self._staged], 0
+        self._add(rows[:, 0], rows[:, 1:4], rows[:, 4:7])  # `ImuStream.add` copies them
 
     @property
     def stream(self) -> ImuStream:
-        """The IMU reorder buffer, with the batch `process_imu` may hold for the next frame added first."""
-        if self._deferred is not None:
-            self._add_deferred()
+        """The IMU reorder buffer, with the batch `process_imu` may stage for the next frame added first."""
+        if self._staged:
+            self._add_staged()
         return self._stream
 
     def flush(self) -> None:
@@ -236,7 +252,9 @@ class Mekf(Backend):
         self.propagate_to(t_s)
         fuses_visual = self.motion.fuses_visual
         if visual is not None and self.manhattan_initialised and fuses_visual:
-            self._visual_update(visual)  # stacks a due accelerometer update into its own
+            # A due accelerometer measurement (prepared when it fell due, on the compiled path) rides in
+            # the visual update.
+            self._visual_update(visual, self._take_accel_rows() if self.accel.due else None)
             return self._estimate(t_s)
         if self.accel.due:
             self.accel_update()
@@ -259,15 +277,14 @@ class Mekf(Backend):
 
     def propagate_to(self, t_s: float) -> None:
         """Propagate the state to `t_s` (s, camera clock) with the mode's motion strategy."""
-        deferred = self._deferred
-        if deferred is not None:
-            # A frame's batch, held unchecked by `process_imu`: checked and integrated in one compiled call
-            # (an IMU gap or saturation seen, an unclean batch or one past the frame take the reference path).
+        if self._staged:
+            # A frame's batch, staged by `process_imu`: integrated in one compiled call (after an IMU gap
+            # or saturation, or with a sample past the frame, the reference path takes it).
             if (not self.in_imu_gap and not self._stream.saturation_seen
-                    and integrate_frame_batch_compiled(self, self._stream, *deferred, t_s)):
-                self._deferred = None
+                    and integrate_staged_compiled(self, self._staged, t_s)):
+                self._staged = 0
                 return
-            self._add_deferred()
+            self._add_staged()
         elif not self.pending and t_s == self.t_state:
             return  # already there (a frame's prediction, then its update); later stamps are late
         self.motion.propagate_to(self, t_s)
@@ -315,6 +332,11 @@ class Mekf(Backend):
         if rows is not None:
             self._kalman_update(*rows)
 
+    def _take_accel_rows(self):
+        """The due accelerometer update's `_accel_rows`, for a stacked update (no longer due)."""
+        self.accel.due = False
+        return self._accel_rows()
+
     def _accel_rows(self):
         """The period's zero-rate update (applied at once, with `rest_gyro_max_rad_s`), then the
         gravity measurement of its mean (or low-passed) direction: `(residual, R, H)` or None (near
@@ -343,14 +365,11 @@ class Mekf(Backend):
         self.counters["accel_updates"] += 1
         return r, var * I3, H
 
-    def _visual_update(self, visual: VisualRotation) -> None:
+    def _visual_update(self, visual: VisualRotation, accel_rows) -> None:
         """The frame's rotation as a measurement of `R_cm`, gated and Huber-weighted, stacked with
-        the vertical pseudo-measurement and a due accelerometer update into one update."""
+        the vertical pseudo-measurement and `accel_rows` (`_accel_rows` of a due accelerometer
+        update, or None) into one update; past the gate, `accel_rows` alone."""
         cfg = self.config
-        accel_rows = None
-        if self.accel.due:  # the period's measurement: prepared when it fell due (compiled), or now
-            self.accel.due = False
-            accel_rows = self._accel_rows()
         r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
         t_s, t_prev_s = self.t_state, self.t_visual_s
         self.t_visual_s = t_s
@@ -441,16 +460,14 @@ class Mekf(Backend):
         """The estimate of the state now, stamped `t_s`, with the `Status` of the flag `bits`."""
         if not self.initialised:
             return Estimate(t_s, np.eye(3), np.eye(3), status_of(bits | status_bits.NOT_INITIALISED))
-        # The fewest numpy calls (a frame's estimate runs between solver calls, where each call costs
-        # microseconds, and a numba call more): one gather copies R_wc, R_wm, P[TH, TH] and its transpose.
-        R_wc, R_wm, cov, cov_T = self.x.take(_ESTIMATE_INDEX)
-        cov += cov_T
+        # The fewest Python steps (a frame's estimate runs between solver calls, where each costs about
+        # a microsecond, and a numba call more): one gather copies R_wc, R_wm, P[TH, TH], its transpose, b_c.
+        R_wc, R_wm, P_th, P_th_T, b_c = self.x.take(_ESTIMATE_INDEX)
+        cov = P_th + P_th_T  # into a new array: in place, numpy would check two views of one array for overlap
         cov *= 0.5
         if not self.motion.uses_imu:
             cov += self.persistent_cov
             bias_i = None
         else:
-            b_c = self.x.take(_BIAS_INDEX)
-            bias_i = b_c if self.imu_is_camera else self.R_ci.T @ b_c
-        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm=R_wm if self.manhattan_initialised else None,
-                        gyro_bias_rad_s=bias_i)
+            bias_i = b_c[0] if self.imu_is_camera else self.R_ci.T @ b_c[0]
+        return new_estimate(t_s, R_wc, cov, status_of(bits), R_wm if self.manhattan_initialised else None, bias_i)

@@ -32,7 +32,7 @@ from .accel import chunk_bounds
 from .matrix3 import exp3_into, inv3, matmul3_into
 from .measurements import gravity_model, zero_rate_model
 from ..imu_stream import rows_if_clean
-from .state import orthonormal, reset_jacobian
+from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
 from .state_buffer import (PREPARED_MEASURED, PREPARED_NO_MEASUREMENT, NONE_PREPARED, S_ACC_ELAPSED, S_ACC_TIME,
                            S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_DEFERRED_BITS,
                            S_DEFERRED_ROWS, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE,
@@ -148,8 +148,8 @@ def matmul_into(A, B, out):
 
 def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
     """Joseph-form update with isotropic measurement noise `var`, then injection into the nominal
-    state and the reset of the error (as `Mekf._kalman_update`). Updates the arrays in place and
-    returns the new (R_wc, R_wm); nothing changes but `s[S_NONFINITE]` when the result is not finite.
+    state and the reset of the error (as `Mekf._kalman_update`), all in place; nothing changes but
+    `s[S_NONFINITE]` when the result is not finite.
     Scalar loops that use the structure (a BLAS call per small product costs more than the product,
     and more still out of the caches, after a solver call): the Joseph form expanded,
     `(I - K H) P (I - K H)^T + K (var I) K^T = P - K (P H^T)^T - (P H^T) K^T + K S K^T` with `S` the
@@ -180,15 +180,16 @@ def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
             finite &= abs(v) < np.inf
     if not finite:
         s[S_NONFINITE] += 1
-        return R_wc, R_wm
+        return
     with_manhattan = p[P_MF_INIT] > 0
     G = reset_jacobian(dx, with_manhattan)
     if with_manhattan:
-        R_wm = matmul3_into(R_wm, exp3_into(dx[6], dx[7], dx[8], np.empty((3, 3))), np.empty((3, 3)))
-    R_wc = matmul3_into(R_wc, exp3_into(dx[0], dx[1], dx[2], np.empty((3, 3))), np.empty((3, 3)))
+        R_wm[:, :] = matmul3_into(R_wm, exp3_into(dx[6], dx[7], dx[8], np.empty((3, 3))), np.empty((3, 3)))
+    R_wc[:, :] = matmul3_into(R_wc, exp3_into(dx[0], dx[1], dx[2], np.empty((3, 3))), np.empty((3, 3)))
     s[S_PRODUCTS] += 1
     if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
-        R_wc, R_wm = orthonormal(R_wc), orthonormal(R_wm)
+        R_wc[:, :] = orthonormal(R_wc)
+        R_wm[:, :] = orthonormal(R_wm)
         s[S_PRODUCTS] = 0
     for i in range(3):
         b_c[i] += dx[3 + i]
@@ -196,28 +197,32 @@ def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
         for st in range(2):
             for i in range(3):
                 lp[st, i] += lp_J[st, i, 0] * dx[3] + lp_J[st, i, 1] * dx[4] + lp_J[st, i, 2] * dx[5]
-    n_blocks = 2 if with_manhattan else 1  # G is the identity but on the rotation blocks (offsets 0, 6)
+    # G is the identity but on the rotation blocks (`state.reset_jacobian`), the Manhattan one only
+    # `with_manhattan`.
     GP = P_new.copy()  # G P_new: only the rotation blocks' rows change
-    for o in range(0, 6 * n_blocks, 6):
+    for o in ROTATION_BLOCKS:
+        if o != ROTATION_BLOCKS[0] and not with_manhattan:
+            break
         for a in range(3):
             for j in range(12):
                 GP[o + a, j] = (G[o + a, o] * P_new[o, j] + G[o + a, o + 1] * P_new[o + 1, j]
                                 + G[o + a, o + 2] * P_new[o + 2, j])
     GPG = GP.copy()  # (G P_new) G^T: only their columns change
-    for o in range(0, 6 * n_blocks, 6):
+    for o in ROTATION_BLOCKS:
+        if o != ROTATION_BLOCKS[0] and not with_manhattan:
+            break
         for i in range(12):
             for b in range(3):
                 GPG[i, o + b] = GP[i, o] * G[o + b, o] + GP[i, o + 1] * G[o + b, o + 1] + GP[i, o + 2] * G[o + b, o + 2]
     for i in range(12):
         for j in range(12):
             P[i, j] = 0.5 * (GPG[i, j] + GPG[j, i])
-    return R_wc, R_wm
 
 
 def accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
     """The end of an accelerometer period (as `Mekf._accel_rows`): the zero-rate update when at rest,
-    applied, then the (low-passed) accelerometer direction's measurement. Consumes the period.
-    Returns (R_wc, R_wm, ok, residual (3,), variance, H (3, 12), downweighted); `ok` False (no
+    applied in place, then the (low-passed) accelerometer direction's measurement. Consumes the
+    period. Returns (ok, residual (3,), variance, H (3, 12), downweighted); `ok` False (no
     measurement) near free fall."""
     T = s[S_ACC_TIME]
     acc_c = acc_sum / T if T > 0 else acc_sum.copy()
@@ -234,7 +239,7 @@ def accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
                 if math.isnan(s[S_REST_SINCE]):
                     s[S_REST_SINCE] = s[S_T_STATE] - T
                 if s[S_T_STATE] - s[S_REST_SINCE] >= p[P_REST_MIN_S]:
-                    R_wc, R_wm = kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
+                    kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
                     s[S_REST_UPDATES] += 1
         rest_sums[:] = 0.0
         s[S_REST_N] = 0
@@ -254,20 +259,20 @@ def accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
     ok, r, var, H, downweighted = accel_measurement(acc_c, T, R_wc, lp_J[1], tau > 0, p)
     if not ok:
         s[S_ACCEL_SKIPPED] += 1
-        return R_wc, R_wm, False, r, var, H, False
+        return False, r, var, H, False
     if downweighted:
         s[S_ACCEL_DOWNWEIGHTED] += 1
     s[S_ACCEL_UPDATES] += 1
-    return R_wc, R_wm, True, r, var, H, downweighted
+    return True, r, var, H, downweighted
 
 
 def accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
-    """The update at the end of an accelerometer period (as `Mekf.accel_update`): `accel_rows`, then
-    its measurement's update. Returns (R_wc, R_wm, downweighted)."""
-    R_wc, R_wm, ok, r, var, H, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
+    """The update at the end of an accelerometer period (as `Mekf.accel_update`), in place:
+    `accel_rows`, then its measurement's update. Returns whether it was down-weighted."""
+    ok, r, var, H, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
     if ok:
-        R_wc, R_wm = kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
-    return R_wc, R_wm, downweighted
+        kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
+    return downweighted
 
 
 def state_views(x):
@@ -322,28 +327,33 @@ def prepare_deferred_update(x, p):
     if code & MEASURED:
         s2, R_wc, R_wm, b_c, P, _, _, lp, lp_J, _ = state_views(after)
         rows = x[X_ACCEL_ROWS:X_SIZE]
-        R_wc_new, R_wm_new = kalman_update(s2, R_wc.copy(), R_wm.copy(), b_c, P, lp, lp_J, rows[0:3], rows[3],
-                                           rows[4:40].reshape((3, 12)), p)
-        R_wc[:, :] = R_wc_new
-        R_wm[:, :] = R_wm_new
+        kalman_update(s2, R_wc, R_wm, b_c, P, lp, lp_J, rows[0:3], rows[3], rows[4:40].reshape((3, 12)), p)
         s[S_DEFERRED_BITS] = NONFINITE if s2[S_NONFINITE] > s[S_NONFINITE] else 0
     return code & STATUS_RESULTS
 
 
-def integrate_frame_batch(x, t, gyro, accel, watermark_s, gyro_range_rad_s, t_frame_s, p, record_R, record_P):
-    """`integrate_batch` for a batch not yet checked (`t` (n,) s, `gyro` (n, 3) rad/s, `accel` (n, 3)
-    m/s^2, camera frame), propagated to a frame at `t_frame_s` s: -2, changing nothing, unless all its
-    samples are clean (`imu_stream.rows_if_clean` against `watermark_s` and `gyro_range_rad_s`) and at
-    or before the frame, with the frame no further than `P_GAP_LIMIT` past the last one, and no
-    accelerometer update waits (`s[S_ACCEL_DUE]`)."""
+def stage_batch(stage, t, gyro, accel, newest_s, gyro_range_rad_s, max_span_s):
+    """A frame's IMU samples (`t` (n,) s, `gyro` (n, 3) rad/s, `accel` (n, 3) m/s^2, camera frame;
+    shapes checked), checked as `ImuStream.add` checks them (`imu_stream.rows_if_clean` against
+    `newest_s` and `gyro_range_rad_s`) and copied into the rows of `stage` (`types.IMU_COLUMNS`),
+    where they wait for the frame (`integrate_staged`). Returns n, or 0 (the samples are left to the
+    reorder buffer) when there are none, more than `stage` holds, a span of `max_span_s` or more, or
+    a sample that is not clean."""
     n = t.shape[0]
-    if (n == 0 or not t[n - 1] <= t_frame_s or not t_frame_s - t[n - 1] <= p[P_GAP_LIMIT]
-            or x[X_S + S_ACCEL_DUE] > 0):
+    if n == 0 or n > stage.shape[0] or not t[n - 1] - t[0] < max_span_s:
+        return 0
+    return n if rows_if_clean(t, gyro, accel, newest_s, gyro_range_rad_s, stage[:n]) else 0
+
+
+def integrate_staged(x, stage, n, t_frame_s, p, record_R, record_P):
+    """`integrate_batch` for the `n` rows of `stage` (`stage_batch`), propagated to a frame at
+    `t_frame_s` s: -2, changing nothing, unless they are all at or before the frame, the frame no
+    further than `P_GAP_LIMIT` past the last one, and no accelerometer update waits (`s[S_ACCEL_DUE]`)."""
+    rows = stage[:n]
+    t_last = rows[n - 1, 0]
+    if not t_last <= t_frame_s or not t_frame_s - t_last <= p[P_GAP_LIMIT] or x[X_S + S_ACCEL_DUE] > 0:
         return -2
-    rows = np.empty((n, 8))
-    if not rows_if_clean(t, gyro, accel, watermark_s, gyro_range_rad_s, rows):
-        return -2
-    return integrate_batch(x, rows, t_frame_s - t[n - 1], p, record_R, record_P)
+    return integrate_batch(x, rows, t_frame_s - t_last, p, record_R, record_P)
 
 
 def has_gap(t, t_state, gap_limit_s):
@@ -419,9 +429,8 @@ def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_s
             if last and p[P_DEFER] > 0:
                 s[S_ACCEL_DUE] = 1
             else:
-                R_wc_cur, R_wm_cur, dw = accel_and_rest_update(s, R_wc_cur, R_wm_cur, b_c, P, acc_sum, lp, lp_J,
-                                                               rest_sums, p)
-                downweighted_any |= dw
+                downweighted_any |= accel_and_rest_update(s, R_wc_cur, R_wm_cur, b_c, P, acc_sum, lp, lp_J,
+                                                          rest_sums, p)
     R_wc[:, :] = R_wc_cur
     R_wm[:, :] = R_wm_cur
     return DOWNWEIGHTED if downweighted_any else 0
@@ -480,10 +489,7 @@ def accel_update_in_place(x, p):
     bits of what happened."""
     s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state_views(x)
     nonfinite_before = s[S_NONFINITE]
-    R_wc_new, R_wm_new, downweighted = accel_and_rest_update(s, R_wc.copy(), R_wm.copy(), b_c, P, acc_sum, lp,
-                                                             lp_J, rest_sums, p)
-    R_wc[:, :] = R_wc_new
-    R_wm[:, :] = R_wm_new
+    downweighted = accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
     return (DOWNWEIGHTED if downweighted else 0) + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
 
 
@@ -494,10 +500,7 @@ def accel_rows_in_place(x, p, rows):
     `DOWNWEIGHTED` | `NONFINITE` bits of what happened (no `MEASURED`: no measurement, near free fall)."""
     s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state_views(x)
     nonfinite_before = s[S_NONFINITE]
-    R_wc_new, R_wm_new, ok, r, var, H, downweighted = accel_rows(s, R_wc.copy(), R_wm.copy(), b_c, P, acc_sum, lp,
-                                                                 lp_J, rest_sums, p)
-    R_wc[:, :] = R_wc_new
-    R_wm[:, :] = R_wm_new
+    ok, r, var, H, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
     rows[0:3] = r
     rows[3] = var
     for i in range(3):
@@ -514,8 +517,10 @@ ACCEL_ROWS = None
 """`accel_rows_in_place` compiled, or None."""
 SEGMENTS = None
 """`integrate_segments` compiled, or None."""
-FRAME_BATCH = None
-"""`integrate_frame_batch` compiled, or None."""
+STAGE = None
+"""`stage_batch` compiled, or None."""
+INTEGRATE_STAGED = None
+"""`integrate_staged` compiled, or None."""
 if jit.available():
     try:
         _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into,
@@ -526,10 +531,11 @@ if jit.available():
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = integrate_batch
-        FRAME_BATCH = jit.compiled(integrate_frame_batch, cache=True, error_model="numpy", nogil=False)  # per frame
+        STAGE = jit.compiled(stage_batch, cache=True, nogil=False)  # per frame, a few microseconds each
+        INTEGRATE_STAGED = jit.compiled(integrate_staged, cache=True, error_model="numpy", nogil=False)
         ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
         ACCEL_ROWS = accel_rows_in_place
         SEGMENTS = jit.compiled(integrate_segments, cache=True, error_model="numpy")
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)
-        KERNEL = ACCEL_UPDATE = ACCEL_ROWS = SEGMENTS = FRAME_BATCH = None
+        KERNEL = ACCEL_UPDATE = ACCEL_ROWS = SEGMENTS = STAGE = INTEGRATE_STAGED = None

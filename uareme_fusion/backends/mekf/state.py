@@ -20,7 +20,10 @@ N_STATE = 12
 I3 = np.eye(3)
 ZERO_STATE = np.zeros(N_STATE)
 ZERO_STATE.setflags(write=False)
-_TH_AND_MF = np.array([[0, 1, 2], [6, 7, 8]])
+ROTATION_BLOCKS = (TH.start, MF.start)
+"""Where the two rotation blocks (camera attitude, Manhattan frame) of the error state start (Python
+ints: compile-time constants in the kernels); the reset acts on them alone."""
+_TH_AND_MF = np.stack([np.arange(N_STATE)[TH], np.arange(N_STATE)[MF]])
 """Indices that gather the two rotation blocks of the error state as a (2, 3) stack."""
 ORTHONORMALISE_EVERY = 16
 """Products (integration chunks and update corrections) between re-orthonormalisations of R_wc and
@@ -36,9 +39,9 @@ def orthonormal(R: np.ndarray) -> np.ndarray:
 def reset_jacobian(dx, with_manhattan):
     """(12, 12) Jacobian of the error reset after injecting `dx` (12,): `I - skew(dtheta)/2` on the
     camera attitude block and, when `with_manhattan`, on the Manhattan block; identity elsewhere."""
-    G = np.eye(12)
-    for offset in (0, 6):
-        if offset == 6 and not with_manhattan:
+    G = np.eye(N_STATE)
+    for offset in ROTATION_BLOCKS:
+        if offset != ROTATION_BLOCKS[0] and not with_manhattan:
             break
         a, b, c = 0.5 * dx[offset], 0.5 * dx[offset + 1], 0.5 * dx[offset + 2]
         G[offset, offset + 1] += c
