@@ -4,7 +4,6 @@ presets. The models' Jacobians are tested in test_mekf_models.py."""
 
 from __future__ import annotations
 
-import dataclasses
 
 import numpy as np
 import pytest
@@ -14,8 +13,7 @@ from uareme_fusion.config import load_config
 from uareme_fusion.errors import ConfigError
 from uareme_fusion.rotations import WORLD_UP, align_yaw, angle_between, exp_so3, log_so3, manhattan_symmetries, nees
 from uareme_fusion.rotations import tilt_error_deg, up_in_camera
-from uareme_fusion.backends.mekf.filter import new_estimate
-from uareme_fusion.types import Estimate, Status, VisualRotation
+from uareme_fusion.types import Status, VisualRotation
 
 RATE_HZ = 200.0
 FPS = 20.0
@@ -357,16 +355,3 @@ def test_the_docstring_example_runs():
     for test in tests:
         runner.run(test)
     assert tuple(runner.summarize(verbose=False)) == (0, 10)
-
-
-def test_estimate_set_at_once_is_the_dataclass_built_field_by_field():
-    """`new_estimate` (the filter's fast constructor) gives the `Estimate` that `Estimate(...)` gives:
-    the same fields in order, still frozen, and `dataclasses.replace` works on it."""
-    args = (1.5, np.eye(3), 2.0 * np.eye(3), Status.IMU_GAP, None, np.ones(3))
-    fast, built = new_estimate(*args), Estimate(*args)
-    names = [f.name for f in dataclasses.fields(Estimate)]
-    assert type(fast) is Estimate and list(vars(fast)) == names == list(vars(built))
-    assert all(getattr(fast, name) is getattr(built, name) for name in names)
-    assert dataclasses.replace(fast, status=Status.OK).status == Status.OK
-    with pytest.raises(dataclasses.FrozenInstanceError):
-        fast.t_s = 2.0
