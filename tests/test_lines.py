@@ -335,8 +335,9 @@ def test_horizon_height_ignores_a_far_vp_and_a_weak_outlier():
     from uareme_fusion.solver.horizontal_vps import VanishingPoint
 
     n = np.array([0.0, -1.0])  # sky up: the height along n is -y
-    def vp(x, y, support):
-        return VanishingPoint(np.array([x, y, 1.0]) / math.hypot(x, y, 1.0), support, 20, np.eye(2) * 1e-5)
+    def vp(x, y, support):  # its segments about the image centre
+        return VanishingPoint(np.array([x, y, 1.0]) / math.hypot(x, y, 1.0), support, 20, np.eye(2) * 1e-5,
+                              math.hypot(x, y))
     vps = [vp(0.6, 0.10, 3.0), vp(-0.5, 0.11, 2.0), vp(10.0, 0.4, 4.0), vp(0.2, -0.1, 0.5)]
     t = _vp_height(vps, n, lambda t: np.ones_like(t), None, math.radians(1.0), AtlantaConfig())
     assert t == pytest.approx(-0.105, abs=0.01)

@@ -39,6 +39,9 @@ class VanishingPoint:
     n_inliers: int
     cov: np.ndarray | None = None
     """2x2 covariance of the finite point point[:2] / point[2] (`zenith.point_covariance`); None at infinity."""
+    distance: float = float("inf")
+    """Weighted mean distance from the finite point to its segments' midpoints (caller's units): an
+    angle seen from its segments moves it by about this times the angle; inf at infinity."""
 
 
 def fitted_vp(ends: np.ndarray, lines: np.ndarray, weights: np.ndarray, std_rad: np.ndarray, members: np.ndarray,
@@ -50,7 +53,12 @@ def fitted_vp(ends: np.ndarray, lines: np.ndarray, weights: np.ndarray, std_rad:
     point = least_squares_vp(lines[members], weights[members] / std_rad[members] ** 2)
     if support is None:
         support = float(vp_support(miss_angles(ends, point[None]), std_rad, weights)[0])
-    return VanishingPoint(point, support, len(members), point_covariance(ends[members], point, std_rad[members]))
+    distance = float("inf")
+    if abs(point[2]) > 1e-9:
+        reach = np.linalg.norm(point[:2] / point[2] - ends[members].mean(axis=1), axis=1)
+        distance = float(np.average(reach, weights=np.maximum(weights[members], 1e-300)))
+    return VanishingPoint(point, support, len(members), point_covariance(ends[members], point, std_rad[members]),
+                          distance)
 
 
 def horizontal_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, angle_std_rad: np.ndarray,
