@@ -104,15 +104,16 @@ class AtlantaConfig:
     straight), the same 1 deg as a segment's miss-angle floor (`ZenithConfig.min_angle_deg`); its
     height std is at least this angle times the VP's distance from its segments (module docstring,
     step 2). It replaced a floor of 0.02 of the diagonal whatever the distance: ECD AUC 89.6 ->
-    90.2 % on the cached inputs (odd 89.9 -> 90.6, even 89.2 -> 89.8); 0.5 / 1 / 1.5 / 2 deg: 89.9 /
-    90.2 / 90.2 / 89.9 %."""
+    90.2 % (odd 89.9 -> 90.6, even 89.2 -> 89.8; `bench horizon --ecd-only`); 0.5 / 1 / 1.5 / 2 deg:
+    89.9 / 90.2 / 90.2 / 89.9 %, and both halves gain at each of them."""
     roll_std_deg: float = 1.0
     """Std of the horizon's direction about perpendicular to the centre-zenith line (seen zenith)."""
     roll_std_unseen_deg: float = 3.0
     """The same without a seen zenith (up from the first guess)."""
     vp_inlier_support: float = 1.0
-    """Support at which a VP is as likely on the horizon as not (pi_k = 1/2). This and a floor of
-    0.02 of the diagonal on a VP's height (since `vp_floor_deg`), `roll_std_deg` and `prior_log_focal_std` are the best on ECD's even-numbered images of a grid
+    """Support at which a VP is as likely on the horizon as not (pi_k = 1/2). This, a floor of 0.02
+    of the diagonal on a VP's height (since replaced by `vp_floor_deg`), `roll_std_deg` and
+    `prior_log_focal_std` are the best on ECD's even-numbered images of a grid
     (floor 0.003-0.02, roll 0.5-1 deg, prior std 0.3-1.2, support 0.3-3): AUC even 86.1 -> 86.7 %,
     held out on the odd-numbered ones 87.0 -> 87.8 % (all 86.5 -> 87.3 %). A wider grid (floor to
     0.08, roll to 2 deg) finds 87.1 % on even that scores 83.2 % on odd: +-1 % is the noise of 52

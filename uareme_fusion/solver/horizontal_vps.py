@@ -10,7 +10,7 @@ two facades' edges (many pairs, each through a different point) from outvoting a
 pairs, being nearly parallel, meet imprecisely.
 
 Each finite VP carries the covariance of its position from its inliers (`VanishingPoint.cov`,
-`zenith.point_covariance`).
+`zenith.point_covariance`) and its distance from them (`VanishingPoint.distance`).
 """
 
 from __future__ import annotations
