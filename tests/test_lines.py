@@ -335,10 +335,27 @@ def test_horizon_height_ignores_a_far_vp_and_a_weak_outlier():
     from uareme_fusion.solver.horizontal_vps import VanishingPoint
 
     n = np.array([0.0, -1.0])  # sky up: the height along n is -y
-    def vp(x, y, support):
-        return VanishingPoint(np.array([x, y, 1.0]) / math.hypot(x, y, 1.0), support, 20, np.eye(2) * 1e-5)
+    def vp(x, y, support):  # its segments about the image centre
+        return VanishingPoint(np.array([x, y, 1.0]) / math.hypot(x, y, 1.0), support, 20, np.eye(2) * 1e-5,
+                              math.hypot(x, y))
     vps = [vp(0.6, 0.10, 3.0), vp(-0.5, 0.11, 2.0), vp(10.0, 0.4, 4.0), vp(0.2, -0.1, 0.5)]
     t = _vp_height(vps, n, lambda t: np.ones_like(t), None, math.radians(1.0), AtlantaConfig())
     assert t == pytest.approx(-0.105, abs=0.01)
     alone = _vp_height(vps[2:3], n, lambda t: np.ones_like(t), (-0.1, 0.05), math.radians(1.0), AtlantaConfig())
     assert abs(alone + 0.1) < abs(alone + 0.4)  # the far VP alone is weaker than the focal prior
+
+
+def test_horizon_height_follows_the_vp_its_segments_see_from_nearer():
+    """Two VPs on the vertical through the centre, equally supported and precise, 0.06 apart in
+    height: the one whose segments lie 0.2 away sets the height, not the one seen from 2.0 away
+    (the same error of direction moves a VP in proportion to that distance, `vp_floor_deg`)."""
+    from uareme_fusion.solver.atlanta import AtlantaConfig, _vp_height
+    from uareme_fusion.solver.horizontal_vps import VanishingPoint
+
+    n = np.array([0.0, -1.0])
+    def vp(y, distance):
+        return VanishingPoint(np.array([0.0, y, 1.0]) / math.hypot(y, 1.0), 3.0, 20, np.eye(2) * 1e-6, distance)
+    for near, far in ((0.10, 0.04), (0.04, 0.10)):
+        t = _vp_height([vp(near, 0.2), vp(far, 2.0)], n, lambda t: np.ones_like(t), None, math.radians(1.0),
+                       AtlantaConfig())
+        assert t == pytest.approx(-near, abs=0.005)

@@ -4,11 +4,12 @@ solver/horizontal_vps.py, solver/vp_linkage.py)."""
 import math
 
 import numpy as np
+import pytest
 
 from uareme_fusion.overlay.camera import assumed_K
 from uareme_fusion.rotations import exp_so3
 from uareme_fusion.sim.line_segments import manhattan_segments
-from uareme_fusion.solver.horizontal_vps import horizontal_vps
+from uareme_fusion.solver.horizontal_vps import fitted_vp, horizontal_vps
 from uareme_fusion.solver.vp_linkage import linkage_vps
 from uareme_fusion.solver.zenith import estimate_zenith, miss_angles, segment_lines
 
@@ -105,3 +106,20 @@ def test_linkage_finds_both_horizontal_vps_among_clutter():
     # The two strongest are the two directions, not clutter.
     assert {int(np.argmin([_angle_deg(vp.point, t) for t in truths])) for vp in found[:2]} == {0, 1}
     assert all(min(_angle_deg(vp.point, t) for t in truths) < 0.5 for vp in found[:2])
+
+
+def test_fitted_vp_distance_is_the_weighted_mean_distance_of_its_segments():
+    """Segments on rays from a point at 0.5 and 2.0 from it, weights 3 : 1: distance (3 * 0.5 + 2) / 4."""
+    point = np.array([0.3, -0.1])
+    angles = np.radians([10.0, 50.0, 100.0, 170.0])
+    ends, weights = [], []
+    for k, a in enumerate(angles):
+        u = np.array([math.cos(a), math.sin(a)])
+        r = 0.5 if k % 2 == 0 else 2.0
+        ends.append([point + (r - 0.05) * u, point + (r + 0.05) * u])
+        weights.append(3.0 if r == 0.5 else 1.0)
+    ends, weights = np.array(ends), np.array(weights)
+    vp = fitted_vp(ends, segment_lines(ends), weights, np.full(4, 1e-3), np.arange(4))
+    assert np.allclose(vp.point[:2] / vp.point[2], point, atol=1e-9)
+    assert vp.distance == pytest.approx((3.0 * 0.5 + 2.0) / 4.0)
+    assert vp.support == pytest.approx(weights.sum())  # every segment points at it

@@ -10,17 +10,24 @@ two facades' edges (many pairs, each through a different point) from outvoting a
 pairs, being nearly parallel, meet imprecisely.
 
 Each finite VP carries the covariance of its position from its inliers (`VanishingPoint.cov`,
-`zenith.point_covariance`).
+`zenith.point_covariance`) and its distance from them (`VanishingPoint.distance`).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .zenith import least_squares_vp, miss_angles, point_covariance, vp_likelihood
+from .zenith import (
+    floored_std,
+    least_squares_vp,
+    miss_angles,
+    point_covariance,
+    unit_points,
+    vp_likelihood,
+    vp_support,
+)
 
 
 @dataclass(frozen=True)
@@ -32,6 +39,26 @@ class VanishingPoint:
     n_inliers: int
     cov: np.ndarray | None = None
     """2x2 covariance of the finite point point[:2] / point[2] (`zenith.point_covariance`); None at infinity."""
+    distance: float = float("inf")
+    """Weighted mean distance from the finite point to its segments' midpoints (caller's units): an
+    angle seen from its segments moves it by about this times the angle; inf at infinity."""
+
+
+def fitted_vp(ends: np.ndarray, lines: np.ndarray, weights: np.ndarray, std_rad: np.ndarray, members: np.ndarray,
+              support: float | None = None) -> VanishingPoint:
+    """The VP of the segments `members` (indices or a mask) of `ends` (N, 2, 2) with `lines`, `weights`
+    and floored miss-angle stds `std_rad`: weighted least squares (w / s^2) and its covariance. Its
+    support is `support`, else S of all the segments at the fitted point (`zenith.vp_support`)."""
+    members = np.flatnonzero(members) if members.dtype == bool else members
+    point = least_squares_vp(lines[members], weights[members] / std_rad[members] ** 2)
+    if support is None:
+        support = float(vp_support(miss_angles(ends, point[None]), std_rad, weights)[0])
+    distance = float("inf")
+    if abs(point[2]) > 1e-9:
+        reach = np.linalg.norm(point[:2] / point[2] - ends[members].mean(axis=1), axis=1)
+        distance = float(np.average(reach, weights=np.maximum(weights[members], 1e-300)))
+    return VanishingPoint(point, support, len(members), point_covariance(ends[members], point, std_rad[members]),
+                          distance)
 
 
 def horizontal_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, angle_std_rad: np.ndarray,
@@ -41,9 +68,8 @@ def horizontal_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, ang
     homogeneous `proposals` (P, 3), strongest first (module docstring)."""
     if len(proposals) == 0:
         return []
-    s = np.maximum(angle_std_rad, math.radians(min_angle_deg))
-    props = proposals / np.maximum(np.linalg.norm(proposals, axis=1, keepdims=True), 1e-300)
-    angle = miss_angles(ends, props)
+    s = floored_std(angle_std_rad, min_angle_deg)
+    angle = miss_angles(ends, unit_points(proposals))
     inlier_angle = angle < 3 * s[None]
     likelihood = vp_likelihood(angle, s)
     alive = np.ones(len(ends), bool)
@@ -54,8 +80,6 @@ def horizontal_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, ang
         inliers = inlier_angle[k] & alive
         if score[k] < min_share * weights.sum() or inliers.sum() < 2:
             break
-        point = least_squares_vp(lines[inliers], weights[inliers] / s[inliers] ** 2)
         alive &= ~inliers
-        found.append(VanishingPoint(point, float(score[k]), int(inliers.sum()),
-                                    point_covariance(ends[inliers], point, s[inliers])))
+        found.append(fitted_vp(ends, lines, weights, s, inliers, float(score[k])))
     return found

@@ -21,18 +21,16 @@ the extra false ones down).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from .horizontal_vps import VanishingPoint
-from .zenith import least_squares_vp, miss_angles, point_covariance, vp_likelihood
+from .horizontal_vps import VanishingPoint, fitted_vp
+from .zenith import floored_std, miss_angles, unit_points
 
 
 def _preference_sets(ends: np.ndarray, angle_std_rad: np.ndarray, proposals: np.ndarray, max_proposals: int,
                      inlier_sigmas: float) -> np.ndarray:
     """(N, P) bool: segment i points at proposal p; at most `max_proposals` proposals, evenly spaced."""
-    props = proposals / np.maximum(np.linalg.norm(proposals, axis=1, keepdims=True), 1e-300)
+    props = unit_points(proposals)
     if len(props) > max_proposals:
         props = props[np.linspace(0, len(props) - 1, max_proposals).astype(int)]
     return (miss_angles(ends, props) < inlier_sigmas * angle_std_rad[None]).T
@@ -78,14 +76,12 @@ def linkage_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, angle_
     by J-linkage over the homogeneous `proposals` (P, 3), strongest first (module docstring)."""
     if len(proposals) == 0:
         return []
-    s = np.maximum(angle_std_rad, math.radians(min_angle_deg))
+    s = floored_std(angle_std_rad, min_angle_deg)
     pref = _preference_sets(ends, s, proposals, max_proposals, inlier_sigmas)
     found = []
     for idx in linkage_clusters(pref):
         if len(idx) < 2 or weights[idx].sum() < min_share * weights.sum():
             continue
-        point = least_squares_vp(lines[idx], weights[idx] / s[idx] ** 2)
-        support = float(weights @ vp_likelihood(miss_angles(ends, point[None])[0], s))
-        found.append(VanishingPoint(point, support, len(idx), point_covariance(ends[idx], point, s[idx])))
+        found.append(fitted_vp(ends, lines, weights, s, idx))
     found.sort(key=lambda v: -v.support)
     return found if max_vps is None else found[:max_vps]

@@ -72,10 +72,27 @@ def miss_angles(ends: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.arcsin(np.minimum(sin, 1.0))
 
 
+def floored_std(angle_std_rad: np.ndarray, min_angle_deg: float) -> np.ndarray:
+    """Segments' miss-angle stds floored at `min_angle_deg` (end point noise alone understates bent
+    edges and misgrouped segments)."""
+    return np.maximum(angle_std_rad, math.radians(min_angle_deg))
+
+
+def unit_points(points: np.ndarray) -> np.ndarray:
+    """Homogeneous points (P, 3) scaled to unit length."""
+    return points / np.maximum(np.linalg.norm(points, axis=1, keepdims=True), 1e-300)
+
+
 def vp_likelihood(miss_rad: np.ndarray, std_rad: np.ndarray) -> np.ndarray:
     """Gaussian support exp(-(a / s)^2 / 2) of segments missing a point by `miss_rad` (`miss_angles`),
     each with angle std `std_rad` (N,); summed with the segments' weights it scores the point."""
     return np.exp(-0.5 * (miss_rad / std_rad) ** 2)
+
+
+def vp_support(miss_rad: np.ndarray, std_rad: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """S = sum_i w_i exp(-(a_i / s_i)^2 / 2) of each point from its segments' miss angles `miss_rad`
+    (P, N) (`miss_angles`): the weight of the segments that point at it."""
+    return vp_likelihood(miss_rad, std_rad) @ weights
 
 
 def least_squares_vp(lines: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -132,18 +149,16 @@ def estimate_zenith(ends: np.ndarray, weights: np.ndarray, angle_std_rad: np.nda
     lines = segment_lines(ends)
     i, j = np.triu_indices(len(top), 1)
     proposals = np.cross(lines[top[i]], lines[top[j]])
-    proposals = np.concatenate([proposals, guess[None], np.array([[0.0, 1.0, 0.0]])])
-    proposals /= np.maximum(np.linalg.norm(proposals, axis=1, keepdims=True), 1e-300)
+    proposals = unit_points(np.concatenate([proposals, guess[None], np.array([[0.0, 1.0, 0.0]])]))
     inside = np.all(np.abs(proposals[:, :2]) < half_size * np.abs(proposals[:, 2:3]), axis=1)
     proposals = proposals[~inside]
-    s = np.maximum(angle_std_rad[cand], math.radians(cfg.min_angle_deg))
+    s_all = floored_std(angle_std_rad, cfg.min_angle_deg)
     score = np.zeros(len(proposals))
     for start in range(0, len(proposals), 2048):
         a = miss_angles(ends[cand], proposals[start:start + 2048])
-        score[start:start + 2048] = (weights[cand] * vp_likelihood(a, s)).sum(axis=1)
+        score[start:start + 2048] = vp_support(a, s_all[cand], weights[cand])
     score *= np.exp(-0.5 * (roll_rad(proposals) / math.radians(cfg.roll_prior_deg)) ** 2)
     z = proposals[int(np.argmax(score))]
-    s_all = np.maximum(angle_std_rad, math.radians(cfg.min_angle_deg))
     for _ in range(cfg.refinements + 1):
         inliers = (miss_angles(ends, z[None])[0] < 3 * s_all) & vertical
         if inliers.sum() < 2:
