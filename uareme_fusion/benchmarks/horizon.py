@@ -23,7 +23,8 @@ Each figure is printed beside its goal (issue 12) and its baseline:
     (left and right walls, floor and ceiling) stop being parallel; no K can do that (a K maps space
     linearly: parallel planes stay parallel), so this fits b alone. Whole planes fitted in each frame
     (trimmed least squares): parallel pairs are 2.92 deg apart (median 2.41) as read, 1.82 (1.28) with
-    0.014 / m taken off, 2.02 (1.46) at 0.02; perpendicular pairs barely move (median 0.92 -> 0.87);
+    0.014 / m taken off, 2.02 (1.46) at 0.02; perpendicular pairs barely move (median 0.92 -> 0.87).
+    Each folder alone has its best there too (means 2.58 -> 1.48 and 3.36 -> 2.27; worse at 0.01, 0.02);
   - f and the principal point cannot be fitted from the depth's Manhattan-ness: what is left of its
     distortion (parallel planes 1.3 deg apart) dominates, and fits ran to f 445 px. In the 35 frames
     turned 12+ deg from the corridor, where f sets the walls' angle, the walls meet at 90 deg best for
