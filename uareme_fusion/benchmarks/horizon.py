@@ -12,6 +12,28 @@ Each figure is printed beside its goal (issue 12) and its baseline:
   intrinsics (focal length from the lines, principal point at the image centre), and with the
   intrinsics the dataset publishes (`--camera`; the principal point is 3 px left of and 6 px below
   the centre, which a single frame cannot tell).
+  The reference takes an inverse-depth offset of 0.014 / m off the depth first (z = 1 / (1 / z_png -
+  0.014); 3.0 m reads 2.88 m): the offset a structured-light sensor's disparity calibration leaves
+  (its depth is 1 / (a d + b) of the disparity d; an error in b), fitted from the depth alone. Checked on
+  110 frames with `tools/check_icsl_reference.py`, no RGB estimate taking part:
+  - the depth is registered to the colour image: depth jumps sit on colour edges best at a shift of
+    (-1, -1) px, a scale of 1.00 and a radial k1 of +0.025, 0 next (searched +-12 px, 0.98-1.02,
+    k1 -0.15..0.15), so it has the colour camera's pixels and K;
+  - an offset b tilts a plane at distance d by about b d towards the optical axis, so parallel planes
+    (left and right walls, floor and ceiling) stop being parallel; no K can do that (a K maps space
+    linearly: parallel planes stay parallel), so this fits b alone. Whole planes fitted in each frame
+    (trimmed least squares): parallel pairs are 2.92 deg apart (median 2.41) as read, 1.82 (1.28) with
+    0.014 / m taken off, 2.02 (1.46) at 0.02; perpendicular pairs barely move (median 0.92 -> 0.87).
+    Each folder alone has its best there too (means 2.58 -> 1.48 and 3.36 -> 2.27; worse at 0.01, 0.02);
+  - f and the principal point cannot be fitted from the depth's Manhattan-ness: what is left of its
+    distortion (parallel planes 1.3 deg apart) dominates, and fits ran to f 445 px. In the 35 frames
+    turned 12+ deg from the corridor, where f sets the walls' angle, the walls meet at 90 deg best for
+    f 520 px as read and for f 505 px or less with the offset taken off (2.4 deg off 90 at 537.6), while
+    the lines pool f at 557-563 px: the published 537.6 is kept;
+  - the rotation also moves with the plane-fit window (on the depth as read, 9 px is 1.5 deg per frame
+    from 21 px; from 15 px on, steps of 0.1 deg), but no window's axes are nearer the whole-plane
+    fits (1.6 deg pixel-weighted at every window), so `DepthNormals`' default 9 px is kept.
+  Before the offset was taken off: per image 2.29 deg, K given 1.80 (NEES 78.7), K pooled 2.16.
 - ICL-NUIM kt3 (Handa et al. 2014, CC BY 3.0): `eval` ARE and NEES of the RGB-only single-frame
   backend; the estimated FOV against fx = 481.2.
 - Backends on real sequences, RGB only (no IMU): `single`, `mekf` and `smoother` on the same
@@ -97,17 +119,29 @@ def ecd_scores(folder: Path, analyser, limit: int | None = None) -> dict:
             "median_hfov_deg": float(np.median(hfov)), "ms_per_image": float(np.median(ms))}
 
 
+ICSL_INVERSE_DEPTH_OFFSET_PER_M = 0.014
+"""What the ICSL depth PNGs add to the inverse depth (1/m): taken off before the reference's normals
+(module docstring; `tools/check_icsl_reference.py` fits it from the depth alone)."""
+
+
+def corrected_icsl_depth(depth_m: np.ndarray, offset_per_m: float = ICSL_INVERSE_DEPTH_OFFSET_PER_M) -> np.ndarray:
+    """ICSL depth (metres, 0 where missing) with `offset_per_m` taken off its inverse (0 where that leaves
+    none)."""
+    inverse = np.divide(1.0, depth_m, out=np.zeros_like(depth_m), where=depth_m > 0) - offset_per_m
+    return np.divide(1.0, inverse, out=np.zeros_like(depth_m), where=(depth_m > 0) & (inverse > 0))
+
+
 @functools.cache
 def icsl_depth_reference(rgb_path: Path):
-    """The depth-normal rotation and its covariance for one ICSL frame (published intrinsics); once
-    per frame (both ICSL scorings and the ICSL-more sequence use them)."""
+    """The depth-normal rotation and its covariance for one ICSL frame (published intrinsics, the depth's
+    inverse-depth offset taken off); once per frame (both ICSL scorings and the ICSL-more sequence use
+    them)."""
     from ..normals.depth import DepthNormals
     from ..solver import solve_manhattan
     from ..types import Frame
 
-    K = ICSL_CORRIDOR_K
     depth = read_image(rgb_path.parent.parent / "depth" / rgb_path.name, -1).astype(np.float32) / 1000.0
-    nm = DepthNormals().estimate_frame(Frame(0.0, depth=depth, K=K))
+    nm = DepthNormals().estimate_frame(Frame(0.0, depth=corrected_icsl_depth(depth), K=ICSL_CORRIDOR_K))
     return solve_manhattan(nm)
 
 
