@@ -4,7 +4,6 @@ presets. The models' Jacobians are tested in test_mekf_models.py."""
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

@@ -74,11 +74,11 @@ def frame_differences(name: str, seq) -> None:
     are = {b: errors_over_time(run, seq.R_wc_true)["are_deg"] for b, run in runs.items()}
     speed = np.r_[np.nan, np.degrees(np.linalg.norm(steps_rad(seq.R_wc_true), axis=1))]
     ok = np.isfinite(speed)
+    quartiles = np.quantile(speed[ok], [0, 0.25, 0.5, 0.75, 1.0])
     print(f"{name}: ARE mean single {np.mean(are['single']):.5f} deg")
     for b in ("mekf", "smoother"):
         d = are[b] - are["single"]
         vs = paired_difference(are[b], are["single"])
-        quartiles = np.quantile(speed[ok], [0, 0.25, 0.5, 0.75, 1.0])
         by_speed = [np.mean(d[ok & (speed >= lo) & (speed <= hi)]) for lo, hi in zip(quartiles[:-1], quartiles[1:])]
         print(f"  {b}: ARE {np.mean(are[b]):.5f}; minus single {vs['mean']:+.5f} deg (95 % {vs['low']:+.5f} .. "
               f"{vs['high']:+.5f}), per-frame std {d.std():.4f}, lag-one corr {np.corrcoef(d[:-1], d[1:])[0, 1]:+.2f}, "

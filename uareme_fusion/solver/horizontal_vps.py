@@ -53,12 +53,12 @@ def fitted_vp(ends: np.ndarray, lines: np.ndarray, weights: np.ndarray, std_rad:
     point = least_squares_vp(lines[members], weights[members] / std_rad[members] ** 2)
     if support is None:
         support = float(vp_support(miss_angles(ends, point[None]), std_rad, weights)[0])
-    distance = float("inf")
-    if abs(point[2]) > 1e-9:
+    cov = point_covariance(ends[members], point, std_rad[members])
+    distance = float("inf")  # a VP at infinity: no covariance, no finite distance (`point_covariance`)
+    if cov is not None:
         reach = np.linalg.norm(point[:2] / point[2] - ends[members].mean(axis=1), axis=1)
         distance = float(np.average(reach, weights=np.maximum(weights[members], 1e-300)))
-    return VanishingPoint(point, support, len(members), point_covariance(ends[members], point, std_rad[members]),
-                          distance)
+    return VanishingPoint(point, support, len(members), cov, distance)
 
 
 def horizontal_vps(ends: np.ndarray, weights: np.ndarray, lines: np.ndarray, angle_std_rad: np.ndarray,
