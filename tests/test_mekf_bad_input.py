@@ -51,6 +51,19 @@ def test_small_reordering_is_undone_and_duplicates_and_late_samples_are_counted(
     assert stream.counts.duplicate == 1 and stream.counts.late == 1
 
 
+def test_checked_rows_are_held_as_a_copy_and_count_nothing():
+    stream = ImuStream(reorder_window_s=0.02)
+    t, g, a = still_samples(10)
+    rows = np.column_stack([t, g, a, np.zeros(10)])
+    stream.add_checked_rows(rows[:6])  # into an empty buffer, as `Mekf` puts back a staged batch
+    stream.add_checked_rows(rows[6:])  # after what is held
+    rows[:, 1] = 7.0  # the caller reuses its array
+    released = stream.flush()
+    np.testing.assert_array_equal(released.t_s, t)
+    assert not released.gyro_rad_s.any() and stream.newest_s == t[-1]
+    assert stream.counts == type(stream.counts)()
+
+
 def test_wrong_shapes_raise_input_error_naming_them():
     with pytest.raises(InputError, match=r"\(N, 3\)"):
         Mekf().process_imu(np.zeros(3), np.zeros((3, 2)), np.zeros((3, 3)))

@@ -173,6 +173,14 @@ class ImuStream:
             self.counts.duplicate += int((~unique).sum())
             self._held = rows[unique]
 
+    def add_checked_rows(self, rows: np.ndarray) -> None:
+        """Add rows (n, 8) (`types.IMU_COLUMNS`) already checked as `add` checks them (`rows_if_clean`
+        against `newest_s` and the gyro range: finite, in order, later than what is held, not saturated),
+        so none is dropped or counted; copied (the caller may reuse its array). `Mekf` puts back a
+        batch staged for a frame this way, with nothing held."""
+        held = self._held
+        self._held = np.concatenate([held, rows]) if held.shape[0] else rows.copy()
+
     @property
     def saturation_seen(self) -> bool:
         """Whether any sample so far reached the gyro range (else no release holds a saturated one)."""

@@ -98,10 +98,17 @@ def integrate_compiled(filt, rows: np.ndarray, extra_s: float, defer: bool) -> b
     gap, which the reference path then handles."""
     record_R, record_P = _record_buffers(filt, rows.shape[0])
     code = KERNEL(filt.x, rows, extra_s, _parameters(filt, defer), record_R, record_P)
+    return _took_batch(filt, code, rows, rows.shape[0], record_R, record_P)
+
+
+def _took_batch(filt, code: int, rows: np.ndarray, n: int, record_R: np.ndarray, record_P: np.ndarray) -> bool:
+    """After a kernel integrated the first `n` of `rows` (`types.IMU_COLUMNS`) with result `code`: False
+    when it refused them (code < 0, nothing changed); else True, with the estimates it recorded kept
+    and its result bits (`Status` bits) raised in `filt.flags`."""
     if code < 0:
-        return False  # a step longer than the gap limit: nothing was changed
+        return False
     if record_R.shape[0]:
-        filt.record_t.append(rows[:, 0].copy())
+        filt.record_t.append(rows[:n, 0].copy())
         filt.record_R.append(record_R)
         filt.record_P.append(record_P)
     filt.flags |= code
@@ -130,16 +137,11 @@ def integrate_staged_compiled(filt, n: int, t_frame_s: float) -> bool:
     frame. False, changing nothing, when a sample lies past the frame, the frame lies past the gap
     limit, a step is an IMU gap, or an accelerometer update waits. A frame's path: the fewest Python
     steps around the one call."""
-    record_R, record_P = _record_buffers(filt, n) if filt.config.record_imu_estimates else (_NO_RECORD, _NO_RECORD)
+    record_R, record_P = _record_buffers(filt, n)
     code = K.INTEGRATE_STAGED(filt.x, filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
-    if code < 0:
+    if not _took_batch(filt, code, filt._stage, n, record_R, record_P):
         return False
     filt._stream.released_elsewhere(t_frame_s)
-    if record_R.shape[0]:
-        filt.record_t.append(filt._stage[:n, 0].copy())
-        filt.record_R.append(record_R)
-        filt.record_P.append(record_P)
-    filt.flags |= code
     return True
 
 

@@ -194,8 +194,13 @@ class Mekf(Backend):
         if dropped > self._dropped_reported:
             self.flags |= status_bits.IMU_DROPPED
             self._dropped_reported = dropped
-        # Samples wait in the reorder buffer; a frame's `propagate_to` releases them, or, in an
-        # IMU-only stream, this does once an accelerometer period's worth is older than the window.
+        self._release_if_period_held()
+
+    def _release_if_period_held(self) -> None:
+        """After samples were added: samples wait in the reorder buffer; a frame's `propagate_to` releases
+        them, or, in an IMU-only stream, this does once an accelerometer period's worth is older than the
+        window (and integrates them)."""
+        stream = self._stream
         if stream.held_span_s + self.pending_span_s >= self.config.accel_update_period_s + stream.reorder_window_s:
             self.queue(stream.release_until(stream.newest_s - stream.reorder_window_s, move_watermark=False))
             if self.pending_span_s >= self.config.accel_update_period_s:
@@ -204,7 +209,8 @@ class Mekf(Backend):
     def _add_staged(self) -> None:
         """The batch staged for the next frame (clean: see `process_imu`) into the reorder buffer."""
         rows, self._staged = self._stage[:self._staged], 0
-        self._add(rows[:, 0], rows[:, 1:4], rows[:, 4:7])  # `ImuStream.add` copies them
+        self._stream.add_checked_rows(rows)  # checked when staged, against an empty buffer: none dropped
+        self._release_if_period_held()
 
     @property
     def stream(self) -> ImuStream:
@@ -314,11 +320,11 @@ class Mekf(Backend):
     # ------------------------------------------------------------------ updates
     def accel_update(self) -> None:
         """Apply the accelerometer (and zero-rate) update of the period just completed."""
-        self.accel.due = False
         if self.compiled:
+            self.accel.due = False
             accel_update_compiled(self)
             return
-        rows = self._accel_rows()
+        rows = self._take_accel_rows()
         if rows is not None:
             self._kalman_update(*rows)
 

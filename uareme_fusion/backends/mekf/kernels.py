@@ -200,17 +200,16 @@ def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
     # G is the identity but on the rotation blocks (`state.reset_jacobian`), the Manhattan one only
     # `with_manhattan`.
     GP = P_new.copy()  # G P_new: only the rotation blocks' rows change
-    for o in ROTATION_BLOCKS:
-        if o != ROTATION_BLOCKS[0] and not with_manhattan:
-            break
+    n_blocks = 2 if with_manhattan else 1
+    for block in range(n_blocks):
+        o = ROTATION_BLOCKS[block]
         for a in range(3):
             for j in range(12):
                 GP[o + a, j] = (G[o + a, o] * P_new[o, j] + G[o + a, o + 1] * P_new[o + 1, j]
                                 + G[o + a, o + 2] * P_new[o + 2, j])
     GPG = GP.copy()  # (G P_new) G^T: only their columns change
-    for o in ROTATION_BLOCKS:
-        if o != ROTATION_BLOCKS[0] and not with_manhattan:
-            break
+    for block in range(n_blocks):
+        o = ROTATION_BLOCKS[block]
         for i in range(12):
             for b in range(3):
                 GPG[i, o + b] = GP[i, o] * G[o + b, o] + GP[i, o + 1] * G[o + b, o + 1] + GP[i, o + 2] * G[o + b, o + 2]
@@ -372,29 +371,28 @@ def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_s
     n_chunks = bounds.shape[0] - 1
     downweighted_any = False
     C_buf = np.empty((t.shape[0], 3, 3))
-    R_wc_cur = R_wc.copy()
-    R_wm_cur = R_wm.copy()
     for c in range(n_chunks):
         a, b = bounds[c], bounds[c + 1]
         last = c == n_chunks - 1
         extra = extra_s if last else 0.0
         C_k = C_buf[a:b]
-        C_N, A_bias, T, P_pred = propagate_chunk(R_wc_cur, b_c, P, last_gyro, s[S_T_STATE], t[a:b], gyro[a:b],
+        C_N, A_bias, T, P_pred = propagate_chunk(R_wc, b_c, P, last_gyro, s[S_T_STATE], t[a:b], gyro[a:b],
                                                  extra, p[P_TRAPEZOID] > 0, p[P_Q_GYRO], p[P_Q_BIAS],
                                                  p[P_Q_RATE], C_k)
         if p[P_MF_INIT] > 0 and (p[P_MF_YAW_RW] > 0 or p[P_MF_TILT_RW] > 0) and T > 0:
-            u = R_wm_cur[2].copy()
+            u = R_wm[2].copy()
             uu = np.outer(u, u)
             P_pred[6:9, 6:9] += T * (p[P_MF_YAW_RW] ** 2 * uu + p[P_MF_TILT_RW] ** 2 * (np.eye(3) - uu))
         P[:, :] = P_pred
         if p[P_RECORD] > 0:
             for k in range(b - a):
-                matmul3_into(R_wc_cur, C_k[k], record_R[a + k])
+                matmul3_into(R_wc, C_k[k], record_R[a + k])
                 record_P[a + k] = P_pred[0:3, 0:3]
-        R_wc_cur = matmul3_into(R_wc_cur, C_N, np.empty((3, 3)))
+        R_wc[:, :] = matmul3_into(R_wc, C_N, np.empty((3, 3)))
         s[S_PRODUCTS] += 1
         if s[S_PRODUCTS] >= p[P_ORTHO_EVERY]:
-            R_wc_cur, R_wm_cur = orthonormal(R_wc_cur), orthonormal(R_wm_cur)
+            R_wc[:, :] = orthonormal(R_wc)
+            R_wm[:, :] = orthonormal(R_wm)
             s[S_PRODUCTS] = 0
         last_gyro[:] = gyro[b - 1]
         # Specific force, time-weighted, in the chunk's end frame.
@@ -429,10 +427,7 @@ def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_s
             if last and p[P_DEFER] > 0:
                 s[S_ACCEL_DUE] = 1
             else:
-                downweighted_any |= accel_and_rest_update(s, R_wc_cur, R_wm_cur, b_c, P, acc_sum, lp, lp_J,
-                                                          rest_sums, p)
-    R_wc[:, :] = R_wc_cur
-    R_wm[:, :] = R_wm_cur
+                downweighted_any |= accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
     return DOWNWEIGHTED if downweighted_any else 0
 
 

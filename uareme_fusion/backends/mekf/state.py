@@ -40,9 +40,8 @@ def reset_jacobian(dx, with_manhattan):
     """(12, 12) Jacobian of the error reset after injecting `dx` (12,): `I - skew(dtheta)/2` on the
     camera attitude block and, when `with_manhattan`, on the Manhattan block; identity elsewhere."""
     G = np.eye(N_STATE)
-    for offset in ROTATION_BLOCKS:
-        if offset != ROTATION_BLOCKS[0] and not with_manhattan:
-            break
+    for block in range(2 if with_manhattan else 1):  # the camera's, then the Manhattan frame's
+        offset = ROTATION_BLOCKS[block]
         a, b, c = 0.5 * dx[offset], 0.5 * dx[offset + 1], 0.5 * dx[offset + 2]
         G[offset, offset + 1] += c
         G[offset, offset + 2] -= b
