@@ -1,12 +1,8 @@
-"""The ICSL depth reference's inverse-depth offset (`benchmarks.horizon.corrected_icsl_depth`)."""
+"""The ICSL depth reference's inverse-depth offset (`formats.datasets.corrected_icsl_depth`)."""
 
 import numpy as np
 
-from uareme_fusion.benchmarks.horizon import (
-    ICSL_INVERSE_DEPTH_OFFSET_PER_M,
-    corrected_icsl_depth,
-)
-from uareme_fusion.formats.datasets import ICSL_CORRIDOR_K
+from uareme_fusion.formats.datasets import ICSL_CORRIDOR_K, ICSL_INVERSE_DEPTH_OFFSET_PER_M, corrected_icsl_depth
 from uareme_fusion.normals.depth import DepthNormals
 
 

@@ -26,11 +26,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from uareme_fusion.benchmarks.horizon import (
+from uareme_fusion.formats.datasets import (
+    ICSL_CORRIDOR_K,
     ICSL_INVERSE_DEPTH_OFFSET_PER_M,
     corrected_icsl_depth,
+    read_icsl_depth,
 )
-from uareme_fusion.formats.datasets import ICSL_CORRIDOR_K
 from uareme_fusion.normals.depth import DepthNormals, DepthNormalsConfig
 from uareme_fusion.pinhole import pinhole
 from uareme_fusion.rotations import log_so3, nearest_symmetric
@@ -171,7 +172,7 @@ def main() -> None:
     args = parser.parse_args()
     rgb_paths = [p for folder in ("icsl_corridor", "icsl_corridor_more")
                  for p in sorted((args.data / folder / "rgb").glob("*.png"))][::args.stride]
-    depths = [cv2.imread(str(p.parent.parent / "depth" / p.name), -1).astype(np.float32) / 1000.0 for p in rgb_paths]
+    depths = [read_icsl_depth(p.parent.parent / "depth" / p.name, 0.0) for p in rgb_paths]  # as stored
     print(registration(rgb_paths, depths), flush=True)
     print("inverse-depth offset taken off (1/m): parallel planes' angle, perpendicular planes' angle from 90 (deg)")
     for offset in OFFSETS_PER_M:

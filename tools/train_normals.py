@@ -63,7 +63,8 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from uareme_fusion.normals.depth import MILLIMETRE_DEPTH_UNIT_M, ICSL_CORRIDOR_K, DepthNormals, read_depth_png
+from uareme_fusion.formats.datasets import ICSL_CORRIDOR_K, read_icsl_depth
+from uareme_fusion.normals.depth import DepthNormals
 from uareme_fusion.sim.render import Renderer, intrinsics_from_fov
 from uareme_fusion.sim.scenarios import build_scenario
 
@@ -142,7 +143,7 @@ def icsl_labelled(first: int = 0, count: int = ICSL_TRAIN_FRAMES, size=RENDER_SI
     rgbs, normals = [], []
     for name in names:
         rgb = cv2.imread(str(root / "rgb" / name), cv2.IMREAD_COLOR)[..., ::-1]
-        depth = read_depth_png(root / "depth" / name, MILLIMETRE_DEPTH_UNIT_M, rgb.shape[:2])
+        depth = read_icsl_depth(root / "depth" / name, expected_shape=rgb.shape[:2])
         nm = est.estimate(depth, ICSL_CORRIDOR_K)
         n = np.where((nm.kappa > 0)[..., None], nm.normals, 0.0).astype(np.float32)
         rgbs.append(cv2.resize(rgb, size, interpolation=cv2.INTER_AREA))

@@ -58,8 +58,7 @@ from rich.console import Console
 from rich.table import Table
 
 from ..errors import InputError
-from ..formats.datasets import ICSL_CORRIDOR_K
-from ..io.images import read_image
+from ..formats.datasets import ICSL_CORRIDOR_K, read_icsl_depth
 from ..rotations import log_so3, nearest_symmetric
 
 AUC_CUTOFF = 0.25
@@ -119,18 +118,6 @@ def ecd_scores(folder: Path, analyser, limit: int | None = None) -> dict:
             "median_hfov_deg": float(np.median(hfov)), "ms_per_image": float(np.median(ms))}
 
 
-ICSL_INVERSE_DEPTH_OFFSET_PER_M = 0.014
-"""What the ICSL depth PNGs add to the inverse depth (1/m): taken off before the reference's normals
-(module docstring; `tools/check_icsl_reference.py` fits it from the depth alone)."""
-
-
-def corrected_icsl_depth(depth_m: np.ndarray, offset_per_m: float = ICSL_INVERSE_DEPTH_OFFSET_PER_M) -> np.ndarray:
-    """ICSL depth (metres, 0 where missing) with `offset_per_m` taken off its inverse (0 where that leaves
-    none)."""
-    inverse = np.divide(1.0, depth_m, out=np.zeros_like(depth_m), where=depth_m > 0) - offset_per_m
-    return np.divide(1.0, inverse, out=np.zeros_like(depth_m), where=(depth_m > 0) & (inverse > 0))
-
-
 @functools.cache
 def icsl_depth_reference(rgb_path: Path):
     """The depth-normal rotation and its covariance for one ICSL frame (published intrinsics, the depth's
@@ -140,8 +127,8 @@ def icsl_depth_reference(rgb_path: Path):
     from ..solver import solve_manhattan
     from ..types import Frame
 
-    depth = read_image(rgb_path.parent.parent / "depth" / rgb_path.name, -1).astype(np.float32) / 1000.0
-    nm = DepthNormals().estimate_frame(Frame(0.0, depth=corrected_icsl_depth(depth), K=ICSL_CORRIDOR_K))
+    depth = read_icsl_depth(rgb_path.parent.parent / "depth" / rgb_path.name)
+    nm = DepthNormals().estimate_frame(Frame(0.0, depth=depth, K=ICSL_CORRIDOR_K))
     return solve_manhattan(nm)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..pinhole import pinhole
+from .depth_png import MILLIMETRE_DEPTH_UNIT_M, read_depth_png
 
 
 ICL_NUIM_K_PUBLISHED = pinhole(481.20, -480.00, 319.50, 239.50)
@@ -19,6 +20,9 @@ ICL_NUIM_K_OPENCV = pinhole(481.20, 480.00, 319.50, 239.50)
 """The same pixels in the OpenCV camera frame (y down): fy = +480. Its rotations need `flip_y_rotation`."""
 ICSL_CORRIDOR_K = pinhole(537.60, 539.03, 316.15, 245.52)
 """ICSL corridor RGB-D camera (millimetre depth)."""
+ICSL_INVERSE_DEPTH_OFFSET_PER_M = 0.014
+"""What the ICSL depth PNGs add to the inverse depth (1/m), fitted from the depth alone (parallel planes
+made parallel: `tools/check_icsl_reference.py`, evidence in `benchmarks/horizon.py`'s docstring)."""
 
 PUBLISHED_INTRINSICS: dict[str, tuple[np.ndarray, np.ndarray]] = {
     "TUM RGB-D freiburg1": (pinhole(517.3, 516.5, 318.6, 255.3), np.array([0.2624, -0.9531, -0.0054, 0.0026, 1.1633])),
@@ -45,3 +49,18 @@ def flip_y_rotation(R_wc_published: np.ndarray) -> np.ndarray:
 
 GT_KAPPA = 100.0
 """kappa of ground-truth normals in simulated sequences (`normals/*.npz`; the paper's cap)."""
+
+
+def corrected_icsl_depth(depth_m: np.ndarray, offset_per_m: float = ICSL_INVERSE_DEPTH_OFFSET_PER_M) -> np.ndarray:
+    """ICSL depth (metres, 0 where missing) with `offset_per_m` taken off its inverse (0 where that leaves
+    none)."""
+    inverse = np.divide(1.0, depth_m, out=np.zeros_like(depth_m), where=depth_m > 0) - offset_per_m
+    return np.divide(1.0, inverse, out=np.zeros_like(depth_m), where=(depth_m > 0) & (inverse > 0))
+
+
+def read_icsl_depth(path, offset_per_m: float = ICSL_INVERSE_DEPTH_OFFSET_PER_M,
+                    expected_shape: tuple[int, int] | None = None) -> np.ndarray:
+    """An ICSL corridor depth PNG (millimetres) as float32 metres with `offset_per_m` taken off its inverse
+    (0 to read it as stored); `InputError` as `read_depth_png`. Every reader of ICSL depth (the
+    benchmark's reference, the normal network's labels, the check tool) goes through here."""
+    return corrected_icsl_depth(read_depth_png(path, MILLIMETRE_DEPTH_UNIT_M, expected_shape), offset_per_m)
