@@ -43,6 +43,13 @@ RADIAL_K1 = np.round(np.arange(-0.15, 0.151, 0.025), 3)
 OFFSETS_PER_M = (0.0, 0.005, 0.01, 0.0125, ICSL_INVERSE_DEPTH_OFFSET_PER_M, 0.015, 0.0175, 0.02, 0.03)
 FOCALS_PX = (505.0, 520.0, 537.6, 554.0, 570.0)
 WINDOWS_PX = (9, 11, 13, 15, 17, 21, 25, 31)
+WHOLE_PLANE_WINDOW_PX = 21
+"""The plane-fit window of the checks' depth normals (wide: whole planes, little noise)."""
+
+
+def window_normals(window_px: int = WHOLE_PLANE_WINDOW_PX) -> DepthNormals:
+    """Depth normals fitted over `window_px` windows (stride 2 px below 20 px, else 4)."""
+    return DepthNormals(DepthNormalsConfig(window_px=window_px, stride_px=2 if window_px < 20 else 4))
 
 
 def depth_jumps(depth_m: np.ndarray, min_log_step: float = 0.06, max_depth_m: float = 4.0) -> np.ndarray:
@@ -105,7 +112,7 @@ def whole_planes(depth_m: np.ndarray, K: np.ndarray, min_px: int = 5000) -> list
     """(axis, unit normal) of each plane: pixels within 10 deg of a Manhattan axis (21 px fits), split by
     the side of the camera they lie on, fitted as 1/z = g . ray (three rounds, keeping the 80 % best)."""
     h, w = depth_m.shape
-    nm = DepthNormals(DepthNormalsConfig(window_px=21, stride_px=4)).estimate(depth_m, K)
+    nm = window_normals().estimate(depth_m, K)
     R = solve_manhattan(nm).R_cm
     v, u = np.mgrid[0:h, 0:w]
     rays = np.stack([u, v, np.ones_like(u)], -1).reshape(-1, 3).astype(float) @ np.linalg.inv(K).T
@@ -142,7 +149,7 @@ def plane_pair_angles(depths: list[np.ndarray], offset_per_m: float) -> tuple[np
 def wall_angle_deg(depth_m: np.ndarray, K: np.ndarray, R: np.ndarray, gate_deg: float = 8.0) -> float | None:
     """The two horizontal axes' directions (kappa-weighted mean normals within `gate_deg`, 21 px fits)
     angle from 90 deg; None when either has fewer than 2000 pixels."""
-    nm = DepthNormals(DepthNormalsConfig(window_px=21, stride_px=4)).estimate(depth_m, K)
+    nm = window_normals().estimate(depth_m, K)
     n, weight = nm.normals.reshape(-1, 3), nm.kappa.ravel()
     vertical = int(np.argmax(np.abs(R[1])))
     means = []
@@ -181,7 +188,7 @@ def main() -> None:
               f"pairs); perpendicular mean {perpendicular.mean():.2f} median {np.median(perpendicular):.2f} "
               f"({len(perpendicular)})", flush=True)
     corrected = [corrected_icsl_depth(z, ICSL_INVERSE_DEPTH_OFFSET_PER_M) for z in depths]
-    R_published = [solve_manhattan(DepthNormals(DepthNormalsConfig(window_px=21, stride_px=4)).estimate(z, ICSL_CORRIDOR_K)).R_cm
+    R_published = [solve_manhattan(window_normals().estimate(z, ICSL_CORRIDOR_K)).R_cm
                    for z in corrected]
     turned = [i for i, R in enumerate(R_published)
               if abs(np.degrees(np.arctan2(R[0, np.argmax(np.abs(R[2]))], R[2, np.argmax(np.abs(R[2]))]))) > 12]
@@ -190,9 +197,9 @@ def main() -> None:
         K = pinhole(f, f * ICSL_CORRIDOR_K[1, 1] / ICSL_CORRIDOR_K[0, 0], ICSL_CORRIDOR_K[0, 2], ICSL_CORRIDOR_K[1, 2])
         angles = [a for a in (wall_angle_deg(corrected[i], K, R_published[i]) for i in turned) if a is not None]
         print(f"  f {f:.1f} px: mean {np.mean(angles):.2f} median {np.median(angles):.2f} ({len(angles)} frames)", flush=True)
-    rotations = {}
-    for window in WINDOWS_PX:
-        estimator = DepthNormals(DepthNormalsConfig(window_px=window, stride_px=2 if window < 20 else 4))
+    rotations = {WHOLE_PLANE_WINDOW_PX: R_published}
+    for window in (w for w in WINDOWS_PX if w != WHOLE_PLANE_WINDOW_PX):
+        estimator = window_normals(window)
         rotations[window] = [solve_manhattan(estimator.estimate(z, ICSL_CORRIDOR_K)).R_cm for z in corrected]
     print("mean per-frame angle (deg) between the depth rotations of two plane-fit windows (px), offset taken off")
     print("      " + "".join(f"{w:>6d}" for w in WINDOWS_PX))
