@@ -45,8 +45,8 @@ class FixedShare(VisualNoiseShare):
         super().__init__(frames=1.0)
         self.share = float(share)
 
-    def update(self, t_s, visual) -> float:
-        return self.share
+    def _update_share(self, t_s, visual) -> None:
+        """The frames leave the share as it is (`persistent_cov` still follows them)."""
 
 
 def sequences(data: Path, by_cue: bool) -> dict:
