@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from uareme_fusion.backends.visual_noise_share import VisualNoiseShare
-from uareme_fusion.benchmarks.horizon import chained_reference, icsl_depth_reference, rgb_sequence
+from uareme_fusion.benchmarks.horizon import (backend_errors, backend_rows, chained_reference, icsl_depth_reference,
+                                              rgb_sequence)
 from uareme_fusion.evaluation.backend_factory import make_backend
 from uareme_fusion.evaluation.compare import errors_over_time, run_backend
-from uareme_fusion.evaluation.paired_difference import paired_difference
 from uareme_fusion.rotations import log_so3
 
 CUES = "normals,lines"
@@ -45,8 +45,8 @@ class FixedShare(VisualNoiseShare):
         super().__init__(frames=1.0)
         self.share = float(share)
 
-    def update(self, t_s, visual) -> float:
-        return self.share
+    def _update_share(self, t_s, visual) -> None:
+        """The frames leave the share as it is (`persistent_cov` still follows them)."""
 
 
 def sequences(data: Path, by_cue: bool) -> dict:
@@ -70,17 +70,18 @@ def deg2(x) -> float:
 
 
 def frame_differences(name: str, seq) -> None:
-    runs = {b: run_backend(make_backend(b), seq) for b in ("single", "mekf", "smoother")}
-    are = {b: errors_over_time(run, seq.R_wc_true)["are_deg"] for b, run in runs.items()}
+    errors, notes = backend_errors(seq)
+    rows = backend_rows(errors, notes)
+    are = {b: err["are_deg"] for b, err in errors.items()}
     speed = np.r_[np.nan, np.degrees(np.linalg.norm(steps_rad(seq.R_wc_true), axis=1))]
     ok = np.isfinite(speed)
     quartiles = np.quantile(speed[ok], [0, 0.25, 0.5, 0.75, 1.0])
-    print(f"{name}: ARE mean single {np.mean(are['single']):.5f} deg")
+    print(f"{name}: ARE mean single {rows['single']['are_mean_deg']:.5f} deg")
     for b in ("mekf", "smoother"):
         d = are[b] - are["single"]
-        vs = paired_difference(are[b], are["single"])
+        vs = rows[b]["are_vs_single_deg"]
         by_speed = [np.mean(d[ok & (speed >= lo) & (speed <= hi)]) for lo, hi in zip(quartiles[:-1], quartiles[1:])]
-        print(f"  {b}: ARE {np.mean(are[b]):.5f}; minus single {vs['mean']:+.5f} deg (95 % {vs['low']:+.5f} .. "
+        print(f"  {b}: ARE {rows[b]['are_mean_deg']:.5f}; minus single {vs['mean']:+.5f} deg (95 % {vs['low']:+.5f} .. "
               f"{vs['high']:+.5f}), per-frame std {d.std():.4f}, lag-one corr {np.corrcoef(d[:-1], d[1:])[0, 1]:+.2f}, "
               f"corr with speed {np.corrcoef(d[ok], speed[ok])[0, 1]:+.2f}; by speed quartile "
               + " ".join(f"{x:+.4f}" for x in by_speed))

@@ -140,7 +140,7 @@ class ImuStream:
             rows = np.empty((n, COLUMNS))
             if _ROWS_IF_CLEAN(t, gyro, accel, held[-1, 0] if held.shape[0] else self.watermark_s,
                               self.gyro_range_rad_s, rows):
-                self._held = np.concatenate([held, rows]) if held.shape[0] else rows
+                self._append(rows)
                 return
         rows = np.concatenate((t[:, None], gyro, accel, np.zeros((t.shape[0], 1))), axis=1)
         # One pass for both checks: the largest |value| per column (NaN propagates, inf is not finite).
@@ -159,7 +159,7 @@ class ImuStream:
         t = rows[:, 0]
         newest = held[-1, 0] if held.shape[0] else self.watermark_s
         if t[0] > newest and (t.shape[0] == 1 or bool((t[1:] > t[:-1]).all())):
-            self._held = np.concatenate([held, rows]) if held.shape[0] else rows  # in order: append
+            self._append(rows)  # in order
             return
         stale = t <= self.watermark_s
         self.counts.duplicate += int(np.sum(t == self.watermark_s))
@@ -178,8 +178,12 @@ class ImuStream:
         against `newest_s` and the gyro range: finite, in order, later than what is held, not saturated),
         so none is dropped or counted; copied (the caller may reuse its array). `Mekf` puts back a
         batch staged for a frame this way, with nothing held."""
+        self._append(rows.copy())
+
+    def _append(self, rows: np.ndarray) -> None:
+        """Put `rows` (n, 8), later than every held row, after them; kept as they are when nothing is held."""
         held = self._held
-        self._held = np.concatenate([held, rows]) if held.shape[0] else rows.copy()
+        self._held = np.concatenate([held, rows]) if held.shape[0] else rows
 
     @property
     def saturation_seen(self) -> bool:

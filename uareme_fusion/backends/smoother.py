@@ -178,7 +178,6 @@ class Smoother(Backend):
         self._dropped_imu = 0
         self._noise_share = VisualNoiseShare(self.config.visual_noise_share_frames
                                              if self.config.mode is SmootherMode.PAPER else 0.0)
-        self._persistent_cov = np.zeros((3, 3))
         self._reset_interval()
 
     # ----------------------------------------------------------------------------- variant hooks
@@ -189,9 +188,9 @@ class Smoother(Backend):
         """`R_wc` (3, 3) predicted at the next frame: the last estimate (paper)."""
         return self._last.R_wc
 
-    def _visual_factor(self, k: int, visual: VisualRotation) -> gtsam.NonlinearFactor:
-        """f^z of paper eq. 7: the single-frame rotation as a robust prior on X(k)."""
-        return gtsam.PriorFactorRot3(X(k), gtsam.Rot3(visual.R_cm.T), self._visual_noise(visual))
+    def _visual_factor(self, k: int, visual: VisualRotation, noise) -> gtsam.NonlinearFactor:
+        """f^z of paper eq. 7: the single-frame rotation as a robust prior on X(k) (`noise`: `_add_visual`)."""
+        return gtsam.PriorFactorRot3(X(k), gtsam.Rot3(visual.R_cm.T), noise)
 
     def _add_motion_factors(self, graph, values, stamps, k: int, t_s: float) -> None:
         """f^s of paper eq. 7: identity between consecutive frames, isotropic sigma."""
@@ -213,19 +212,16 @@ class Smoother(Backend):
         return np.eye(3), None
 
     # ----------------------------------------------------------------------------- shared factors
-    def _visual_noise(self, visual: VisualRotation) -> gtsam.noiseModel.Base:
-        """The frame's covariance as one of `R_wc`, its independent share only (paper mode)."""
-        cov = self._noise_share.share * visual_R_wc_covariance(visual)
-        return _robust(self.config.visual_huber_sigma, gtsam.noiseModel.Gaussian.Covariance(cov))
-
-    def _take_noise_share(self, t_s: float, visual: VisualRotation | None) -> None:
-        """After the frame's factor (made with the share of the previous frames): update the share
+    def _add_visual(self, graph, k: int, t_s: float, visual: VisualRotation) -> None:
+        """The frame's factor, robust, with its covariance as one of `R_wc` times the independent share
+        of the previous frames (paper mode; gyro mode: the whole covariance); then the share updated
         with the frame (labelled as fused) and the persistent part reported with the estimate
-        (`visual_noise_share.py`); nothing in gyro mode."""
+        (`visual_noise_share.py`; nothing in gyro mode)."""
+        R_wc_cov = visual_R_wc_covariance(visual)
+        noise = gtsam.noiseModel.Gaussian.Covariance(self._noise_share.share * R_wc_cov)
+        graph.add(self._visual_factor(k, visual, _robust(self.config.visual_huber_sigma, noise)))
         if self._noise_share.enabled:
-            persistent = self._noise_share.take(t_s, visual)
-            if persistent is not None:
-                self._persistent_cov = persistent
+            self._noise_share.take(t_s, visual, R_wc_cov)
 
     def _smoothness_factor(self, k: int) -> gtsam.NonlinearFactor:
         return gtsam.BetweenFactorRot3(X(k - 1), X(k), gtsam.Rot3(), self._between_noise)
@@ -259,8 +255,7 @@ class Smoother(Backend):
         try:
             if visual is not None:
                 visual = visual.symmetric_to(R_wc_pred.T @ self._R_wm)
-                graph.add(self._visual_factor(k, visual))
-                self._take_noise_share(t_s, visual)
+                self._add_visual(graph, k, t_s, visual)
             self._add_motion_factors(graph, values, stamps, k, t_s)
             values.insert(X(k), gtsam.Rot3(R_wc_pred))
             stamps[X(k)] = float(k)
@@ -285,8 +280,7 @@ class Smoother(Backend):
         self._smoother = self._new_smoother()
         graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
         visual = self._start_priors(graph, values, stamps, visual)
-        graph.add(self._visual_factor(0, visual))
-        self._take_noise_share(t_s, visual)
+        self._add_visual(graph, 0, t_s, visual)
         values.insert(X(0), gtsam.Rot3(self._R_wm @ visual.R_cm.T))
         stamps[X(0)] = 0.0
         self._smoother.update(graph, values, stamps)
@@ -330,7 +324,7 @@ class Smoother(Backend):
         self._R_wm = R_wm
         if bias is not None:
             self._bias = bias
-        return Estimate(t_s, R_wc, 0.5 * (cov + cov.T) + self._persistent_cov, status, R_wm=R_wm.copy(),
+        return Estimate(t_s, R_wc, 0.5 * (cov + cov.T) + self._noise_share.persistent_cov, status, R_wm=R_wm.copy(),
                         gyro_bias_rad_s=None if bias is None else self._R_ci.T @ bias)
 
 

@@ -78,9 +78,9 @@ class GyroSmoother(Smoother):
             R_wc = R_wc @ self._pim.deltaRij().matrix()
         return R_wc
 
-    def _visual_factor(self, k: int, visual: VisualRotation) -> gtsam.NonlinearFactor:
+    def _visual_factor(self, k: int, visual: VisualRotation, noise) -> gtsam.NonlinearFactor:
         """f^z as a measurement of `R_mc = R_wm^T R_wc`, relative to the Manhattan variable M."""
-        return gtsam.BetweenFactorRot3(MANHATTAN_KEY, X(k), gtsam.Rot3(visual.R_cm.T), self._visual_noise(visual))
+        return gtsam.BetweenFactorRot3(MANHATTAN_KEY, X(k), gtsam.Rot3(visual.R_cm.T), noise)
 
     def _add_motion_factors(self, graph, values, stamps, k: int, t_s: float) -> None:
         """Gyro preintegration (or the paper's smoothness factor when no gyro sample came), the bias

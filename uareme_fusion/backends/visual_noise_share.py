@@ -57,7 +57,10 @@ class VisualNoiseShare:
         """`frames`: the averaging horizon (0: off, `share` stays 1); `min_share` the floor of lam."""
         self.frames, self.min_share = float(frames), float(min_share)
         self.share = 1.0
-        self._history: list[tuple[float, np.ndarray]] = []
+        self.persistent_cov = np.zeros((3, 3))
+        """(1 - lam) times the last finite frame's covariance as one of `R_wc` (rad^2, right
+        perturbation): the error the filter cannot average, reported with the estimate (`take`)."""
+        self._history: list[tuple[float, np.ndarray, float]] = []  # (t_s, R_mc, tr cov) of the last frames
         self._sum = self._sum2 = self._weight = 0.0
         self._count = 0
 
@@ -68,19 +71,36 @@ class VisualNoiseShare:
     def update(self, t_s: float, visual: VisualRotation | None) -> float:
         """Take the frame at `t_s` (its visual rotation labelled as the backend fuses it, or None:
         the chain of consecutive frames restarts) and return the current `share`."""
-        if not self.enabled:
-            return self.share
+        self._take_frame(t_s, visual)
+        return self.share
+
+    def take(self, t_s: float, visual: VisualRotation | None, R_wc_cov: np.ndarray | None = None) -> None:
+        """`update` with the frame, then `persistent_cov` from it (kept as it was when the frame has no
+        rotation or no finite covariance). `R_wc_cov`: `visual_R_wc_covariance(visual)` when the caller
+        has it already."""
+        if self._take_frame(t_s, visual):
+            R_wc_cov = visual_R_wc_covariance(visual) if R_wc_cov is None else R_wc_cov
+            self.persistent_cov = (1.0 - self.share) * R_wc_cov
+
+    def _take_frame(self, t_s: float, visual: VisualRotation | None) -> bool:
+        """`update`'s work; whether `visual` is a rotation with a finite covariance."""
         if visual is None:
             self._history.clear()
-            return self.share
+            return False
         if not np.all(np.isfinite(visual.cov)):  # not a covariance: the frame says nothing here
-            return self.share
-        self._history = (self._history + [(float(t_s), visual.R_cm.T, float(np.trace(visual.cov)))])[-3:]
+            return False
+        if self.enabled:
+            self._update_share(float(t_s), visual)
+        return True
+
+    def _update_share(self, t_s: float, visual: VisualRotation) -> None:
+        """`share` with the frame (a finite covariance) as the third of the last three."""
+        self._history = (self._history + [(t_s, visual.R_cm.T, float(np.trace(visual.cov)))])[-3:]
         if len(self._history) < 3:
-            return self.share
+            return
         (t0, R0, c0), (t1, R1, c1), (t2, R2, c2) = self._history
         if not (t1 > t0 and t2 > t1 and min(c0, c1, c2) > 0) or max(c0, c1, c2) > SAME_VIEW_RATIO * min(c0, c1, c2):
-            return self.share
+            return
         r = (t2 - t1) / (t1 - t0)
         D = log_so3(R1.T @ R2) - r * log_so3(R0.T @ R1)
         expected = c2 + (1.0 + r) ** 2 * c1 + r**2 * c0
@@ -98,16 +118,3 @@ class VisualNoiseShare:
         n_eff = min(self._count, (2.0 - a) / a)
         upper = mean + CONFIDENCE_SIGMAS * np.sqrt(var / n_eff)
         self.share = float(np.clip(upper, self.min_share, 1.0))
-        return self.share
-
-    def take(self, t_s: float, visual: VisualRotation | None) -> np.ndarray | None:
-        """`update` with the frame, then the persistent covariance of it to report with the estimate
-        (`persistent_R_wc_covariance`); None when the frame has no rotation or no finite covariance."""
-        self.update(t_s, visual)
-        if visual is None or not np.all(np.isfinite(visual.cov)):
-            return None
-        return self.persistent_R_wc_covariance(visual)
-
-    def persistent_R_wc_covariance(self, visual: VisualRotation) -> np.ndarray:
-        """(1 - lam) times `visual`'s covariance as one of `R_wc` (rad^2, right perturbation)."""
-        return (1.0 - self.share) * visual_R_wc_covariance(visual)

@@ -223,26 +223,37 @@ def icl_scores(folder: Path, cues: str) -> dict:
 BACKENDS_COMPARED = ("single", "mekf", "smoother")
 
 
-def backend_scores(sequence) -> dict:
-    """ARE and NEES means of each of `BACKENDS_COMPARED` on one `VisualSequence` with a reference, and
-    each backend's per-frame ARE minus `single`'s (`are_vs_single_deg`: `paired_difference`)."""
-    from ..evaluation.compare import errors_over_time, make_backends, run_backend, summarise
-    from ..evaluation.paired_difference import paired_difference
+def backend_errors(sequence) -> tuple[dict, dict]:
+    """Each of `BACKENDS_COMPARED` run on one `VisualSequence` with a reference: its per-frame errors
+    (`errors_over_time`) by name, and a note for each backend that could not be made."""
+    from ..evaluation.compare import errors_over_time, make_backends, run_backend
 
     backends, notes = make_backends(BACKENDS_COMPARED)
-    rows, are = {}, {}
+    return {name: errors_over_time(run_backend(backend, sequence), sequence.R_wc_true)
+            for name, backend in backends.items()}, notes
+
+
+def backend_rows(errors: dict, notes: dict) -> dict:
+    """ARE and NEES means of each backend from `backend_errors`, and each one's per-frame ARE minus
+    `single`'s (`are_vs_single_deg`: `paired_difference`); a backend that could not run has its note."""
+    from ..evaluation.compare import error_summary
+    from ..evaluation.paired_difference import paired_difference
+
+    rows = {}
     for name in BACKENDS_COMPARED:
         if name in notes:
             rows[name] = {"note": notes[name]}
             continue
-        run = run_backend(backends[name], sequence)
-        row = summarise(run, sequence.R_wc_true)
-        rows[name] = {"are_mean_deg": row["are_deg_mean"], "nees_mean": row["nees_mean"]}
-        are[name] = errors_over_time(run, sequence.R_wc_true)["are_deg"]
-    for name in are:
-        if name != "single" and "single" in are:
-            rows[name]["are_vs_single_deg"] = paired_difference(are[name], are["single"])
+        summary = error_summary(errors[name])
+        rows[name] = {"are_mean_deg": summary["are_deg_mean"], "nees_mean": summary["nees_mean"]}
+        if name != "single" and "single" in errors:
+            rows[name]["are_vs_single_deg"] = paired_difference(errors[name]["are_deg"], errors["single"]["are_deg"])
     return rows
+
+
+def backend_scores(sequence) -> dict:
+    """`backend_rows` of `backend_errors` on one `VisualSequence` with a reference."""
+    return backend_rows(*backend_errors(sequence))
 
 
 def rgb_sequence(spec: Path, cues: str, R_wc_reference: np.ndarray | None = None):

@@ -93,12 +93,19 @@ def summarise(run: BackendRun, R_wc_true: np.ndarray | None, yaw_only_nees: bool
            "not_initialised": int(sum(bool(e.status & Status.NOT_INITIALISED) for e in run.estimates)),
            "optimiser_failed": int(sum(bool(e.status & Status.OPTIMISER_FAILED) for e in run.estimates))}
     if R_wc_true is not None:
-        err = errors_over_time(run, R_wc_true, yaw_only_nees)
-        ok = err["initialised"]
-        for key, names in (("are_deg", ("mean", "median", "max")), ("tilt_deg", ("mean", "max")),
-                           ("nees", ("mean", "median"))):
-            row.update({f"{key}_{k}": v for k, v in error_stats(err[key][ok], names).items()})
-        row.update(jump_counts({**err, "valid": ok}))
+        row.update(error_summary(errors_over_time(run, R_wc_true, yaw_only_nees)))
+    return row
+
+
+def error_summary(err: dict) -> dict:
+    """The error columns of `summarise`'s row from `errors_over_time`'s per-frame errors `err`, over
+    the initialised frames."""
+    ok = err["initialised"]
+    row = {}
+    for key, names in (("are_deg", ("mean", "median", "max")), ("tilt_deg", ("mean", "max")),
+                       ("nees", ("mean", "median"))):
+        row.update({f"{key}_{k}": v for k, v in error_stats(err[key][ok], names).items()})
+    row.update(jump_counts({**err, "valid": ok}))
     return row
 
 

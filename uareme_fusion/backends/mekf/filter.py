@@ -132,8 +132,7 @@ class Mekf(Backend):
         self.init_samples: list[ImuBatch] = []
         self.rejections = 0
         self.t_visual_s: float | None = None  # time of the previous visual update (camera clock), s
-        self.noise_share = VisualNoiseShare(cfg.visual_noise_share_frames)
-        self.persistent_cov = np.zeros((3, 3))  # visual only: the frames' error the filter cannot average, rad^2
+        self.noise_share = VisualNoiseShare(cfg.visual_noise_share_frames)  # visual only (its `persistent_cov`)
         self._dropped_reported = 0
         self.accel = AccelPeriod(self.x)
         self.record_t: list[np.ndarray] = []
@@ -386,9 +385,7 @@ class Mekf(Backend):
         shared = not self.motion.uses_imu and self.noise_share.enabled
         if shared:  # fuse the independent share only (as estimated over the previous frames)
             R_vis = R_vis * self.noise_share.share
-            persistent = self.noise_share.take(t_s, visual.symmetric_to(self.R_wc.T @ self.R_wm))
-            if persistent is not None:  # always, past the gate (a finite covariance)
-                self.persistent_cov = persistent
+            self.noise_share.take(t_s, visual.symmetric_to(self.R_wc.T @ self.R_wm))
         d = np.sqrt(d2)
         if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_sigma)
@@ -462,7 +459,7 @@ class Mekf(Backend):
         cov = P_th + P_th_T  # into a new array: in place, numpy would check two views of one array for overlap
         cov *= 0.5
         if not self.motion.uses_imu:
-            cov += self.persistent_cov
+            cov += self.noise_share.persistent_cov
             bias_i = None
         else:
             bias_i = b_c[0] if self.imu_is_camera else self.R_ci.T @ b_c[0]
