@@ -83,8 +83,6 @@ def harvest_kernel_counters(x: np.ndarray, counters: dict[str, int]) -> None:
             x[index] = 0.0
             x[X_AFTER_ACCEL + index] -= count
 
-"""The bits of a kernel's result that are `Status` bits (`kernels.DOWNWEIGHTED`, `kernels.NONFINITE`)."""
-
 
 def _record_buffers(filt, n: int) -> tuple[np.ndarray, np.ndarray]:
     if not filt.config.record_imu_estimates:
