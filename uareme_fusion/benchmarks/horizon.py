@@ -236,7 +236,7 @@ def backend_errors(sequence) -> tuple[dict, dict]:
 def backend_rows(errors: dict, notes: dict) -> dict:
     """ARE and NEES means of each backend from `backend_errors`, and each one's per-frame ARE minus
     `single`'s (`are_vs_single_deg`: `paired_difference`); a backend that could not run has its note."""
-    from ..evaluation.compare import error_summary
+    from ..evaluation.compare import error_columns
     from ..evaluation.paired_difference import paired_difference
 
     rows = {}
@@ -244,7 +244,7 @@ def backend_rows(errors: dict, notes: dict) -> dict:
         if name in notes:
             rows[name] = {"note": notes[name]}
             continue
-        summary = error_summary(errors[name])
+        summary = error_columns(errors[name])
         rows[name] = {"are_mean_deg": summary["are_deg_mean"], "nees_mean": summary["nees_mean"]}
         if name != "single" and "single" in errors:
             rows[name]["are_vs_single_deg"] = paired_difference(errors[name]["are_deg"], errors["single"]["are_deg"])

@@ -93,13 +93,13 @@ def summarise(run: BackendRun, R_wc_true: np.ndarray | None, yaw_only_nees: bool
            "not_initialised": int(sum(bool(e.status & Status.NOT_INITIALISED) for e in run.estimates)),
            "optimiser_failed": int(sum(bool(e.status & Status.OPTIMISER_FAILED) for e in run.estimates))}
     if R_wc_true is not None:
-        row.update(error_summary(errors_over_time(run, R_wc_true, yaw_only_nees)))
+        row.update(error_columns(errors_over_time(run, R_wc_true, yaw_only_nees)))
     return row
 
 
-def error_summary(err: dict) -> dict:
-    """The error columns of `summarise`'s row from `errors_over_time`'s per-frame errors `err`, over
-    the initialised frames."""
+def error_columns(err: dict) -> dict:
+    """The error columns of `summarise`'s row (flat keys) from `errors_over_time`'s per-frame errors
+    `err`, over the initialised frames; `metrics.error_summary` is a run summary's nested form."""
     ok = err["initialised"]
     row = {}
     for key, names in (("are_deg", ("mean", "median", "max")), ("tilt_deg", ("mean", "max")),
