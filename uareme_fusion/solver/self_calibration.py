@@ -273,12 +273,12 @@ class _Problem:
     def rotations(self, x: np.ndarray) -> np.ndarray:
         return self.R0 @ Rotation.from_rotvec(x[3:].reshape(-1, 3)).as_matrix()
 
-    def _segment_geometry(self, x: np.ndarray, axes: np.ndarray):
-        """(u, v, l) per segment at its axis `axes[j]` (each (N, 3)): u = R_i r-hat_k, the vanishing point
-        v = K u and the line l = m x v through its midpoint m (homogeneous); its half vector
-        (x2 - x1) / 2 is `self.half`."""
+    def _segment_geometry(self, x: np.ndarray, axes: np.ndarray, R: np.ndarray):
+        """(u, v, l) per segment at its axis `axes[j]` (each (N, 3)): u = R_i r-hat_k (R `rotations(x)`),
+        the vanishing point v = K u and the line l = m x v through its midpoint m (homogeneous); its half
+        vector (x2 - x1) / 2 is `self.half`."""
         f = math.exp(x[0])
-        u = self.rotations(x)[self.frame_of, :, axes]
+        u = R[self.frame_of, :, axes]
         v = u @ pinhole(f, f, x[1], x[2]).T
         l = np.cross(self.mid, v)
         return u, v, l
@@ -292,17 +292,25 @@ class _Problem:
     def axis_distances(self, x: np.ndarray) -> np.ndarray:
         """d_jk (N, 3) in pixels: the distance of segment j's end point from the line through its midpoint
         and the vanishing point K r_k of axis k (finite or not)."""
-        n = len(self.ends)
-        return np.stack([self._end_distances(self._segment_geometry(x, np.full(n, k))[2])[0] for k in range(3)],
+        n, R = len(self.ends), self.rotations(x)
+        return np.stack([self._end_distances(self._segment_geometry(x, np.full(n, k), R)[2])[0] for k in range(3)],
                         axis=1)
 
     def nearest_axes(self, x: np.ndarray) -> np.ndarray:
         return np.argmin(np.abs(self.axis_distances(x)), axis=1)
 
+    def _normals_phi(self, R: np.ndarray) -> np.ndarray | None:
+        """phi_i = Log(R_Ni^T R_i) (F, 3) of the frames' rotations `R`, or None when no frame has the
+        normals' rotation (`with_normals` off: their rows are zero)."""
+        if not self.has_normals.any():
+            return None
+        return Rotation.from_matrix(np.swapaxes(self.R_normals, 1, 2) @ R).as_rotvec()
+
     def residuals(self, x: np.ndarray, axes: np.ndarray) -> np.ndarray:
-        lines = self._end_distances(self._segment_geometry(x, axes)[2])[0]
-        d = Rotation.from_matrix(np.swapaxes(self.R_normals, 1, 2) @ self.rotations(x)).as_rotvec()
-        normals = np.einsum("fij,fj->fi", self.L_normals, d).ravel()
+        R = self.rotations(x)
+        lines = self._end_distances(self._segment_geometry(x, axes, R)[2])[0]
+        phi = self._normals_phi(R)
+        normals = np.zeros(3 * self.n_frames) if phi is None else np.einsum("fij,fj->fi", self.L_normals, phi).ravel()
         prior = (x[1:3] - self.centre) / self.prior_std_px
         return np.concatenate([lines / self.cfg.endpoint_noise_px, normals, prior])
 
@@ -311,14 +319,15 @@ class _Problem:
         at delta_i = 0 (`solve` re-centres R0 on every round, so the steps stay small). The normals' rows
         are L_i^T J_r^-1(phi_i), phi_i = Log(R_Ni^T R_i)."""
         f = math.exp(x[0])
-        u, v, l = self._segment_geometry(x, axes)
+        R = self.rotations(x)
+        u, v, l = self._segment_geometry(x, axes, R)
         distance, den = self._end_distances(l)
         dr_dl = (self.half / den[:, None] - (distance / den**2)[:, None] * l * [1.0, 1.0, 0.0]) / self.cfg.endpoint_noise_px
         dr_dv = np.cross(dr_dl, self.mid)  # dr/dl . (m x dv) = (dr/dl x m) . dv
         d_theta = np.stack([dr_dv[:, 0] * f * u[:, 0] + dr_dv[:, 1] * f * u[:, 1],
                             dr_dv[:, 0] * u[:, 2], dr_dv[:, 1] * u[:, 2]], axis=1)
         # v(delta) = K R Exp(delta) e_k, dv = K R (d delta x e_k): dr = a . (d delta x e_k) = (e_k x a) . d delta
-        a = np.einsum("ni,ij,njk->nk", dr_dv, pinhole(f, f, x[1], x[2]), self.rotations(x)[self.frame_of])
+        a = np.einsum("ni,ij,njk->nk", dr_dv, pinhole(f, f, x[1], x[2]), R[self.frame_of])
         d_delta = np.cross(np.eye(3)[axes], a)
         n_seg, F = len(self.ends), self.n_frames
         rows = [np.repeat(np.arange(n_seg), 6)]
@@ -328,8 +337,8 @@ class _Problem:
         block = np.arange(3 * F)
         rows.append(n_seg + np.repeat(block, 3))
         cols.append((3 + 3 * (block // 3)[:, None] + np.arange(3)).ravel())
-        phi = Rotation.from_matrix(np.swapaxes(self.R_normals, 1, 2) @ self.rotations(x)).as_rotvec()
-        vals.append((self.L_normals @ _right_jacobian_inverse(phi)).reshape(-1))
+        phi = self._normals_phi(R)
+        vals.append(np.zeros(9 * F) if phi is None else (self.L_normals @ _right_jacobian_inverse(phi)).reshape(-1))
         rows.append(n_seg + 3 * F + np.array([0, 1]))
         cols.append(np.array([1, 2]))
         vals.append(np.full(2, 1.0 / self.prior_std_px))
@@ -355,10 +364,9 @@ class _Problem:
                              tolerance: float = 1e-9) -> np.ndarray | None:
         """Iteratively reweighted Levenberg-Marquardt on sum rho(r^2) (normal equations, (3 + 3F)^2, dense);
         keeps H = J^T W J of the last step for `gauss_newton_cov`."""
-        cost = self._cost(x, axes)
+        cost, r = self._cost(x, axes)
         lam = 1e-3
         for _ in range(max_iterations):
-            r = self.residuals(x, axes)
             w = self._loss(r**2)[1]
             J = self.jacobian(x, axes)
             Jw = J.multiply(w[:, None]).tocsr()
@@ -368,20 +376,22 @@ class _Problem:
                 step = np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), -g)
                 trial = x + step
                 if self.inside(trial):
-                    trial_cost = self._cost(trial, axes)
+                    trial_cost, trial_r = self._cost(trial, axes)
                     if trial_cost <= cost:
                         break
                 lam *= 4.0
                 if lam > 1e8:
                     return x
-            x, lam, settled = trial, max(lam / 3.0, 1e-9), cost - trial_cost <= tolerance * max(cost, 1.0)
+            x, r, lam, settled = trial, trial_r, max(lam / 3.0, 1e-9), cost - trial_cost <= tolerance * max(cost, 1.0)
             cost = trial_cost
             if settled:
                 break
         return x if np.all(np.isfinite(x)) else None
 
-    def _cost(self, x: np.ndarray, axes: np.ndarray) -> float:
-        return float(self._loss(self.residuals(x, axes) ** 2)[0].sum())
+    def _cost(self, x: np.ndarray, axes: np.ndarray) -> tuple[float, np.ndarray]:
+        """(sum rho(r^2), the residuals r) at x."""
+        r = self.residuals(x, axes)
+        return float(self._loss(r**2)[0].sum()), r
 
     def _loss(self, z: np.ndarray) -> np.ndarray:
         """(rho, rho') of z = r^2: Cauchy on the segments' residuals, plain squares on the normals' and the
