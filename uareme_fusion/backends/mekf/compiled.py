@@ -14,8 +14,8 @@ from .accel import PERIOD_TOLERANCE_S
 from .kernels import KERNEL
 from .state import I3, ORTHONORMALISE_EVERY
 from .state_buffer import (PREPARED_MEASURED, NONE_PREPARED, S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES,
-                           S_DEFERRED_BITS, S_DEFERRED_ROWS, S_NONFINITE, S_REST_UPDATES, X_ACCEL_ROWS, X_AFTER_ACCEL,
-                           X_SIZE)
+                           S_DEFERRED_BITS, S_DEFERRED_ROWS, S_NONFINITE, S_REST_UPDATES, S_VISUAL_REJECTED,
+                           S_VISUAL_UPDATES, X_ACCEL_ROWS, X_AFTER_ACCEL, X_SIZE)
 
 
 def compiled_path_applies(filt, t: np.ndarray, saturated: np.ndarray, extra_s: float) -> bool:
@@ -64,12 +64,16 @@ def parameter_vector(filt, defer: bool) -> np.ndarray:
     p[K.P_ORTHO_EVERY] = ORTHONORMALISE_EVERY
     p[K.P_RECORD] = float(cfg.record_imu_estimates)
     p[K.P_GAP_LIMIT] = cfg.imu_gap_limit_s
+    p[K.P_GATE_CHI2], p[K.P_HUBER] = cfg.visual_gate_chi2, cfg.visual_huber_sigma
+    p[K.P_VERTICAL_STD], p[K.P_VERTICAL_MAX] = cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad
+    p[K.P_VISUAL_CORRELATION] = cfg.visual_error_correlation_s
     return p
 
 
 _COUNTERS = ((S_ACCEL_UPDATES, "accel_updates"), (S_ACCEL_SKIPPED, "accel_skipped"),
              (S_ACCEL_DOWNWEIGHTED, "accel_downweighted"), (S_REST_UPDATES, "rest_updates"),
-             (S_NONFINITE, "nonfinite_updates"))
+             (S_NONFINITE, "nonfinite_updates"), (S_VISUAL_UPDATES, "visual_updates"),
+             (S_VISUAL_REJECTED, "visual_rejected"))
 _NO_RECORD = np.empty((0, 3, 3))  # record buffers when nothing is recorded (writable: the kernels' type)
 
 
@@ -207,3 +211,12 @@ def accel_update_compiled(filt) -> None:
         np.copyto(fields, after)
         return
     filt.flags |= K.ACCEL_UPDATE(x, _parameters(filt, False))
+
+
+def visual_update_compiled(filt, visual) -> int:
+    """A frame's visual rotation fused into the filter's state buffer in one compiled call
+    (`kernels.visual_update`), as `Mekf._visual_update` fuses it with an IMU, a due accelerometer
+    update stacked in; its result bits raised in `filt.flags`. Returns non-zero when the frame was gated out."""
+    code = K.VISUAL_UPDATE(filt.x, _parameters(filt, False), visual.R_cm, visual.cov)
+    filt.flags |= code
+    return code & K.VISUAL_REJECTED

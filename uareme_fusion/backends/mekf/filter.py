@@ -21,7 +21,7 @@ from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
 from .compiled import (KERNEL, STAGE_ROWS, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters,
-                       integrate_staged_compiled, stage_compiled)
+                       integrate_staged_compiled, stage_compiled, visual_update_compiled)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
                            visual_model)
@@ -29,8 +29,8 @@ from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
 from .status_bits import status_of
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
-from .state_buffer import (S_IMU_T, S_PRODUCTS, S_T_STATE, X_B_C, X_P, X_R_WC, X_R_WM, BufferArray, BufferScalar,
-                           field_views, new_state_buffer)
+from .state_buffer import (S_IMU_T, S_PRODUCTS, S_REJECTIONS, S_T_STATE, S_T_VISUAL, X_B_C, X_P, X_R_WC, X_R_WM,
+                           BufferArray, BufferScalar, field_views, new_state_buffer)
 
 
 _P_TH = X_P + N_STATE * np.arange(N_STATE)[TH, None] + np.arange(N_STATE)[TH]  # where P[TH, TH] lies in `x`
@@ -93,6 +93,8 @@ class Mekf(Backend):
     t_state = BufferScalar(S_T_STATE, optional=True)
     imu_t_s = BufferScalar(S_IMU_T)  # time of the newest integrated IMU sample (camera clock), s; -inf before any
     products_unnormalised = BufferScalar(S_PRODUCTS, int)
+    t_visual_s = BufferScalar(S_T_VISUAL, optional=True)  # time of the previous visual update (camera clock), s
+    rejections = BufferScalar(S_REJECTIONS, int)  # consecutive frames gated out
 
     def __init__(self, config: MekfConfig | str | None = None):
         """`config`: a `MekfConfig`, a preset name or YAML path (`Mekf("vehicle")`), or None for the defaults."""
@@ -130,8 +132,6 @@ class Mekf(Backend):
         self.pending: list[ImuBatch] = []
         self.pending_span_s = 0.0
         self.init_samples: list[ImuBatch] = []
-        self.rejections = 0
-        self.t_visual_s: float | None = None  # time of the previous visual update (camera clock), s
         self.noise_share = VisualNoiseShare(cfg.visual_noise_share_frames)  # visual only (its `persistent_cov`)
         self._dropped_reported = 0
         self.accel = AccelPeriod(self.x)
@@ -161,6 +161,8 @@ class Mekf(Backend):
         self.motion = motion
         # Whether a frame's IMU batch may wait in the stage for the frame's one compiled call (`process_imu`).
         self._stages_frames = self.compiled and self.imu_is_camera and motion.uses_imu and motion.fuses_visual
+        # Whether a frame's visual update is one compiled call (`compiled.visual_update_compiled`).
+        self._visual_compiled = self.compiled and motion.uses_imu and motion.fuses_visual
 
     # ------------------------------------------------------------------ public API
     def process_imu(self, t_s, gyro_rad_s, accel_m_s2) -> None:
@@ -249,7 +251,10 @@ class Mekf(Backend):
         if visual is not None and self.manhattan_initialised and fuses_visual:
             # A due accelerometer measurement (prepared when it fell due, on the compiled path) rides in
             # the visual update.
-            self._visual_update(visual, self._take_accel_rows() if self.accel.due else None)
+            if not self._visual_compiled:
+                self._visual_update(visual, self._take_accel_rows() if self.accel.due else None)
+            elif visual_update_compiled(self, visual) and self.rejections >= self.config.reinit_after_rejections:
+                self._reinitialise(visual)
             return self._estimate(t_s)
         if self.accel.due:
             self.accel_update()
@@ -377,9 +382,7 @@ class Mekf(Backend):
             if accel_rows is not None:
                 self._kalman_update(*accel_rows)
             if self.rejections >= cfg.reinit_after_rejections:
-                self.flags |= status_bits.REINITIALISED
-                self.counters["reinitialised"] += 1
-                self.motion.reinitialise(self, visual)
+                self._reinitialise(visual)
             return
         self.rejections = 0
         shared = not self.motion.uses_imu and self.noise_share.enabled
@@ -394,6 +397,12 @@ class Mekf(Backend):
                     if self.motion.uses_imu else None)
         self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
         self.counters["visual_updates"] += 1
+
+    def _reinitialise(self, visual: VisualRotation) -> None:
+        """After `reinit_after_rejections` frames gated out in a row: a new scene alignment from `visual`."""
+        self.flags |= status_bits.REINITIALISED
+        self.counters["reinitialised"] += 1
+        self.motion.reinitialise(self, visual)
 
     def _count_rejection(self) -> None:
         self.flags |= status_bits.VISUAL_REJECTED

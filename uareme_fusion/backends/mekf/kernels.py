@@ -27,16 +27,17 @@ import math
 import numpy as np
 
 from ... import jit
+from ...rotations import manhattan_symmetries
 from . import status_bits
 from .accel import chunk_bounds
-from .matrix3 import exp3_into, inv3, matmul3_into
-from .measurements import gravity_model, zero_rate_model
+from .matrix3 import exp3_into, inv3, log3_into, matmul3_into
+from .measurements import correlated_noise_scale, gravity_model, vertical_measurement, zero_rate_model
 from ..imu_stream import rows_if_clean
 from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
 from .state_buffer import (PREPARED_MEASURED, PREPARED_NO_MEASUREMENT, NONE_PREPARED, S_ACC_ELAPSED, S_ACC_TIME,
                            S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_DEFERRED_BITS,
                            S_DEFERRED_ROWS, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE,
-                           S_REST_UPDATES, S_T_STATE, X_ACC_SUM, X_ACCEL_ROWS, X_AFTER_ACCEL, X_B_C, X_LAST_GYRO, X_LP,
+                           S_REJECTIONS, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_REJECTED, S_VISUAL_UPDATES, X_ACC_SUM, X_ACCEL_ROWS, X_AFTER_ACCEL, X_B_C, X_LAST_GYRO, X_LP,
                            X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S, X_SIZE)
 
 # The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `accel_rows_in_place` return.
@@ -47,12 +48,18 @@ STATUS_RESULTS = DOWNWEIGHTED | NONFINITE
 """The result bits that are `Status` flags."""
 MEASURED = 1 << 30
 """`accel_rows_in_place` wrote an accelerometer measurement (no `Status` bit)."""
+VISUAL_REJECTED = status_bits.VISUAL_REJECTED
+"""`visual_update`: the frame's rotation failed the gate (a `Status` bit)."""
+SYMMETRIES = manhattan_symmetries()
+"""The 24 rotations that relabel a Manhattan frame (`rotations.manhattan_symmetries`, in its order):
+a constant of the compiled code."""
 
 # Layout of the float64 parameter vector `p`.
 (P_Q_GYRO, P_Q_BIAS, P_Q_RATE, P_TRAPEZOID, P_PERIOD, P_DUE, P_DEFER, P_LP_TAU, P_INV_G, P_GRAVITY,
  P_ACC_NOISE, P_NORM_SCALE, P_INNOV_SCALE, P_FLAG_RATIO, P_REST_GYRO, P_REST_ACCEL, P_REST_MIN_S,
- P_REST_STD, P_MF_INIT, P_MF_YAW_RW, P_MF_TILT_RW, P_ORTHO_EVERY, P_RECORD, P_GAP_LIMIT) = range(24)
-P_SIZE = 24
+ P_REST_STD, P_MF_INIT, P_MF_YAW_RW, P_MF_TILT_RW, P_ORTHO_EVERY, P_RECORD, P_GAP_LIMIT, P_GATE_CHI2, P_HUBER,
+ P_VERTICAL_STD, P_VERTICAL_MAX, P_VISUAL_CORRELATION) = range(29)
+P_SIZE = 29
 
 
 def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoid, q_gyro, q_bias, q_rate,
@@ -146,41 +153,83 @@ def matmul_into(A, B, out):
     return out
 
 
-def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
-    """Joseph-form update with isotropic measurement noise `var`, then injection into the nominal
-    state and the reset of the error (as `Mekf._kalman_update`), all in place; nothing changes but
-    `s[S_NONFINITE]` when the result is not finite.
+def solve_into(A, B, X):
+    """`X = A^-1 B` for `A` (m, m) and `B` (m, n), by Gauss-Jordan elimination with partial pivoting on
+    copies (m is at most 9 here: no LAPACK call); a singular or non-finite `A` gives non-finite `X`
+    instead of an exception, as the filter checks its results for that."""
+    m, n = A.shape[0], B.shape[1]
+    M = A.copy()
+    X[:, :] = B
+    for col in range(m):
+        pivot = col
+        for row in range(col + 1, m):
+            if abs(M[row, col]) > abs(M[pivot, col]):
+                pivot = row
+        if pivot != col:
+            for j in range(m):
+                M[col, j], M[pivot, j] = M[pivot, j], M[col, j]
+            for j in range(n):
+                X[col, j], X[pivot, j] = X[pivot, j], X[col, j]
+        inv = 1.0 / M[col, col]
+        for j in range(m):
+            M[col, j] *= inv
+        for j in range(n):
+            X[col, j] *= inv
+        for row in range(m):
+            f = M[row, col]
+            if row != col and f != 0.0:
+                for j in range(m):
+                    M[row, j] -= f * M[col, j]
+                for j in range(n):
+                    X[row, j] -= f * X[col, j]
+    return X
+
+
+def kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, R, H, p):
+    """Joseph-form update with the measurement `residual` (m,), noise `R` (m, m) and `H` (m, 12), then
+    injection into the nominal state and the reset of the error (as `Mekf._kalman_update`), all in
+    place; nothing changes but `s[S_NONFINITE]` when the result is not finite.
     Scalar loops that use the structure (a BLAS call per small product costs more than the product,
     and more still out of the caches, after a solver call): the Joseph form expanded,
-    `(I - K H) P (I - K H)^T + K (var I) K^T = P - K (P H^T)^T - (P H^T) K^T + K S K^T` with `S` the
+    `(I - K H) P (I - K H)^T + K R K^T = P - K (P H^T)^T - (P H^T) K^T + K S K^T` with `S` the
     innovation covariance, and the reset `G P G^T` on the rotation blocks only."""
-    PHt = matmul_into(P, H.T, np.empty((12, 3)))
-    S = matmul_into(H, PHt, np.empty((3, 3)))
-    for i in range(3):
-        S[i, i] += var
-    S_inv = inv3(S)
-    K = np.empty((12, 3))
-    KS = np.empty((12, 3))
-    dx = np.empty(12)
+    m = residual.shape[0]
+    PHt = matmul_into(P, H.T, np.empty((12, m)))
+    S = matmul_into(H, PHt, np.empty((m, m)))
+    for i in range(m):
+        for j in range(m):
+            S[i, j] += R[i, j]
+    K = solve_into(S, PHt.T, np.empty((m, 12))).T  # S symmetric: K^T = S^-1 (P H^T)^T
+    KS = matmul_into(K, S, np.empty((12, m)))
+    dx = np.zeros(12)
     for i in range(12):
-        for j in range(3):
-            K[i, j] = PHt[i, 0] * S_inv[0, j] + PHt[i, 1] * S_inv[1, j] + PHt[i, 2] * S_inv[2, j]
-        for j in range(3):
-            KS[i, j] = K[i, 0] * S[0, j] + K[i, 1] * S[1, j] + K[i, 2] * S[2, j]
-        dx[i] = K[i, 0] * residual[0] + K[i, 1] * residual[1] + K[i, 2] * residual[2]
+        for k in range(m):
+            dx[i] += K[i, k] * residual[k]
     P_new = np.empty((12, 12))
     finite = True
     for i in range(12):
         finite &= abs(dx[i]) < np.inf
         for j in range(12):
-            v = (P[i, j] - (K[i, 0] * PHt[j, 0] + K[i, 1] * PHt[j, 1] + K[i, 2] * PHt[j, 2])
-                 - (PHt[i, 0] * K[j, 0] + PHt[i, 1] * K[j, 1] + PHt[i, 2] * K[j, 2])
-                 + (KS[i, 0] * K[j, 0] + KS[i, 1] * K[j, 1] + KS[i, 2] * K[j, 2]))
+            v = P[i, j]
+            for k in range(m):
+                v += -K[i, k] * PHt[j, k] - PHt[i, k] * K[j, k] + KS[i, k] * K[j, k]
             P_new[i, j] = v
             finite &= abs(v) < np.inf
     if not finite:
         s[S_NONFINITE] += 1
         return
+    inject_and_reset(s, R_wc, R_wm, b_c, P, lp, lp_J, dx, P_new, p)
+
+
+def isotropic_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var, H, p):
+    """`kalman_update` of a 3-row measurement with isotropic noise `var`."""
+    kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, residual, var * np.eye(3), H, p)
+
+
+def inject_and_reset(s, R_wc, R_wm, b_c, P, lp, lp_J, dx, P_new, p):
+    """After an update with error estimate `dx` (12,) and covariance `P_new` (12, 12): `dx` injected
+    into the nominal state and the low-pass stages (as `Mekf._kalman_update`), and `P` set to the
+    reset `G P_new G^T`, symmetrised, all in place."""
     with_manhattan = p[P_MF_INIT] > 0
     G = reset_jacobian(dx, with_manhattan)
     if with_manhattan:
@@ -238,7 +287,7 @@ def accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
                 if math.isnan(s[S_REST_SINCE]):
                     s[S_REST_SINCE] = s[S_T_STATE] - T
                 if s[S_T_STATE] - s[S_REST_SINCE] >= p[P_REST_MIN_S]:
-                    kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
+                    isotropic_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
                     s[S_REST_UPDATES] += 1
         rest_sums[:] = 0.0
         s[S_REST_N] = 0
@@ -270,7 +319,7 @@ def accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p
     `accel_rows`, then its measurement's update. Returns whether it was down-weighted."""
     ok, r, var, H, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
     if ok:
-        kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
+        isotropic_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
     return downweighted
 
 
@@ -326,9 +375,114 @@ def prepare_deferred_update(x, p):
     if code & MEASURED:
         s2, R_wc, R_wm, b_c, P, _, _, lp, lp_J, _ = state_views(after)
         rows = x[X_ACCEL_ROWS:X_SIZE]
-        kalman_update(s2, R_wc, R_wm, b_c, P, lp, lp_J, rows[0:3], rows[3], rows[4:40].reshape((3, 12)), p)
+        isotropic_update(s2, R_wc, R_wm, b_c, P, lp, lp_J, rows[0:3], rows[3], rows[4:40].reshape((3, 12)), p)
         s[S_DEFERRED_BITS] = NONFINITE if s2[S_NONFINITE] > s[S_NONFINITE] else 0
     return code & STATUS_RESULTS
+
+
+def visual_measurement(R_wc, R_wm, R_cm, cov, r, R_vis, H):
+    """`measurements.visual_model` on plain arrays, into the first three rows of `r` (m,), `R_vis`
+    (m, m) and `H` (m, 12) (zeros elsewhere, which it leaves): the solver's `R_cm` (3, 3) with
+    covariance `cov` (3, 3) rad^2 measures `R_cm = R_wc^T R_wm`, relabelled by the symmetry that
+    brings it nearest the prediction (the first of `SYMMETRIES` with the largest trace, as
+    `rotations.nearest_symmetric`); residual `Log(R_cm_pred^T R_cm)`."""
+    R_pred = np.empty((3, 3))  # R_wc^T R_wm
+    for i in range(3):
+        for j in range(3):
+            R_pred[i, j] = R_wc[0, i] * R_wm[0, j] + R_wc[1, i] * R_wm[1, j] + R_wc[2, i] * R_wm[2, j]
+    A = np.empty((3, 3))  # R_pred^T R_cm
+    for i in range(3):
+        for j in range(3):
+            A[i, j] = R_pred[0, i] * R_cm[0, j] + R_pred[1, i] * R_cm[1, j] + R_pred[2, i] * R_cm[2, j]
+    best, best_trace = 0, -np.inf
+    for g in range(SYMMETRIES.shape[0]):
+        trace = 0.0
+        for i in range(3):
+            for j in range(3):
+                trace += A[i, j] * SYMMETRIES[g, j, i]
+        if trace > best_trace:
+            best, best_trace = g, trace
+    G = SYMMETRIES[best]
+    log3_into(matmul3_into(A, G, np.empty((3, 3))), r)
+    C = np.empty((3, 3))  # G^T (cov + cov^T)/2 G
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = 0.5 * (cov[i, j] + cov[j, i])
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += G[k, i] * (C[k, 0] * G[0, j] + C[k, 1] * G[1, j] + C[k, 2] * G[2, j])
+            R_vis[i, j] = acc
+            H[i, j] = -R_pred[j, i]
+        H[i, 6 + i] = 1.0
+
+
+def visual_update(x, p, R_cm, cov):
+    """A frame's rotation `R_cm` (3, 3) with covariance `cov` (3, 3) rad^2, fused into the state
+    buffer `x` in place as `Mekf._visual_update` fuses it with an IMU (a due accelerometer update's
+    rows taken first, as `Mekf._take_accel_rows`, prepared or not): gated on its Mahalanobis distance
+    (`P_GATE_CHI2`; past it the accelerometer rows alone, the frame counted in `s[S_REJECTIONS]` and
+    `s[S_VISUAL_REJECTED]`), its covariance scaled for correlated errors (`P_VISUAL_CORRELATION`) and
+    by the Huber weight (`P_HUBER`), stacked with the vertical pseudo-measurement and the accelerometer
+    rows into one update. Returns the `VISUAL_REJECTED` | `DOWNWEIGHTED` | `NONFINITE` bits of what
+    happened; the re-initialisation after many rejections is left to the caller."""
+    s, R_wc, R_wm, b_c, P, _, _, lp, lp_J, _ = state_views(x)
+    nonfinite_before = s[S_NONFINITE]
+    code = 0
+    accel = x[X_ACCEL_ROWS:X_SIZE]
+    with_accel = False
+    if s[S_ACCEL_DUE] > 0:
+        s[S_ACCEL_DUE] = 0
+        prepared = s[S_DEFERRED_ROWS]
+        if prepared != NONE_PREPARED:  # its flags were raised when it was prepared
+            s[S_DEFERRED_ROWS] = NONE_PREPARED
+            with_accel = prepared == PREPARED_MEASURED
+        else:
+            taken = accel_rows_in_place(x, p, accel)
+            code |= taken & STATUS_RESULTS
+            with_accel = (taken & MEASURED) > 0
+    r, R_all, H = np.zeros(9), np.zeros((9, 9)), np.zeros((9, 12))
+    visual_measurement(R_wc, R_wm, R_cm, cov, r, R_all, H)
+    t_prev = s[S_T_VISUAL]
+    s[S_T_VISUAL] = s[S_T_STATE]
+    if t_prev == t_prev:  # not NaN: a previous visual update
+        R_all[0:3, 0:3] *= correlated_noise_scale(s[S_T_STATE] - t_prev, p[P_VISUAL_CORRELATION])
+    PHt = matmul_into(P, H[0:3].T, np.empty((12, 3)))  # the gate and Huber weigh the frame's full error
+    S = matmul_into(H[0:3], PHt, np.empty((3, 3)))
+    S += R_all[0:3, 0:3]
+    S_inv = inv3(S)
+    d2 = 0.0
+    for i in range(3):
+        d2 += r[i] * (S_inv[i, 0] * r[0] + S_inv[i, 1] * r[1] + S_inv[i, 2] * r[2])
+    if not d2 <= p[P_GATE_CHI2]:  # NaN too
+        code |= VISUAL_REJECTED
+        s[S_VISUAL_REJECTED] += 1
+        s[S_REJECTIONS] += 1
+        if with_accel:
+            isotropic_update(s, R_wc, R_wm, b_c, P, lp, lp_J, accel[0:3], accel[3], accel[4:40].reshape((3, 12)), p)
+    else:
+        s[S_REJECTIONS] = 0
+        d = math.sqrt(d2)
+        if d > p[P_HUBER]:  # Huber weight w = k / d  ->  covariance / w
+            R_all[0:3, 0:3] *= d / p[P_HUBER]
+        m = 3
+        ok, r_v, var_v, H_v = vertical_measurement(R_wm, p[P_VERTICAL_STD], p[P_VERTICAL_MAX])
+        if ok:
+            r[3:6] = r_v
+            H[3:6] = H_v
+            for i in range(3):
+                R_all[3 + i, 3 + i] = var_v
+            m = 6
+        if with_accel:
+            r[m:m + 3] = accel[0:3]
+            H[m:m + 3] = accel[4:40].reshape((3, 12))
+            for i in range(3):
+                R_all[m + i, m + i] = accel[3]
+            m += 3
+        kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r[:m], R_all[:m, :m], H[:m], p)
+        s[S_VISUAL_UPDATES] += 1
+    return code | (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
 
 
 def stage_batch(stage, t, gyro, accel, newest_s, gyro_range_rad_s, max_span_s):
@@ -516,13 +670,16 @@ STAGE = None
 """`stage_batch` compiled, or None."""
 INTEGRATE_STAGED = None
 """`integrate_staged` compiled, or None."""
+VISUAL_UPDATE = None
+"""`visual_update` compiled, or None."""
 if jit.available():
     try:
         _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into,
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
-                 zero_rate_measurement, matmul_into, kalman_update, accel_rows, accel_and_rest_update, has_gap,
-                 chunk_bounds, integrate_chunks, state_views, rows_if_clean, accel_rows_in_place,
-                 prepare_deferred_update, integrate_batch)
+                 zero_rate_measurement, matmul_into, solve_into, inject_and_reset, kalman_update, isotropic_update,
+                 accel_rows, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks, state_views, rows_if_clean,
+                 accel_rows_in_place, prepare_deferred_update, integrate_batch, correlated_noise_scale, log3_into,
+                 vertical_measurement, visual_measurement)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = integrate_batch
@@ -531,6 +688,7 @@ if jit.available():
         ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
         ACCEL_ROWS = accel_rows_in_place
         SEGMENTS = jit.compiled(integrate_segments, cache=True, error_model="numpy")
+        VISUAL_UPDATE = jit.compiled(visual_update, cache=True, error_model="numpy", nogil=False)
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)
-        KERNEL = ACCEL_UPDATE = ACCEL_ROWS = SEGMENTS = STAGE = INTEGRATE_STAGED = None
+        KERNEL = ACCEL_UPDATE = ACCEL_ROWS = SEGMENTS = STAGE = INTEGRATE_STAGED = VISUAL_UPDATE = None

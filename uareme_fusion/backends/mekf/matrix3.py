@@ -54,3 +54,33 @@ def matmul3_into(A, B, out):
         for j in range(3):
             out[i, j] = a0 * B[0, j] + a1 * B[1, j] + a2 * B[2, j]
     return out
+
+
+def log3_into(R, out):
+    """Rotation vector (3,) of a rotation matrix `R` (3, 3), the logarithm map of SO(3), written into
+    `out`: through its quaternion (Shepperd's method: the largest squared component first), angle
+    `2 atan2(|v|, w)` with `w >= 0`, so that it stays exact near 0 and near pi."""
+    a, b, c, d, e, f, g, h, i = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2], R[2, 0], R[2, 1], R[2, 2]
+    trace = a + e + i
+    if trace >= a and trace >= e and trace >= i:
+        w = 0.5 * math.sqrt(max(1.0 + trace, 0.0))
+        s = 0.25 / w
+        x, y, z = (h - f) * s, (c - g) * s, (d - b) * s
+    elif a >= e and a >= i:
+        x = 0.5 * math.sqrt(max(1.0 + a - e - i, 0.0))
+        s = 0.25 / x
+        y, z, w = (b + d) * s, (c + g) * s, (h - f) * s
+    elif e >= i:
+        y = 0.5 * math.sqrt(max(1.0 + e - a - i, 0.0))
+        s = 0.25 / y
+        x, z, w = (b + d) * s, (f + h) * s, (c - g) * s
+    else:
+        z = 0.5 * math.sqrt(max(1.0 + i - a - e, 0.0))
+        s = 0.25 / z
+        x, y, w = (c + g) * s, (f + h) * s, (d - b) * s
+    if w < 0.0:
+        x, y, z, w = -x, -y, -z, -w
+    norm_v = math.sqrt(x * x + y * y + z * z)
+    scale = 2.0 * math.atan2(norm_v, w) / norm_v if norm_v > 1e-12 else 2.0 / w
+    out[0], out[1], out[2] = scale * x, scale * y, scale * z
+    return out

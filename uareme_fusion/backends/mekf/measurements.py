@@ -17,10 +17,8 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ...rotations import WORLD_UP, nearest_symmetric, skew
+from ...rotations import nearest_symmetric
 from .state import I3, MF, N_STATE, TH
-
-E_Z = np.array([0.0, 0.0, 1.0])
 
 
 def visual_model(R_wc: np.ndarray, R_wm: np.ndarray, R_cm: np.ndarray, cov_rad2: np.ndarray):
@@ -47,16 +45,27 @@ def correlated_noise_scale(dt_s: float, correlation_s: float) -> float:
     return max(1.0, correlation_s / dt_s)
 
 
-def vertical_model(R_wm: np.ndarray, std_rad: float, max_rad: float):
+def vertical_measurement(R_wm, std_rad, max_rad):
     """Pseudo-measurement "the Manhattan z axis is (nearly) world up" (DESIGN.md "Conventions"),
-    std `std_rad`: `(residual (3,), R (3, 3) rad^2, H (3, 12))`, or None when m's z is farther than
-    `max_rad` from up."""
-    h = R_wm.T @ WORLD_UP
-    if math.acos(min(1.0, max(-1.0, float(h[2])))) > max_rad:
-        return None
-    H = np.zeros((3, N_STATE))
-    H[:, MF] = skew(h)  # d/d(dtheta) of Exp(-dtheta) h at 0
-    return E_Z - h, std_rad**2 * I3, H
+    std `std_rad`, on plain arrays (the compiled kernels call it too): `(ok, residual (3,), variance
+    rad^2, H (3, 12))`, `ok` False when m's z is farther than `max_rad` from up."""
+    h = R_wm[2].copy()  # R_wm^T @ (0, 0, 1)
+    H = np.zeros((3, 12))
+    if math.acos(min(1.0, max(-1.0, h[2]))) > max_rad:
+        return False, np.zeros(3), 0.0, H
+    # d/d(dtheta_m) of Exp(-dtheta_m) h at 0: skew(h)
+    H[0, 7], H[0, 8], H[1, 8] = -h[2], h[1], -h[0]
+    H[1, 6], H[2, 6], H[2, 7] = h[2], -h[1], h[0]
+    r = -h
+    r[2] += 1.0  # e_z - h
+    return True, r, std_rad**2, H
+
+
+def vertical_model(R_wm: np.ndarray, std_rad: float, max_rad: float):
+    """`vertical_measurement` as `(residual (3,), R (3, 3) rad^2, H (3, 12))`, or None when m's z is
+    farther than `max_rad` from up."""
+    ok, r, var, H = vertical_measurement(R_wm, std_rad, max_rad)
+    return (r, var * I3, H) if ok else None
 
 
 def vertical_distance2(R_wm: np.ndarray, P_m: np.ndarray, std_rad: float, max_rad: float) -> float | None:

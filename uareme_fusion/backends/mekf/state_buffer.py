@@ -10,7 +10,7 @@ Layout (offsets `X_*`, shapes in `FIELDS`): `s` (S_SIZE,) scalars indexed by `S_
 camera frame), `acc_sum` (3,) m/s, `lp` (2, 3) m/s^2, `lp_J` (2, 3, 3), `rest_sums` (8,), `accel_rows`
 (40,) (a deferred accelerometer measurement: residual (3,), variance, H (3, 12) row by row). Units and
 meanings as in `filter.Mekf` and `accel.AccelPeriod`. A scalar that may be absent (`t_state`,
-`rest_since_s`) is NaN while it is None. After these fields, `x[X_AFTER_ACCEL:]` (X_SIZE,) holds
+`rest_since_s`, `t_visual_s`) is NaN while it is None. After these fields, `x[X_AFTER_ACCEL:]` (X_SIZE,) holds
 them once more: the state after a deferred accelerometer update alone (`kernels.prepare_deferred_update`).
 """
 
@@ -24,11 +24,14 @@ import numpy as np
 # since the last re-orthonormalisation, low-pass valid (0/1), rest samples and rest start (s), the
 # update counters the kernels keep (harvested by `Mekf.counters`), a deferred update due (0/1), its
 # measurement taken already (`*PREPARED*`) and the `Status` bits of its update alone, the time of the
-# newest integrated IMU sample (s, camera clock; -inf before any).
+# newest integrated IMU sample (s, camera clock; -inf before any); the time of the previous visual update
+# (s, camera clock; NaN before any), the consecutive visual rejections, and the visual updates and
+# rejections the compiled visual update counts (harvested as the others).
 S_T_STATE, S_ACC_TIME, S_ACC_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
 S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE, S_NONFINITE = range(7, 13)
 S_DEFERRED_ROWS, S_DEFERRED_BITS, S_IMU_T = 13, 14, 15
-S_SIZE = 16
+S_T_VISUAL, S_REJECTIONS, S_VISUAL_UPDATES, S_VISUAL_REJECTED = 16, 17, 18, 19
+S_SIZE = 20
 NONE_PREPARED, PREPARED_MEASURED, PREPARED_NO_MEASUREMENT = 0, 1, 2
 """`s[S_DEFERRED_ROWS]`: no deferred update is prepared (or it was taken); one is prepared with its
 measurement in `accel_rows` (and the state after its update alone after the fields); one is prepared
@@ -49,7 +52,7 @@ def new_state_buffer() -> np.ndarray:
     """A fresh `x`: identity rotations, everything else zero, `t_state` and `rest_since_s` None."""
     x = np.zeros(2 * X_SIZE)
     x[X_R_WC:X_R_WM] = x[X_R_WM:X_B_C] = np.eye(3).ravel()
-    x[S_T_STATE] = x[S_REST_SINCE] = np.nan
+    x[S_T_STATE] = x[S_REST_SINCE] = x[S_T_VISUAL] = np.nan
     x[S_IMU_T] = -np.inf
     return x
 
