@@ -191,18 +191,17 @@ def test_frame_batch_held_for_its_frame_is_a_copy_and_counted_when_read():
 
 
 @needs_numba
-def test_update_prepared_when_due_same_as_reference_with_or_without_a_frame():
-    """An accelerometer update that falls due at the end of a frame's batch is prepared in the same
-    compiled call (`kernels.prepare_deferred_update`): its measurement for a visual update, the state
-    after the update alone for a frame without one. Frames with and without rotation, the counts read
-    between the propagation and the frame, and a propagation past a prepared update: the reference's
-    estimates, counts and flags."""
+def test_update_due_at_a_frame_same_as_reference_with_or_without_a_rotation():
+    """An accelerometer update that falls due at the end of a frame's batch waits for the frame: the
+    frame's compiled visual update (`kernels.visual_update`) stacks it, a frame without a rotation
+    applies it alone. Frames with and without rotation, the counts read between the propagation and
+    the frame, and a propagation past a waiting update: the reference's estimates, counts and flags."""
     traj, t, gyro, accel = stream(6, duration_s=10.0)
     rng = np.random.default_rng(8)
     deltas = rng.normal(scale=0.01, size=(t.size, 3))
     filt, ref = (Mekf(c) for c in both(load_config("handheld", MekfConfig)))
     ests = ([], [])
-    prepared = 0
+    waiting = 0
     for k, i in enumerate(range(0, t.size - 7, 7)):
         t_f = float(t[i + 6]) + 0.001
         R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0] @ exp_so3(deltas[i])
@@ -210,14 +209,14 @@ def test_update_prepared_when_due_same_as_reference_with_or_without_a_frame():
         for f in (filt, ref):
             f.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
             f.propagate_to(t_f - 0.0005 if k % 11 == 5 else t_f)  # now and then the frame comes later
-        if filt.x[state_buffer.S_DEFERRED_ROWS] != state_buffer.NONE_PREPARED:
-            prepared += 1
-            if prepared % 2:
+        if filt.accel.due:
+            waiting += 1
+            if waiting % 2:
                 filt.counters  # read (and moved out of the state buffer) before the frame takes the update
         for f, out in zip((filt, ref), ests):
             out.append(f.process_frame(t_f, None if k % 4 == 1 else visual))
         assert filt.counters == ref.counters
-    assert prepared > 30 and filt.counters["accel_updates"] > 40 and filt.counters["visual_updates"] > 100
+    assert waiting > 30 and filt.counters["accel_updates"] > 40 and filt.counters["visual_updates"] > 100
     assert_same_filters(filt, ref, *ests)
 
 
@@ -248,7 +247,7 @@ def test_kernels_see_the_fields_that_python_sees():
     x[:] = np.arange(x.size)
     python_views = state_buffer.field_views(x)
     kernel_views = getattr(kernels.state_views, "py_func", kernels.state_views)(x)
-    assert len(kernel_views) == len(state_buffer.FIELDS) - 1  # all but `accel_rows`, which the kernels slice
+    assert len(kernel_views) == len(state_buffer.FIELDS)
     for view, (name, shape) in zip(kernel_views, state_buffer.FIELDS):
         assert view.shape == shape and np.shares_memory(view, x)
         assert np.array_equal(view, python_views[name])

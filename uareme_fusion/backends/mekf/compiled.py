@@ -12,10 +12,9 @@ import numpy as np
 from . import kernels as K
 from .accel import PERIOD_TOLERANCE_S
 from .kernels import KERNEL
-from .state import I3, ORTHONORMALISE_EVERY
-from .state_buffer import (PREPARED_MEASURED, NONE_PREPARED, S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES,
-                           S_DEFERRED_BITS, S_DEFERRED_ROWS, S_NONFINITE, S_REST_UPDATES, S_VISUAL_REJECTED,
-                           S_VISUAL_UPDATES, X_ACCEL_ROWS, X_AFTER_ACCEL, X_SIZE)
+from .state import ORTHONORMALISE_EVERY
+from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_NONFINITE, S_REST_UPDATES,
+                           S_VISUAL_REJECTED, S_VISUAL_UPDATES)
 
 
 def compiled_path_applies(filt, t: np.ndarray, saturated: np.ndarray, extra_s: float) -> bool:
@@ -78,14 +77,12 @@ _NO_RECORD = np.empty((0, 3, 3))  # record buffers when nothing is recorded (wri
 
 
 def harvest_kernel_counters(x: np.ndarray, counters: dict[str, int]) -> None:
-    """Move the update counts the kernels keep in the state buffer `x` into `counters` (by name); the
-    state after a deferred update (`kernels.prepare_deferred_update`) counts from the same start."""
+    """Move the update counts the kernels keep in the state buffer `x` into `counters` (by name)."""
     for index, name in _COUNTERS:
         count = x[index]
         if count:
             counters[name] += int(count)
             x[index] = 0.0
-            x[X_AFTER_ACCEL + index] -= count
 
 
 def _record_buffers(filt, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -135,8 +132,8 @@ def stage_compiled(filt, t, gyro_c, accel_c) -> int:
 
 def integrate_staged_compiled(filt, n: int, t_frame_s: float) -> bool:
     """The `n` samples staged by `stage_compiled`, integrated to the frame at `t_frame_s` (s) in one
-    kernel call (`kernels.integrate_staged`); an update falling due at their end is prepared for the
-    frame. False, changing nothing, when a sample lies past the frame, the frame lies past the gap
+    kernel call (`kernels.integrate_staged`); an update falling due at their end is left to the frame
+    (its visual update stacks it). False, changing nothing, when a sample lies past the frame, the frame lies past the gap
     limit, a step is an IMU gap, or an accelerometer update waits. A frame's path: the fewest Python
     steps around the one call."""
     record_R, record_P = _record_buffers(filt, n)
@@ -168,55 +165,17 @@ def integrate_segments_compiled(filt, t, gyro_c, accel_c, ends: np.ndarray):
     return out_R, out_cov, out_b, out_flags  # the kernels' result bits are `Status` bits
 
 
-def _deferred_views(filt) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Views of the filter's state buffer (cached per filter): the residual (3,) and H (3, 12) in
-    `accel_rows`, the fields, and the state after a deferred accelerometer update alone."""
-    views = filt.__dict__.get("_deferred_views")
-    if views is None:
-        x = filt.x
-        views = filt._deferred_views = (x[X_ACCEL_ROWS:X_ACCEL_ROWS + 3], x[X_ACCEL_ROWS + 4:X_SIZE].reshape(3, 12),
-                                        x[:X_SIZE], x[X_AFTER_ACCEL:X_AFTER_ACCEL + X_SIZE])
-    return views
-
-
-def accel_rows_compiled(filt):
-    """The accelerometer measurement of the period just completed, for a stacked update, compiled in
-    the filter's state buffer (an at-rest update applied first): as `Mekf._accel_rows`, `(residual (3,),
-    R (3, 3), H (3, 12))` or None near free fall. One prepared when the update fell due at the end of a
-    batch (`kernels.prepare_deferred_update`, its flags already raised) is taken as it is. The residual
-    and H are views of the buffer, valid until the next update falls due."""
-    x = filt.x
-    prepared = x[S_DEFERRED_ROWS]
-    if prepared:
-        x[S_DEFERRED_ROWS] = NONE_PREPARED
-        if prepared != PREPARED_MEASURED:
-            return None
-    else:
-        code = K.ACCEL_ROWS(x, _parameters(filt, False), filt.views["accel_rows"])
-        filt.flags |= code & K.STATUS_RESULTS
-        if not code & K.MEASURED:
-            return None
-    residual, H, _, _ = _deferred_views(filt)
-    return residual, x[X_ACCEL_ROWS + 3] * I3, H
-
-
 def accel_update_compiled(filt) -> None:
     """The accelerometer (and at-rest) update of the period just completed, compiled, in the filter's
-    state buffer: as `Mekf.accel_update`. An update prepared when it fell due at the end of a batch
-    (`kernels.prepare_deferred_update`) is one copy of the state it left."""
-    x = filt.x
-    if x[S_DEFERRED_ROWS]:
-        filt.flags |= int(x[S_DEFERRED_BITS])
-        _, _, fields, after = _deferred_views(filt)
-        np.copyto(fields, after)
-        return
-    filt.flags |= K.ACCEL_UPDATE(x, _parameters(filt, False))
+    state buffer: as `Mekf.accel_update`."""
+    filt.flags |= K.ACCEL_UPDATE(filt.x, _parameters(filt, False))
 
 
 def visual_update_compiled(filt, visual) -> int:
     """A frame's visual rotation fused into the filter's state buffer in one compiled call
     (`kernels.visual_update`), as `Mekf._visual_update` fuses it with an IMU, a due accelerometer
-    update stacked in; its result bits raised in `filt.flags`. Returns non-zero when the frame was gated out."""
-    code = K.VISUAL_UPDATE(filt.x, _parameters(filt, False), visual.R_cm, visual.cov)
+    update stacked in; its result bits raised in `filt.flags` and the estimate after it in
+    `filt.estimate_out` (see the kernel). Returns non-zero when the frame was gated out."""
+    code = K.VISUAL_UPDATE(filt.x, _parameters(filt, False), visual.R_cm, visual.cov, filt.estimate_out)
     filt.flags |= code
     return code & K.VISUAL_REJECTED

@@ -20,7 +20,7 @@ from ..imu_stream import ImuStream, check_imu_arrays
 from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
-from .compiled import (KERNEL, STAGE_ROWS, accel_rows_compiled, accel_update_compiled, harvest_kernel_counters,
+from .compiled import (KERNEL, STAGE_ROWS, accel_update_compiled, harvest_kernel_counters,
                        integrate_staged_compiled, stage_compiled, visual_update_compiled)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
@@ -163,6 +163,7 @@ class Mekf(Backend):
         self._stages_frames = self.compiled and self.imu_is_camera and motion.uses_imu and motion.fuses_visual
         # Whether a frame's visual update is one compiled call (`compiled.visual_update_compiled`).
         self._visual_compiled = self.compiled and motion.uses_imu and motion.fuses_visual
+        self.estimate_out = np.empty((4, 3, 3))  # the estimate after a compiled visual update
 
     # ------------------------------------------------------------------ public API
     def process_imu(self, t_s, gyro_rad_s, accel_m_s2) -> None:
@@ -249,11 +250,12 @@ class Mekf(Backend):
         self.propagate_to(t_s)
         fuses_visual = self.motion.fuses_visual
         if visual is not None and self.manhattan_initialised and fuses_visual:
-            # A due accelerometer measurement (prepared when it fell due, on the compiled path) rides in
-            # the visual update.
+            # A due accelerometer measurement rides in the visual update.
             if not self._visual_compiled:
                 self._visual_update(visual, self._take_accel_rows() if self.accel.due else None)
-            elif visual_update_compiled(self, visual) and self.rejections >= self.config.reinit_after_rejections:
+            elif not visual_update_compiled(self, visual):
+                return self._compiled_estimate(t_s)
+            elif self.rejections >= self.config.reinit_after_rejections:
                 self._reinitialise(visual)
             return self._estimate(t_s)
         if self.accel.due:
@@ -340,9 +342,8 @@ class Mekf(Backend):
     def _accel_rows(self):
         """The period's zero-rate update (applied at once, with `rest_gyro_max_rad_s`), then the
         gravity measurement of its mean (or low-passed) direction: `(residual, R, H)` or None (near
-        free fall). Consumes the period."""
-        if self.compiled:
-            return accel_rows_compiled(self)
+        free fall). Consumes the period. The reference path: compiled, `kernels.accel_rows` does this
+        inside the update that takes it."""
         cfg = self.config
         acc_c, T = self.accel.take_mean()
         if cfg.rest_gyro_max_rad_s > 0:
@@ -457,6 +458,12 @@ class Mekf(Backend):
         est = self._make_estimate(t_s, self.flags)
         self.flags = status_bits.OK
         return est
+
+    def _compiled_estimate(self, t_s: float) -> Estimate:
+        """`_estimate` from what the compiled visual update wrote (`estimate_out`): one copy, no arithmetic."""
+        R_wc, cov, R_wm, b_c = self.estimate_out.copy()
+        bits, self.flags = self.flags, status_bits.OK
+        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm, b_c[0] if self.imu_is_camera else self.R_ci.T @ b_c[0])
 
     def _make_estimate(self, t_s, bits: int) -> Estimate:
         """The estimate of the state now, stamped `t_s`, with the `Status` of the flag `bits`."""

@@ -34,11 +34,10 @@ from .matrix3 import exp3_into, inv3, log3_into, matmul3_into
 from .measurements import correlated_noise_scale, gravity_model, vertical_measurement, zero_rate_model
 from ..imu_stream import rows_if_clean
 from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
-from .state_buffer import (PREPARED_MEASURED, PREPARED_NO_MEASUREMENT, NONE_PREPARED, S_ACC_ELAPSED, S_ACC_TIME,
-                           S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_DEFERRED_BITS,
-                           S_DEFERRED_ROWS, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE,
-                           S_REJECTIONS, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_REJECTED, S_VISUAL_UPDATES, X_ACC_SUM, X_ACCEL_ROWS, X_AFTER_ACCEL, X_B_C, X_LAST_GYRO, X_LP,
-                           X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S, X_SIZE)
+from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED,
+                           S_ACCEL_UPDATES, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE,
+                           S_REJECTIONS, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_REJECTED, S_VISUAL_UPDATES,
+                           X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S, X_SIZE)
 
 # The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `accel_rows_in_place` return.
 DOWNWEIGHTED, NONFINITE = status_bits.ACCEL_DOWNWEIGHTED, status_bits.UPDATE_NONFINITE
@@ -328,7 +327,7 @@ def state_views(x):
     last_gyro, acc_sum, lp, lp_J, rest_sums)."""
     return (x[X_S:X_R_WC], x[X_R_WC:X_R_WM].reshape((3, 3)), x[X_R_WM:X_B_C].reshape((3, 3)), x[X_B_C:X_P],
             x[X_P:X_LAST_GYRO].reshape((12, 12)), x[X_LAST_GYRO:X_ACC_SUM], x[X_ACC_SUM:X_LP],
-            x[X_LP:X_LP_J].reshape((2, 3)), x[X_LP_J:X_REST_SUMS].reshape((2, 3, 3)), x[X_REST_SUMS:X_ACCEL_ROWS])
+            x[X_LP:X_LP_J].reshape((2, 3)), x[X_LP_J:X_REST_SUMS].reshape((2, 3, 3)), x[X_REST_SUMS:X_SIZE])
 
 
 def integrate_batch(x, rows, extra_s, p, record_R, record_P):
@@ -351,33 +350,7 @@ def integrate_batch(x, rows, extra_s, p, record_R, record_P):
                             extra_s, p, record_R, record_P)
     code |= NONFINITE if s[S_NONFINITE] > nonfinite_before else 0
     s[S_IMU_T] = t[t.shape[0] - 1]
-    if s[S_ACCEL_DUE] > 0 and s[S_DEFERRED_ROWS] == NONE_PREPARED:  # deferred to the frame at the batch's end
-        code |= prepare_deferred_update(x, p)
     return code
-
-
-def prepare_deferred_update(x, p):
-    """The accelerometer update deferred to a frame (`P_DEFER`), prepared when it falls due so that
-    the frame, after its solver call, makes no compiled call: the period's measurement is taken
-    (`accel_rows_in_place`: an at-rest update applied, the period consumed) into `x[X_ACCEL_ROWS:]`,
-    for the frame's stacked visual update, and the state after that measurement's update alone goes
-    to `x[X_AFTER_ACCEL:]`, for a frame without one, with the `NONFINITE` bit of that update in
-    `s[S_DEFERRED_BITS]`. `s[S_DEFERRED_ROWS]` says which (`state_buffer.*PREPARED*`); `compiled.py`
-    takes them. Returns the `DOWNWEIGHTED` | `NONFINITE` bits of taking the measurement."""
-    code = accel_rows_in_place(x, p, x[X_ACCEL_ROWS:X_SIZE])
-    s = x[X_S:X_R_WC]
-    s[S_DEFERRED_ROWS] = PREPARED_MEASURED if code & MEASURED else PREPARED_NO_MEASUREMENT
-    s[S_DEFERRED_BITS] = 0
-    after = x[X_AFTER_ACCEL:X_AFTER_ACCEL + X_SIZE]
-    after[:] = x[0:X_SIZE]
-    after[S_ACCEL_DUE] = 0
-    after[S_DEFERRED_ROWS] = NONE_PREPARED
-    if code & MEASURED:
-        s2, R_wc, R_wm, b_c, P, _, _, lp, lp_J, _ = state_views(after)
-        rows = x[X_ACCEL_ROWS:X_SIZE]
-        isotropic_update(s2, R_wc, R_wm, b_c, P, lp, lp_J, rows[0:3], rows[3], rows[4:40].reshape((3, 12)), p)
-        s[S_DEFERRED_BITS] = NONFINITE if s2[S_NONFINITE] > s[S_NONFINITE] else 0
-    return code & STATUS_RESULTS
 
 
 def visual_measurement(R_wc, R_wm, R_cm, cov, r, R_vis, H):
@@ -418,30 +391,27 @@ def visual_measurement(R_wc, R_wm, R_cm, cov, r, R_vis, H):
         H[i, 6 + i] = 1.0
 
 
-def visual_update(x, p, R_cm, cov):
+def visual_update(x, p, R_cm, cov, estimate):
     """A frame's rotation `R_cm` (3, 3) with covariance `cov` (3, 3) rad^2, fused into the state
     buffer `x` in place as `Mekf._visual_update` fuses it with an IMU (a due accelerometer update's
-    rows taken first, as `Mekf._take_accel_rows`, prepared or not): gated on its Mahalanobis distance
+    rows taken first, as `Mekf._take_accel_rows`): gated on its Mahalanobis distance
     (`P_GATE_CHI2`; past it the accelerometer rows alone, the frame counted in `s[S_REJECTIONS]` and
     `s[S_VISUAL_REJECTED]`), its covariance scaled for correlated errors (`P_VISUAL_CORRELATION`) and
     by the Huber weight (`P_HUBER`), stacked with the vertical pseudo-measurement and the accelerometer
-    rows into one update. Returns the `VISUAL_REJECTED` | `DOWNWEIGHTED` | `NONFINITE` bits of what
-    happened; the re-initialisation after many rejections is left to the caller."""
+    rows into one update. The estimate after it goes to `estimate` (4, 3, 3): `R_wc`, its covariance
+    (the attitude block of `P`, symmetrised), `R_wm`, and `b_c` in the first row. Returns the
+    `VISUAL_REJECTED` | `DOWNWEIGHTED` | `NONFINITE` bits of what happened; the re-initialisation after
+    many rejections is left to the caller."""
     s, R_wc, R_wm, b_c, P, _, _, lp, lp_J, _ = state_views(x)
     nonfinite_before = s[S_NONFINITE]
     code = 0
-    accel = x[X_ACCEL_ROWS:X_SIZE]
+    accel = np.empty(40)
     with_accel = False
-    if s[S_ACCEL_DUE] > 0:
+    if s[S_ACCEL_DUE] > 0:  # left to the frame at the end of its batch (`P_DEFER`)
         s[S_ACCEL_DUE] = 0
-        prepared = s[S_DEFERRED_ROWS]
-        if prepared != NONE_PREPARED:  # its flags were raised when it was prepared
-            s[S_DEFERRED_ROWS] = NONE_PREPARED
-            with_accel = prepared == PREPARED_MEASURED
-        else:
-            taken = accel_rows_in_place(x, p, accel)
-            code |= taken & STATUS_RESULTS
-            with_accel = (taken & MEASURED) > 0
+        taken = accel_rows_in_place(x, p, accel)
+        code |= taken & STATUS_RESULTS
+        with_accel = (taken & MEASURED) > 0
     r, R_all, H = np.zeros(9), np.zeros((9, 9)), np.zeros((9, 12))
     visual_measurement(R_wc, R_wm, R_cm, cov, r, R_all, H)
     t_prev = s[S_T_VISUAL]
@@ -482,6 +452,12 @@ def visual_update(x, p, R_cm, cov):
             m += 3
         kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r[:m], R_all[:m, :m], H[:m], p)
         s[S_VISUAL_UPDATES] += 1
+    for i in range(3):
+        for j in range(3):
+            estimate[0, i, j] = R_wc[i, j]
+            estimate[1, i, j] = 0.5 * (P[i, j] + P[j, i])
+            estimate[2, i, j] = R_wm[i, j]
+        estimate[3, 0, i] = b_c[i]
     return code | (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
 
 
@@ -662,8 +638,6 @@ KERNEL = None
 """`integrate_batch` compiled, with the functions it calls, or None (numba missing or broken)."""
 ACCEL_UPDATE = None
 """`accel_update_in_place` compiled, or None."""
-ACCEL_ROWS = None
-"""`accel_rows_in_place` compiled, or None."""
 SEGMENTS = None
 """`integrate_segments` compiled, or None."""
 STAGE = None
@@ -678,7 +652,7 @@ if jit.available():
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
                  zero_rate_measurement, matmul_into, solve_into, inject_and_reset, kalman_update, isotropic_update,
                  accel_rows, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks, state_views, rows_if_clean,
-                 accel_rows_in_place, prepare_deferred_update, integrate_batch, correlated_noise_scale, log3_into,
+                 accel_rows_in_place, integrate_batch, correlated_noise_scale, log3_into,
                  vertical_measurement, visual_measurement)
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
@@ -686,9 +660,8 @@ if jit.available():
         STAGE = jit.compiled(stage_batch, cache=True, nogil=False)  # per frame, a few microseconds each
         INTEGRATE_STAGED = jit.compiled(integrate_staged, cache=True, error_model="numpy", nogil=False)
         ACCEL_UPDATE = jit.compiled(accel_update_in_place, cache=True, error_model="numpy")
-        ACCEL_ROWS = accel_rows_in_place
         SEGMENTS = jit.compiled(integrate_segments, cache=True, error_model="numpy")
         VISUAL_UPDATE = jit.compiled(visual_update, cache=True, error_model="numpy", nogil=False)
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)
-        KERNEL = ACCEL_UPDATE = ACCEL_ROWS = SEGMENTS = STAGE = INTEGRATE_STAGED = VISUAL_UPDATE = None
+        KERNEL = ACCEL_UPDATE = SEGMENTS = STAGE = INTEGRATE_STAGED = VISUAL_UPDATE = None

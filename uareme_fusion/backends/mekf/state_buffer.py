@@ -7,11 +7,9 @@ array, and nothing is packed or unpacked between the two paths.
 
 Layout (offsets `X_*`, shapes in `FIELDS`): `s` (S_SIZE,) scalars indexed by `S_*`, `R_wc` (3, 3),
 `R_wm` (3, 3), `b_c` (3,) rad/s, `P` (12, 12), `last_gyro` (3,) rad/s (the previous gyro reading,
-camera frame), `acc_sum` (3,) m/s, `lp` (2, 3) m/s^2, `lp_J` (2, 3, 3), `rest_sums` (8,), `accel_rows`
-(40,) (a deferred accelerometer measurement: residual (3,), variance, H (3, 12) row by row). Units and
+camera frame), `acc_sum` (3,) m/s, `lp` (2, 3) m/s^2, `lp_J` (2, 3, 3), `rest_sums` (8,). Units and
 meanings as in `filter.Mekf` and `accel.AccelPeriod`. A scalar that may be absent (`t_state`,
-`rest_since_s`, `t_visual_s`) is NaN while it is None. After these fields, `x[X_AFTER_ACCEL:]` (X_SIZE,) holds
-them once more: the state after a deferred accelerometer update alone (`kernels.prepare_deferred_update`).
+`rest_since_s`, `t_visual_s`) is NaN while it is None.
 """
 
 from __future__ import annotations
@@ -22,35 +20,26 @@ import numpy as np
 
 # Scalars in x[X_S]: state time (s), accelerometer period (time covered, time elapsed, s), products
 # since the last re-orthonormalisation, low-pass valid (0/1), rest samples and rest start (s), the
-# update counters the kernels keep (harvested by `Mekf.counters`), a deferred update due (0/1), its
-# measurement taken already (`*PREPARED*`) and the `Status` bits of its update alone, the time of the
-# newest integrated IMU sample (s, camera clock; -inf before any); the time of the previous visual update
+# update counters the kernels keep (harvested by `Mekf.counters`), an update due at a frame (0/1), the
+# time of the newest integrated IMU sample (s, camera clock; -inf before any); the time of the previous visual update
 # (s, camera clock; NaN before any), the consecutive visual rejections, and the visual updates and
 # rejections the compiled visual update counts (harvested as the others).
 S_T_STATE, S_ACC_TIME, S_ACC_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
 S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE, S_NONFINITE = range(7, 13)
-S_DEFERRED_ROWS, S_DEFERRED_BITS, S_IMU_T = 13, 14, 15
-S_T_VISUAL, S_REJECTIONS, S_VISUAL_UPDATES, S_VISUAL_REJECTED = 16, 17, 18, 19
-S_SIZE = 20
-NONE_PREPARED, PREPARED_MEASURED, PREPARED_NO_MEASUREMENT = 0, 1, 2
-"""`s[S_DEFERRED_ROWS]`: no deferred update is prepared (or it was taken); one is prepared with its
-measurement in `accel_rows` (and the state after its update alone after the fields); one is prepared
-and has no measurement (near free fall)."""
+S_IMU_T, S_T_VISUAL, S_REJECTIONS, S_VISUAL_UPDATES, S_VISUAL_REJECTED = range(13, 18)
+S_SIZE = 18
 
 FIELDS = (("s", (S_SIZE,)), ("R_wc", (3, 3)), ("R_wm", (3, 3)), ("b_c", (3,)), ("P", (12, 12)),
-          ("last_gyro", (3,)), ("acc_sum", (3,)), ("lp", (2, 3)), ("lp_J", (2, 3, 3)), ("rest_sums", (8,)),
-          ("accel_rows", (40,)))
+          ("last_gyro", (3,)), ("acc_sum", (3,)), ("lp", (2, 3)), ("lp_J", (2, 3, 3)), ("rest_sums", (8,)))
 """Fields of `x` in order, with their shapes."""
 _OFFSETS = np.cumsum([0] + [math.prod(shape) for _, shape in FIELDS]).tolist()
-X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACC_SUM, X_LP, X_LP_J, X_REST_SUMS, X_ACCEL_ROWS, X_SIZE = _OFFSETS
+X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACC_SUM, X_LP, X_LP_J, X_REST_SUMS, X_SIZE = _OFFSETS
 """Where each field of `FIELDS` starts in `x` (Python ints: compile-time constants in the kernels), and its size."""
-X_AFTER_ACCEL = X_SIZE
-"""Where the fields start once more: the state after a deferred accelerometer update alone."""
 
 
 def new_state_buffer() -> np.ndarray:
     """A fresh `x`: identity rotations, everything else zero, `t_state` and `rest_since_s` None."""
-    x = np.zeros(2 * X_SIZE)
+    x = np.zeros(X_SIZE)
     x[X_R_WC:X_R_WM] = x[X_R_WM:X_B_C] = np.eye(3).ravel()
     x[S_T_STATE] = x[S_REST_SINCE] = x[S_T_VISUAL] = np.nan
     x[S_IMU_T] = -np.inf
