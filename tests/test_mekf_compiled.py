@@ -97,6 +97,40 @@ def test_fused_with_frames_same_estimates(preset):
 
 
 @needs_numba
+@pytest.mark.parametrize("update", [{}, {"visual_error_correlation_s": 0.3, "manhattan_vertical_max_rad": 0.002}])
+def test_compiled_visual_update_gates_weighs_and_reinitialises_as_the_reference(update):
+    """The frame's compiled visual update (`kernels.visual_update`) against the reference
+    (`Mekf._visual_update`, numpy/scipy/filterpy): rotations relabelled by random cube symmetries,
+    frames with twice the noise their covariance claims (Huber-weighted), lone outliers (gated out),
+    a run of 10 outliers (re-initialisation), a NaN covariance (gated out); with and without
+    correlated-error scaling and the vertical pseudo-measurement. Same estimates, counts and flags."""
+    from uareme_fusion.rotations import manhattan_symmetries
+
+    traj, t, gyro, accel = stream(7, duration_s=12.0)
+    rng = np.random.default_rng(11)
+    n_frames = t.size // 7
+    deltas = rng.normal(scale=0.01, size=(n_frames, 3))
+    deltas[rng.random(n_frames) < 0.2] *= 2.0  # beyond what the covariance says: Huber-weighted
+    deltas[rng.random(n_frames) < 0.05] = [0.0, 0.5, 0.0]  # lone outliers: gated out
+    deltas[250:260] = [0.4, 0.0, 0.3]  # ten in a row: re-initialised
+    labels = rng.integers(0, 24, size=n_frames)
+    symmetries = manhattan_symmetries()
+
+    def frames(t_f, filt):  # the same draws for both filters
+        k = min(int(round(t_f * 200.0)) // 7, n_frames - 1)
+        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0] @ exp_so3(deltas[k])
+        cov = np.full((3, 3), np.nan) if k == 200 else 1e-4 * np.eye(3)
+        return VisualRotation(R_cm=R_cm @ symmetries[labels[k]], cov=cov, cost=0.01, iterations=3, n_valid=100)
+
+    cfg = load_config("handheld", MekfConfig).model_copy(update=update)
+    (a, ea), (b, eb) = (run(c, t, gyro, accel, 7, frames) for c in both(cfg))
+    assert a.counters["visual_updates"] > 250 and a.counters["visual_rejected"] > 20
+    assert a.counters["reinitialised"] >= 1
+    assert sum(bool(e.status & Status.VISUAL_REJECTED) for e in ea) == a.counters["visual_rejected"]
+    assert_same_filters(a, b, ea, eb)
+
+
+@needs_numba
 def test_accelerometer_rows_stacked_into_visual_updates_same_with_rest_updates():
     """A camera held still in front of a scene: the compiled accelerometer rows that visual updates
     stack (`compiled.accel_rows_compiled`) apply the at-rest update first and give the reference's

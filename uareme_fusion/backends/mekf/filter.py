@@ -250,14 +250,7 @@ class Mekf(Backend):
         self.propagate_to(t_s)
         fuses_visual = self.motion.fuses_visual
         if visual is not None and self.manhattan_initialised and fuses_visual:
-            # A due accelerometer measurement rides in the visual update.
-            if not self._visual_compiled:
-                self._visual_update(visual, self._take_accel_rows() if self.accel.due else None)
-            elif not visual_update_compiled(self, visual):
-                return self._compiled_estimate(t_s)
-            elif self.rejections >= self.config.reinit_after_rejections:
-                self._reinitialise(visual)
-            return self._estimate(t_s)
+            return self._compiled_estimate(t_s) if self._fuse_visual(visual) else self._estimate(t_s)
         if self.accel.due:
             self.accel_update()
         if visual is None or not fuses_visual:
@@ -365,6 +358,18 @@ class Mekf(Backend):
             self.counters["accel_downweighted"] += 1
         self.counters["accel_updates"] += 1
         return r, var * I3, H
+
+    def _fuse_visual(self, visual: VisualRotation) -> bool:
+        """A frame's visual update, a due accelerometer update stacked in: one compiled call with an IMU
+        (`compiled.visual_update_compiled`), else `_visual_update`. True when the compiled call wrote
+        the estimate after it (`estimate_out`)."""
+        if not self._visual_compiled:
+            self._visual_update(visual, self._take_accel_rows() if self.accel.due else None)
+            return False
+        if not visual_update_compiled(self, visual) or self.rejections < self.config.reinit_after_rejections:
+            return True
+        self._reinitialise(visual)
+        return False
 
     def _visual_update(self, visual: VisualRotation, accel_rows) -> None:
         """The frame's rotation as a measurement of `R_cm`, gated and Huber-weighted, stacked with
