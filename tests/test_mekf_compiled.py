@@ -274,6 +274,32 @@ def test_a_kernel_compiles_where_no_cache_folder_is_writable(tmp_path, monkeypat
     assert kernel(np.arange(3.0)).tolist() == [0.0, 2.0, 4.0]
 
 
+def test_kernel_caches_older_than_any_module_they_draw_on_are_dropped(tmp_path):
+    """numba checks a cache against its own source only: `jit.drop_stale_caches` deletes the cache
+    files beside the listed modules that are older than the newest of them (an edited state-buffer
+    layout must not leave kernels with the old one), and keeps newer ones and other files."""
+    import os
+
+    kernels_py, layout_py = tmp_path / "kernels.py", tmp_path / "sub" / "layout.py"
+    layout_py.parent.mkdir()
+    kernels_py.write_text("")
+    layout_py.write_text("")
+    cache, other_cache = tmp_path / "__pycache__", tmp_path / "sub" / "__pycache__"
+    cache.mkdir()
+    other_cache.mkdir()
+    old = [cache / "kernels.f-1.py311.nbi", cache / "kernels.f-1.py311.1.nbc", other_cache / "layout.g-2.py311.nbi"]
+    kept = [cache / "kernels.h-3.py311.nbi", cache / "kernels.cpython-311.pyc"]
+    for path in old + kept:
+        path.write_text("")
+    for path in old + [kept[1]]:
+        os.utime(path, (1_000, 1_000))
+    os.utime(kernels_py, (2_000, 2_000))
+    os.utime(layout_py, (3_000, 3_000))  # the layout edited after the caches were written
+    os.utime(kept[0], (4_000, 4_000))
+    jit.drop_stale_caches([kernels_py, layout_py])
+    assert not any(path.exists() for path in old) and all(path.exists() for path in kept)
+
+
 def test_kernels_see_the_fields_that_python_sees():
     """`kernels.state_views` (the kernels' fields of the state buffer) and `state_buffer.field_views`
     (Python's) are the same views of `x`, field by field, in the order of `state_buffer.FIELDS`."""

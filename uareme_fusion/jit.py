@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from pathlib import Path
 
 try:
     if os.environ.get("UAREME_NO_JIT"):
@@ -55,6 +56,27 @@ def compiled(fn=None, cache: bool = False, nogil: bool = True, **options):
                 raise
             return numba.njit(cache=False, nogil=nogil, **options)(f)
     return wrap(fn) if fn is not None else wrap
+
+
+def drop_stale_caches(sources) -> None:
+    """numba checks a cached kernel against its own source file only, so kernels that inline
+    functions or freeze constants from other modules would load stale machine code after one of
+    those changed (a state-buffer layout, say). Deletes the numba cache files (`*.nbi`, `*.nbc`) in the
+    `__pycache__` folders beside `sources` (paths of the modules the kernels draw on, their own
+    included) that are older than the newest of those sources, so that the kernels compile again.
+    Caches elsewhere (`NUMBA_CACHE_DIR`) and unwritable folders are left alone."""
+    paths = [Path(s) for s in sources]
+    try:
+        newest = max(p.stat().st_mtime for p in paths)
+    except OSError:
+        return
+    for folder in {p.parent / "__pycache__" for p in paths}:
+        for cached in [*folder.glob("*.nbi"), *folder.glob("*.nbc")]:
+            try:
+                if cached.stat().st_mtime < newest:
+                    cached.unlink()
+            except OSError:
+                pass
 
 
 def disable(exc: BaseException) -> None:

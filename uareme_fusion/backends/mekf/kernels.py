@@ -647,6 +647,11 @@ INTEGRATE_STAGED = None
 VISUAL_UPDATE = None
 """`visual_update` compiled, or None."""
 if jit.available():
+    from ... import rotations
+    from .. import imu_stream
+    from . import accel, matrix3, measurements, state, state_buffer
+    jit.drop_stale_caches([__file__] + [m.__file__ for m in (rotations, imu_stream, accel, matrix3, measurements, state,
+                                                             state_buffer, status_bits)])
     try:
         _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into,
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
