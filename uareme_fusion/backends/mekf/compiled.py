@@ -73,6 +73,7 @@ _COUNTERS = ((S_ACCEL_UPDATES, "accel_updates"), (S_ACCEL_SKIPPED, "accel_skippe
              (S_ACCEL_DOWNWEIGHTED, "accel_downweighted"), (S_REST_UPDATES, "rest_updates"),
              (S_NONFINITE, "nonfinite_updates"), (S_VISUAL_UPDATES, "visual_updates"),
              (S_VISUAL_REJECTED, "visual_rejected"))
+_FLOAT64 = np.dtype(np.float64)
 _NO_RECORD = np.empty((0, 3, 3))  # record buffers when nothing is recorded (writable: the kernels' type)
 
 
@@ -176,6 +177,9 @@ def visual_update_compiled(filt, visual) -> int:
     (`kernels.visual_update`), as `Mekf._visual_update` fuses it with an IMU, a due accelerometer
     update stacked in; its result bits raised in `filt.flags` and the estimate after it in
     `filt.estimate_out` (see the kernel). Returns non-zero when the frame was gated out."""
-    code = K.VISUAL_UPDATE(filt.x, _parameters(filt, False), visual.R_cm, visual.cov, filt.estimate_out)
+    R_cm, cov = visual.R_cm, visual.cov
+    if not (type(R_cm) is type(cov) is np.ndarray and R_cm.dtype is cov.dtype is _FLOAT64):
+        R_cm, cov = np.asarray(R_cm, float), np.asarray(cov, float)  # lists, other dtypes: one specialisation
+    code = K.VISUAL_UPDATE(filt.x, _parameters(filt, False), R_cm, cov, filt.estimate_out)
     filt.flags |= code
     return code & K.VISUAL_REJECTED
