@@ -132,9 +132,9 @@ def test_compiled_visual_update_gates_weighs_and_reinitialises_as_the_reference(
 
 @needs_numba
 def test_accelerometer_rows_stacked_into_visual_updates_same_with_rest_updates():
-    """A camera held still in front of a scene: the compiled accelerometer rows that visual updates
-    stack (`compiled.accel_rows_compiled`) apply the at-rest update first and give the reference's
-    estimates, counts and flags; each estimate owns its arrays."""
+    """A camera held still in front of a scene: the accelerometer rows that compiled visual updates
+    stack (`kernels.visual_update`, `kernels.accel_rows`) apply the at-rest update first and give the
+    reference's estimates, counts and flags; each estimate owns its arrays."""
     traj, t, gyro, accel = stream(4, duration_s=8.0)
     still = np.zeros_like(gyro) + np.array([0.01, -0.02, 0.015])  # only the bias the filter should learn
     accel_still = np.tile(accel[0], (t.size, 1))

@@ -1,5 +1,6 @@
-"""`Mekf`'s compiled IMU path: calls the kernels on the filter's state buffer (`state_buffer.py`),
-which they update in place, and turns their result bits into status flags.
+"""`Mekf`'s compiled path: calls the kernels (IMU propagation, accelerometer and visual updates) on the
+filter's state buffer (`state_buffer.py`), which they update in place, and turns their result bits
+into status flags.
 
 Used for released batches without gaps, saturated samples or a resumed stream (those keep the
 reference path in `motion.GyroMotion`, which handles them); tests check both paths agree.
@@ -134,9 +135,9 @@ def stage_compiled(filt, t, gyro_c, accel_c) -> int:
 def integrate_staged_compiled(filt, n: int, t_frame_s: float) -> bool:
     """The `n` samples staged by `stage_compiled`, integrated to the frame at `t_frame_s` (s) in one
     kernel call (`kernels.integrate_staged`); an update falling due at their end is left to the frame
-    (its visual update stacks it). False, changing nothing, when a sample lies past the frame, the frame lies past the gap
-    limit, a step is an IMU gap, or an accelerometer update waits. A frame's path: the fewest Python
-    steps around the one call."""
+    (its visual update stacks it). False, changing nothing, when a sample lies past the frame, the
+    frame lies past the gap limit, a step is an IMU gap, or an accelerometer update waits. A frame's
+    path: the fewest Python steps around the one call."""
     record_R, record_P = _record_buffers(filt, n)
     code = K.INTEGRATE_STAGED(filt.x, filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
     if not _took_batch(filt, code, filt._stage, n, record_R, record_P):

@@ -119,6 +119,7 @@ class Mekf(Backend):
         self._set_motion(motion_for(cfg.mode))
         self._mode_resolved = cfg.mode != MekfMode.AUTO
         self.x = new_state_buffer()  # R_wc = R_wm = I, b_c = 0, P = 0, t_state None
+        self.estimate_out = np.empty((4, 3, 3))  # the estimate after a compiled visual update
         self.views = field_views(self.x)
         self.omega_c = np.zeros(3)
         self.F_buffer = np.eye(N_STATE)  # gyro transition: only its TH rows change between chunks
@@ -163,7 +164,6 @@ class Mekf(Backend):
         self._stages_frames = self.compiled and self.imu_is_camera and motion.uses_imu and motion.fuses_visual
         # Whether a frame's visual update is one compiled call (`compiled.visual_update_compiled`).
         self._visual_compiled = self.compiled and motion.uses_imu and motion.fuses_visual
-        self.estimate_out = np.empty((4, 3, 3))  # the estimate after a compiled visual update
 
     # ------------------------------------------------------------------ public API
     def process_imu(self, t_s, gyro_rad_s, accel_m_s2) -> None:
@@ -382,7 +382,10 @@ class Mekf(Backend):
         if t_prev_s is not None:
             R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
         S = H @ self.P @ H.T + R_vis  # the gate and Huber weigh the frame's full error
-        d2 = float(r @ np.linalg.solve(S, r))
+        try:
+            d2 = float(r @ np.linalg.solve(S, r))
+        except np.linalg.LinAlgError:  # a singular innovation covariance: no usable measurement
+            d2 = np.inf
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
             self._count_rejection()
             if accel_rows is not None:
@@ -468,7 +471,11 @@ class Mekf(Backend):
         """`_estimate` from what the compiled visual update wrote (`estimate_out`): one copy, no arithmetic."""
         R_wc, cov, R_wm, b_c = self.estimate_out.copy()
         bits, self.flags = self.flags, status_bits.OK
-        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm, b_c[0] if self.imu_is_camera else self.R_ci.T @ b_c[0])
+        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm, self._bias_in_imu(b_c[0]))
+
+    def _bias_in_imu(self, b_c: np.ndarray) -> np.ndarray:
+        """The gyro bias `b_c` (3,) rad/s (camera frame, a copy) in the IMU frame."""
+        return b_c if self.imu_is_camera else self.R_ci.T @ b_c
 
     def _make_estimate(self, t_s, bits: int) -> Estimate:
         """The estimate of the state now, stamped `t_s`, with the `Status` of the flag `bits`."""
@@ -483,5 +490,5 @@ class Mekf(Backend):
             cov += self.noise_share.persistent_cov
             bias_i = None
         else:
-            bias_i = b_c[0] if self.imu_is_camera else self.R_ci.T @ b_c[0]
+            bias_i = self._bias_in_imu(b_c[0])
         return Estimate(t_s, R_wc, cov, status_of(bits), R_wm if self.manhattan_initialised else None, bias_i)

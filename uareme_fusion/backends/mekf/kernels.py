@@ -1,4 +1,4 @@
-"""Compiled IMU propagation and accelerometer/zero-rate updates of `Mekf` (issue 17).
+"""Compiled IMU propagation, accelerometer/zero-rate updates and visual update of `Mekf` (issue 17).
 
 The maths are those of the reference path (`filter.Mekf`, `imu_path`, in numpy/filterpy), written as
 small pure functions on plain arrays so that numba compiles them; the measurement models and the
@@ -7,11 +7,14 @@ error reset are the very functions of `measurements` and `state`:
   prediction (closed-form transition and process noise, as in the reference);
 - `accel_measurement` / `zero_rate_measurement`: residual, variance (isotropic) and H of the
   accelerometer-direction and at-rest bias measurements;
-- `kalman_update`: Joseph-form update of the zero-mean error state, injection and reset.
+- `visual_measurement`: `measurements.visual_model` (its symmetry, residual and noise);
+- `kalman_update`: Joseph-form update of the zero-mean error state (m stacked rows), injection and reset.
 `integrate_batch` runs them over a released batch, chunk by chunk, with the updates falling due.
 It covers batches without gaps or saturated samples; `Mekf` keeps those on the reference path.
-The drivers (`integrate_batch`, `integrate_segments`, `accel_update_in_place`) take the filter's
-state buffer `x` (`state_buffer.py`) and update it in place: one array crosses each call.
+`visual_update` fuses a frame's rotation as `Mekf._visual_update` does with an IMU.
+The drivers (`integrate_batch`, `integrate_staged`, `integrate_segments`, `accel_update_in_place`,
+`visual_update`) take the filter's state buffer `x` (`state_buffer.py`) and update it in place: one
+array crosses each call.
 
 Conventions as in `mekf`: right perturbations, error state `[dtheta_c, db_c, dtheta_m, domega_c]`,
 `R_wc` camera to world (z up), rates in rad/s in the camera frame, times in s.
@@ -23,12 +26,12 @@ Compiling them takes about 20 s on a small machine, so their machine code is cac
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 
-from ... import jit
-from ...rotations import manhattan_symmetries
-from . import status_bits
+from ... import jit, rotations
+from . import state_buffer, status_bits
 from .accel import chunk_bounds
 from .matrix3 import exp3_into, inv3, log3_into, matmul3_into
 from .measurements import correlated_noise_scale, gravity_model, vertical_measurement, zero_rate_model
@@ -39,17 +42,13 @@ from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DOWNWEIGHTED, S_AC
                            S_REJECTIONS, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_REJECTED, S_VISUAL_UPDATES,
                            X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S, X_SIZE)
 
-# The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `accel_rows_in_place` return.
+# The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `visual_update` return.
 DOWNWEIGHTED, NONFINITE = status_bits.ACCEL_DOWNWEIGHTED, status_bits.UPDATE_NONFINITE
 """An accelerometer update was down-weighted; an update's result was not finite (and dropped): the
 bits of the `Status` flags that say so, so that a result is or-ed into the filter's flags as it is."""
-STATUS_RESULTS = DOWNWEIGHTED | NONFINITE
-"""The result bits that are `Status` flags."""
-MEASURED = 1 << 30
-"""`accel_rows_in_place` wrote an accelerometer measurement (no `Status` bit)."""
 VISUAL_REJECTED = status_bits.VISUAL_REJECTED
 """`visual_update`: the frame's rotation failed the gate (a `Status` bit)."""
-SYMMETRIES = manhattan_symmetries()
+SYMMETRIES = rotations.manhattan_symmetries()
 """The 24 rotations that relabel a Manhattan frame (`rotations.manhattan_symmetries`, in its order):
 a constant of the compiled code."""
 
@@ -402,16 +401,13 @@ def visual_update(x, p, R_cm, cov, estimate):
     (the attitude block of `P`, symmetrised), `R_wm`, and `b_c` in the first row. Returns the
     `VISUAL_REJECTED` | `DOWNWEIGHTED` | `NONFINITE` bits of what happened; the re-initialisation after
     many rejections is left to the caller."""
-    s, R_wc, R_wm, b_c, P, _, _, lp, lp_J, _ = state_views(x)
+    s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state_views(x)
     nonfinite_before = s[S_NONFINITE]
     code = 0
-    accel = np.empty(40)
-    with_accel = False
+    with_accel, downweighted = False, False
     if s[S_ACCEL_DUE] > 0:  # left to the frame at the end of its batch (`P_DEFER`)
         s[S_ACCEL_DUE] = 0
-        taken = accel_rows_in_place(x, p, accel)
-        code |= taken & STATUS_RESULTS
-        with_accel = (taken & MEASURED) > 0
+        with_accel, r_a, var_a, H_a, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
     r, R_all, H = np.zeros(9), np.zeros((9, 9)), np.zeros((9, 12))
     visual_measurement(R_wc, R_wm, R_cm, cov, r, R_all, H)
     t_prev = s[S_T_VISUAL]
@@ -425,12 +421,12 @@ def visual_update(x, p, R_cm, cov, estimate):
     d2 = 0.0
     for i in range(3):
         d2 += r[i] * (S_inv[i, 0] * r[0] + S_inv[i, 1] * r[1] + S_inv[i, 2] * r[2])
-    if not d2 <= p[P_GATE_CHI2]:  # NaN too
+    if not -np.inf < d2 <= p[P_GATE_CHI2]:  # NaN and a singular innovation covariance too
         code |= VISUAL_REJECTED
         s[S_VISUAL_REJECTED] += 1
         s[S_REJECTIONS] += 1
         if with_accel:
-            isotropic_update(s, R_wc, R_wm, b_c, P, lp, lp_J, accel[0:3], accel[3], accel[4:40].reshape((3, 12)), p)
+            isotropic_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r_a, var_a, H_a, p)
     else:
         s[S_REJECTIONS] = 0
         d = math.sqrt(d2)
@@ -445,10 +441,10 @@ def visual_update(x, p, R_cm, cov, estimate):
                 R_all[3 + i, 3 + i] = var_v
             m = 6
         if with_accel:
-            r[m:m + 3] = accel[0:3]
-            H[m:m + 3] = accel[4:40].reshape((3, 12))
+            r[m:m + 3] = r_a
+            H[m:m + 3] = H_a
             for i in range(3):
-                R_all[m + i, m + i] = accel[3]
+                R_all[m + i, m + i] = var_a
             m += 3
         kalman_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r[:m], R_all[:m, :m], H[:m], p)
         s[S_VISUAL_UPDATES] += 1
@@ -458,7 +454,7 @@ def visual_update(x, p, R_cm, cov, estimate):
             estimate[1, i, j] = 0.5 * (P[i, j] + P[j, i])
             estimate[2, i, j] = R_wm[i, j]
         estimate[3, 0, i] = b_c[i]
-    return code | (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
+    return code | (DOWNWEIGHTED if downweighted else 0) | (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
 
 
 def stage_batch(stage, t, gyro, accel, newest_s, gyro_range_rad_s, max_span_s):
@@ -618,22 +614,6 @@ def accel_update_in_place(x, p):
     return (DOWNWEIGHTED if downweighted else 0) + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
 
 
-def accel_rows_in_place(x, p, rows):
-    """`accel_rows` on the state buffer `x`, in place (an at-rest update included), for an update
-    that stacks the accelerometer with other measurements: the measurement goes to `rows` (40,):
-    residual (3,), variance (rad^2, isotropic), H (3, 12) row by row. Returns the `MEASURED` |
-    `DOWNWEIGHTED` | `NONFINITE` bits of what happened (no `MEASURED`: no measurement, near free fall)."""
-    s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state_views(x)
-    nonfinite_before = s[S_NONFINITE]
-    ok, r, var, H, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
-    rows[0:3] = r
-    rows[3] = var
-    for i in range(3):
-        rows[4 + 12 * i:16 + 12 * i] = H[i]
-    return ((MEASURED if ok else 0) + (DOWNWEIGHTED if downweighted else 0)
-            + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0))
-
-
 KERNEL = None
 """`integrate_batch` compiled, with the functions it calls, or None (numba missing or broken)."""
 ACCEL_UPDATE = None
@@ -647,18 +627,16 @@ INTEGRATE_STAGED = None
 VISUAL_UPDATE = None
 """`visual_update` compiled, or None."""
 if jit.available():
-    from ... import rotations
-    from .. import imu_stream
-    from . import accel, matrix3, measurements, state, state_buffer
-    jit.drop_stale_caches([__file__] + [m.__file__ for m in (rotations, imu_stream, accel, matrix3, measurements, state,
-                                                             state_buffer, status_bits)])
     try:
         _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into,
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
                  zero_rate_measurement, matmul_into, solve_into, inject_and_reset, kalman_update, isotropic_update,
                  accel_rows, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks, state_views, rows_if_clean,
-                 accel_rows_in_place, integrate_batch, correlated_noise_scale, log3_into,
+                 integrate_batch, correlated_noise_scale, log3_into,
                  vertical_measurement, visual_measurement)
+        # The modules whose functions the kernels inline or whose constants they freeze.
+        jit.drop_stale_caches({__file__, rotations.__file__, state_buffer.__file__, status_bits.__file__}
+                              | {sys.modules[f.__module__].__file__ for f in _pure})
         for _f in _pure:
             globals()[_f.__name__] = jit.compiled(_f, cache=True, error_model="numpy")
         KERNEL = integrate_batch

@@ -32,6 +32,7 @@ def visual_model(R_wc: np.ndarray, R_wm: np.ndarray, R_cm: np.ndarray, cov_rad2:
     H = np.zeros((3, N_STATE))
     H[:, TH] = -R_cm_pred.T
     H[:, MF] = I3
+    cov_rad2 = np.asarray(cov_rad2, float)
     R_vis = P_sym.T @ (0.5 * (cov_rad2 + cov_rad2.T)) @ P_sym
     return r, R_vis, H
 
