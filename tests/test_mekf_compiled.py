@@ -18,7 +18,8 @@ from uareme_fusion.sim.imu import simulate_imu
 from uareme_fusion.sim.trajectory import make_trajectory
 from uareme_fusion.types import Status, VisualRotation
 
-needs_numba = pytest.mark.skipif(mekf_compiled.KERNEL is None, reason="numba not installed: no compiled path")
+needs_numba = pytest.mark.skipif(not mekf_compiled.kernels_available(),
+                                 reason="numba not installed: no compiled path")
 
 
 def stream(seed: int, duration_s: float = 30.0, rate_hz: float = 200.0):
@@ -252,6 +253,37 @@ def test_update_due_at_a_frame_same_as_reference_with_or_without_a_rotation():
         assert filt.counters == ref.counters
     assert waiting > 30 and filt.counters["accel_updates"] > 40 and filt.counters["visual_updates"] > 100
     assert_same_filters(filt, ref, *ests)
+
+
+def _broken_kernel(*args):
+    raise RuntimeError("Failed in nopython mode pipeline (step: native lowering)")  # as a compiler failure
+
+
+@needs_numba
+def test_kernels_that_fail_to_compile_fall_back_to_the_reference_after_one_warning(monkeypatch):
+    """numba compiles a kernel at its first call. Should that fail (here every kernel raises as a
+    failed compilation does), the filter warns once and goes on on the reference path with the
+    reference's estimates, counts and flags, and later filters start on it; nothing crashes."""
+    from uareme_fusion.backends import imu_stream
+
+    for name in ("KERNEL", "ACCEL_UPDATE", "SEGMENTS", "STAGE", "INTEGRATE_STAGED", "VISUAL_UPDATE"):
+        monkeypatch.setattr(kernels, name, _broken_kernel)  # restored after the test, as is what follows
+    monkeypatch.setattr(imu_stream, "_ROWS_IF_CLEAN", _broken_kernel)
+    monkeypatch.setattr(jit, "_warned", False)
+    monkeypatch.delenv("UAREME_NO_JIT", raising=False)
+    traj, t, gyro, accel = stream(9, duration_s=4.0)
+
+    def frames(t_f, filt):
+        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0]
+        return VisualRotation(R_cm=R_cm, cov=1e-4 * np.eye(3), cost=0.01, iterations=3, n_valid=100)
+
+    cfg_compiled, cfg_reference = both(load_config("handheld", MekfConfig))
+    with pytest.warns(RuntimeWarning) as caught:
+        a, ea = run(cfg_compiled, t, gyro, accel, 7, frames)
+    assert sum("compiled kernels unavailable" in str(w.message) for w in caught) == 1
+    b, eb = run(cfg_reference, t, gyro, accel, 7, frames)
+    assert not a.compiled and not Mekf(cfg_compiled).compiled and a.counters["visual_updates"] > 50
+    assert_same_filters(a, b, ea, eb)
 
 
 def _doubled(x):

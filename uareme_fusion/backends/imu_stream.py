@@ -136,12 +136,8 @@ class ImuStream:
         if not n:
             return
         held = self._held
-        if _ROWS_IF_CLEAN is not None:  # the common case in one compiled pass: clean samples, in order
-            rows = np.empty((n, COLUMNS))
-            if _ROWS_IF_CLEAN(t, gyro, accel, held[-1, 0] if held.shape[0] else self.watermark_s,
-                              self.gyro_range_rad_s, rows):
-                self._append(rows)
-                return
+        if _ROWS_IF_CLEAN is not None and self._rows_if_clean(t, gyro, accel, held):
+            return
         rows = np.concatenate((t[:, None], gyro, accel, np.zeros((t.shape[0], 1))), axis=1)
         # One pass for both checks: the largest |value| per column (NaN propagates, inf is not finite).
         largest = np.abs(rows).max(axis=0).tolist()
@@ -179,6 +175,23 @@ class ImuStream:
         so none is dropped or counted; copied (the caller may reuse its array). `Mekf` puts back a
         batch staged for a frame this way, with nothing held."""
         self._append(rows.copy())
+
+    def _rows_if_clean(self, t, gyro, accel, held) -> bool:
+        """The common case of `add` in one compiled pass: samples clean and in order are appended
+        (True). False leaves them to the checks of `add`; so does a kernel that fails to compile
+        (one warning, and the checks of `add` from then on)."""
+        global _ROWS_IF_CLEAN
+        rows = np.empty((t.shape[0], COLUMNS))
+        try:
+            clean = _ROWS_IF_CLEAN(t, gyro, accel, held[-1, 0] if held.shape[0] else self.watermark_s,
+                                   self.gyro_range_rad_s, rows)
+        except Exception as exc:  # noqa: BLE001 -- numba failed to compile or load it
+            jit.disable(exc)
+            _ROWS_IF_CLEAN = None
+            return False
+        if clean:
+            self._append(rows)
+        return clean
 
     def _append(self, rows: np.ndarray) -> None:
         """Put `rows` (n, 8), later than every held row, after them; kept as they are when nothing is held."""

@@ -4,18 +4,36 @@ into status flags.
 
 Used for released batches without gaps, saturated samples or a resumed stream (those keep the
 reference path in `motion.GyroMotion`, which handles them); tests check both paths agree.
+
+numba compiles a kernel (or loads it from its disk cache) at its first call. Should that fail, the
+call changes nothing (compilation comes before execution): `fall_back` warns once, and this filter
+and every later one take the reference path; each caller then does the step that way.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ... import jit
 from . import kernels as K
 from .accel import PERIOD_TOLERANCE_S
-from .kernels import KERNEL
 from .state import ORTHONORMALISE_EVERY
 from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_NONFINITE, S_REST_UPDATES,
                            S_VISUAL_REJECTED, S_VISUAL_UPDATES)
+
+
+def kernels_available() -> bool:
+    """Whether the compiled kernels are there (numba imported, none failed)."""
+    return K.KERNEL is not None
+
+
+def fall_back(filt, exc: BaseException) -> None:
+    """A kernel failed to compile or load: one warning line, no kernels from now on, and `filt`
+    switched to the reference path (see the module docstring)."""
+    jit.disable(exc)
+    K.disable_all()
+    filt.compiled = False
+    filt.set_motion(filt.motion)
 
 
 def compiled_path_applies(filt, t: np.ndarray, saturated: np.ndarray, extra_s: float) -> bool:
@@ -98,7 +116,11 @@ def integrate_compiled(filt, rows: np.ndarray, extra_s: float, defer: bool) -> b
     updates the filter's state buffer in place; False (nothing changed) when the batch holds an IMU
     gap, which the reference path then handles."""
     record_R, record_P = _record_buffers(filt, rows.shape[0])
-    code = KERNEL(filt.x, rows, extra_s, _parameters(filt, defer), record_R, record_P)
+    try:
+        code = K.KERNEL(filt.x, rows, extra_s, _parameters(filt, defer), record_R, record_P)
+    except Exception as exc:  # noqa: BLE001 -- the reference path takes the batch
+        fall_back(filt, exc)
+        return False
     return _took_batch(filt, code, rows, rows.shape[0], record_R, record_P)
 
 
@@ -129,7 +151,12 @@ def stage_compiled(filt, t, gyro_c, accel_c) -> int:
     in order, later than the stream's watermark, below the gyro range) and the batch spans less than
     an accelerometer period and the reorder window (a batch that long may release samples)."""
     stream = filt._stream
-    return K.STAGE(filt._stage, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s, filt.stage_span_s)
+    try:
+        return K.STAGE(filt._stage, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s,
+                       filt.stage_span_s)
+    except Exception as exc:  # noqa: BLE001 -- nothing staged: the reorder buffer takes the batch
+        fall_back(filt, exc)
+        return 0
 
 
 def integrate_staged_compiled(filt, n: int, t_frame_s: float) -> bool:
@@ -139,7 +166,11 @@ def integrate_staged_compiled(filt, n: int, t_frame_s: float) -> bool:
     frame lies past the gap limit, a step is an IMU gap, or an accelerometer update waits. A frame's
     path: the fewest Python steps around the one call."""
     record_R, record_P = _record_buffers(filt, n)
-    code = K.INTEGRATE_STAGED(filt.x, filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
+    try:
+        code = K.INTEGRATE_STAGED(filt.x, filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
+    except Exception as exc:  # noqa: BLE001 -- the reference path takes the staged batch
+        fall_back(filt, exc)
+        return False
     if not _took_batch(filt, code, filt._stage, n, record_R, record_P):
         return False
     filt._stream.released_elsewhere(t_frame_s)
@@ -155,9 +186,13 @@ def integrate_segments_compiled(filt, t, gyro_c, accel_c, ends: np.ndarray):
     m = ends.shape[0]
     record_R, record_P = _record_buffers(filt, t.size)
     out_R, out_cov, out_b, out_flags = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3)), np.empty(m, np.int64)
-    done = K.SEGMENTS(filt.x, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
-                      np.ascontiguousarray(accel_c, float), ends, _parameters(filt, False), record_R, record_P,
-                      out_R, out_cov, out_b, out_flags)
+    try:
+        done = K.SEGMENTS(filt.x, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
+                          np.ascontiguousarray(accel_c, float), ends, _parameters(filt, False), record_R, record_P,
+                          out_R, out_cov, out_b, out_flags)
+    except Exception as exc:  # noqa: BLE001 -- the reference path takes the segments
+        fall_back(filt, exc)
+        return None
     if done < 0:
         return None
     if record_R.shape[0]:
@@ -167,20 +202,31 @@ def integrate_segments_compiled(filt, t, gyro_c, accel_c, ends: np.ndarray):
     return out_R, out_cov, out_b, out_flags  # the kernels' result bits are `Status` bits
 
 
-def accel_update_compiled(filt) -> None:
+def accel_update_compiled(filt) -> bool:
     """The accelerometer (and at-rest) update of the period just completed, compiled, in the filter's
-    state buffer: as `Mekf.accel_update`."""
-    filt.flags |= K.ACCEL_UPDATE(filt.x, _parameters(filt, False))
+    state buffer: as `Mekf.accel_update` (no longer due). False, changing nothing, after `fall_back`."""
+    try:
+        filt.flags |= K.ACCEL_UPDATE(filt.x, _parameters(filt, False))
+    except Exception as exc:  # noqa: BLE001 -- the reference path applies the update
+        fall_back(filt, exc)
+        return False
+    filt.accel.due = False
+    return True
 
 
-def visual_update_compiled(filt, visual) -> int:
+def visual_update_compiled(filt, visual) -> int | None:
     """A frame's visual rotation fused into the filter's state buffer in one compiled call
     (`kernels.visual_update`), as `Mekf._visual_update` fuses it with an IMU, a due accelerometer
     update stacked in; its result bits raised in `filt.flags` and the estimate after it in
-    `filt.estimate_out` (see the kernel). Returns non-zero when the frame was gated out."""
+    `filt.estimate_out` (see the kernel). Returns non-zero when the frame was gated out; None,
+    changing nothing, after `fall_back`."""
     R_cm, cov = visual.R_cm, visual.cov
     if not (type(R_cm) is type(cov) is np.ndarray and R_cm.dtype is cov.dtype is _FLOAT64):
         R_cm, cov = np.asarray(R_cm, float), np.asarray(cov, float)  # lists, other dtypes: one specialisation
-    code = K.VISUAL_UPDATE(filt.x, _parameters(filt, False), R_cm, cov, filt.estimate_out)
+    try:
+        code = K.VISUAL_UPDATE(filt.x, _parameters(filt, False), R_cm, cov, filt.estimate_out)
+    except Exception as exc:  # noqa: BLE001 -- the reference path fuses the frame
+        fall_back(filt, exc)
+        return None
     filt.flags |= code
     return code & K.VISUAL_REJECTED

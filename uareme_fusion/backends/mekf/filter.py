@@ -20,8 +20,8 @@ from ..imu_stream import ImuStream, check_imu_arrays
 from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
-from .compiled import (KERNEL, STAGE_ROWS, accel_update_compiled, harvest_kernel_counters,
-                       integrate_staged_compiled, stage_compiled, visual_update_compiled)
+from .compiled import (STAGE_ROWS, accel_update_compiled, harvest_kernel_counters, integrate_staged_compiled,
+                       kernels_available, stage_compiled, visual_update_compiled)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
                            visual_model)
@@ -111,12 +111,12 @@ class Mekf(Backend):
         self.q_rate = cfg.gyro_rate_noise_sqrt_s**2
         self.manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_sqrt_s or cfg.manhattan_tilt_rw_rad_sqrt_s)
         self.trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
-        self.compiled = cfg.compiled and KERNEL is not None
+        self.compiled = cfg.compiled and kernels_available()
         self._stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
         self._stage = np.empty((STAGE_ROWS, 8)) if self.compiled else None  # a frame's samples (`process_imu`)
         self._staged = 0  # how many
         self.stage_span_s = cfg.accel_update_period_s + self._stream.reorder_window_s  # a staged batch spans less
-        self._set_motion(motion_for(cfg.mode))
+        self.set_motion(motion_for(cfg.mode))
         self._mode_resolved = cfg.mode != MekfMode.AUTO
         self.x = new_state_buffer()  # R_wc = R_wm = I, b_c = 0, P = 0, t_state None
         self.estimate_out = np.empty((4, 3, 3))  # the estimate after a compiled visual update
@@ -156,9 +156,10 @@ class Mekf(Backend):
         """Fix an `auto` filter's mode (once: later calls and explicit modes are left alone)."""
         if not self._mode_resolved:
             self._mode_resolved = True
-            self._set_motion(motion_for(mode))
+            self.set_motion(motion_for(mode))
 
-    def _set_motion(self, motion) -> None:
+    def set_motion(self, motion) -> None:
+        """Use `motion` (a strategy of `motion.py`) and the compiled paths that apply to it."""
         self.motion = motion
         # Whether a frame's IMU batch may wait in the stage for the frame's one compiled call (`process_imu`).
         self._stages_frames = self.compiled and self.imu_is_camera and motion.uses_imu and motion.fuses_visual
@@ -319,9 +320,7 @@ class Mekf(Backend):
     # ------------------------------------------------------------------ updates
     def accel_update(self) -> None:
         """Apply the accelerometer (and zero-rate) update of the period just completed."""
-        if self.compiled:
-            self.accel.due = False
-            accel_update_compiled(self)
+        if self.compiled and accel_update_compiled(self):
             return
         rows = self._take_accel_rows()
         if rows is not None:
@@ -363,10 +362,11 @@ class Mekf(Backend):
         """A frame's visual update, a due accelerometer update stacked in: one compiled call with an IMU
         (`compiled.visual_update_compiled`), else `_visual_update`. True when the compiled call wrote
         the estimate after it (`estimate_out`)."""
-        if not self._visual_compiled:
+        rejected = visual_update_compiled(self, visual) if self._visual_compiled else None
+        if rejected is None:  # the reference path (also after a kernel failed: `compiled.fall_back`)
             self._visual_update(visual, self._take_accel_rows() if self.accel.due else None)
             return False
-        if not visual_update_compiled(self, visual) or self.rejections < self.config.reinit_after_rejections:
+        if not rejected or self.rejections < self.config.reinit_after_rejections:
             return True
         self._reinitialise(visual)
         return False

@@ -648,3 +648,9 @@ if jit.available():
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)
         KERNEL = ACCEL_UPDATE = SEGMENTS = STAGE = INTEGRATE_STAGED = VISUAL_UPDATE = None
+
+
+def disable_all() -> None:
+    """No compiled kernels from now on (one failed: `compiled.fall_back`)."""
+    global KERNEL, ACCEL_UPDATE, SEGMENTS, STAGE, INTEGRATE_STAGED, VISUAL_UPDATE
+    KERNEL = ACCEL_UPDATE = SEGMENTS = STAGE = INTEGRATE_STAGED = VISUAL_UPDATE = None
