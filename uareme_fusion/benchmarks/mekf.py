@@ -18,9 +18,10 @@ Prints, per scenario, absolute figures:
   <= 1 us/sample and whole `run` on a BROAD file <= 2 us/sample, with vqf's and imufusion's
   cost on the same samples in the same run; fused 200 Hz IMU at 30 fps <= 3 us per IMU sample;
 - cost: us per IMU sample (IMU-only on BROAD; in the fused runs all the filter does but the visual
-  update proper, see `fused_cost`) and ms per visual
-  update (the filter only, not the solver). Timings are medians of repeated runs on a shared machine,
-  in CPU time of the filter's thread (`time.thread_time`: what the filter itself costs, whatever else
+  update proper, and with it, on replays of the runs: see `fused_cost`) and ms per visual update
+  (the filter only, not the solver). Timings are medians of repeated runs on a shared machine: the
+  fused ones in wall time (a CPU-time read costs about as much as the filter's frame), the others in
+  CPU time of the filter's thread (`time.thread_time`: what the filter itself costs, whatever else
   the machine runs) with wall-clock time beside it (equal on an idle machine, inflated when shared).
 
 Scenarios (trajectory, IMU, the real solver's rotations) come from `evaluation.scenarios`; BROAD
