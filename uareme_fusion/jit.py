@@ -1,8 +1,9 @@
 """The project's one compiler switch: numba's `njit`, or nothing (pure-numpy reference paths).
 
-`compiled(fn)` compiles `fn` with `numba.njit` (`nogil=True` unless told otherwise) when numba imports (lazily, at its first
-call), and returns None otherwise, after one warning line. Callers keep a pure Python/numpy reference
-beside each compiled kernel and use it whenever the kernel is None or fails to compile (`disable`).
+`compiled(fn)` compiles `fn` with `numba.njit` (`nogil=True` unless told otherwise) when numba
+imports (lazily, at its first call), and returns None otherwise, after one warning line. Callers keep
+a pure Python/numpy reference beside each compiled kernel and use it whenever the kernel is None or
+fails to compile (`disable`).
 `UAREME_NO_JIT=1` in the environment forces the reference paths (tests compare the two).
 """
 

@@ -626,14 +626,21 @@ INTEGRATE_STAGED = None
 """`integrate_staged` compiled, or None."""
 VISUAL_UPDATE = None
 """`visual_update` compiled, or None."""
+
+
+def disable_all() -> None:
+    """No compiled kernels from now on (numba failed here or at a first call: `compiled.fall_back`)."""
+    global KERNEL, ACCEL_UPDATE, SEGMENTS, STAGE, INTEGRATE_STAGED, VISUAL_UPDATE
+    KERNEL = ACCEL_UPDATE = SEGMENTS = STAGE = INTEGRATE_STAGED = VISUAL_UPDATE = None
+
+
 if jit.available():
     try:
         _pure = (reset_jacobian, gravity_model, zero_rate_model, orthonormal, inv3, exp3_into,
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
                  zero_rate_measurement, matmul_into, solve_into, inject_and_reset, kalman_update, isotropic_update,
                  accel_rows, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks, state_views, rows_if_clean,
-                 integrate_batch, correlated_noise_scale, log3_into,
-                 vertical_measurement, visual_measurement)
+                 integrate_batch, correlated_noise_scale, log3_into, vertical_measurement, visual_measurement)
         # The modules whose functions the kernels inline or whose constants they freeze.
         jit.drop_stale_caches({__file__, rotations.__file__, state_buffer.__file__, status_bits.__file__}
                               | {sys.modules[f.__module__].__file__ for f in _pure})
@@ -647,10 +654,4 @@ if jit.available():
         VISUAL_UPDATE = jit.compiled(visual_update, cache=True, error_model="numpy", nogil=False)
     except Exception as exc:  # noqa: BLE001 -- fall back to the reference path
         jit.disable(exc)
-        KERNEL = ACCEL_UPDATE = SEGMENTS = STAGE = INTEGRATE_STAGED = VISUAL_UPDATE = None
-
-
-def disable_all() -> None:
-    """No compiled kernels from now on (one failed: `compiled.fall_back`)."""
-    global KERNEL, ACCEL_UPDATE, SEGMENTS, STAGE, INTEGRATE_STAGED, VISUAL_UPDATE
-    KERNEL = ACCEL_UPDATE = SEGMENTS = STAGE = INTEGRATE_STAGED = VISUAL_UPDATE = None
+        disable_all()
