@@ -47,14 +47,14 @@ from ..lines.detect import LineSegments
 from ..pinhole import focal_from_hfov, pinhole
 from ..rotations import nearest_symmetric, skew
 from ..types import NormalMap, VisualRotation
-from .focal import FocalEstimate, replace_cov, rotation_slope, solve_given_K
+from .focal import FocalConfig, FocalEstimate, replace_cov, rotation_slope, solve_given_K
 from .joint import JointSolver
 
 
 @dataclass(frozen=True)
 class SelfCalibrationConfig:
-    endpoint_noise_px: float = 1.5
-    """Segment end point noise s (pixels)."""
+    endpoint_noise_px: float = FocalConfig.endpoint_noise_px
+    """Segment end point noise s (pixels), as `FocalConfig.endpoint_noise_px`."""
     robust_scale: float = 3.0
     """Cauchy scale in units of s: segments further than this from every axis count little."""
     rounds: int = 4
@@ -68,16 +68,16 @@ class SelfCalibrationConfig:
     """Fewer frames with segments than this: nothing is pooled."""
     min_segments: int = 6
     """Frames with fewer segments take no part."""
-    principal_point_prior_fraction: float = 0.02
+    principal_point_prior_fraction: float = FocalConfig.principal_point_std_fraction
     """s_c / width: the principal point's prior std (as `FocalConfig.principal_point_std_fraction`)."""
     max_principal_point_std_fraction: float = 0.01
     """The principal point is taken from the fit only when its std (each axis) is below this fraction of
     the width, half the prior's; otherwise it is held at the centre and f alone is pooled. ICSL at every
     second frame: icsl_corridor_more (70 frames) std (3.2, 2.3) px; icsl_corridor (40 frames, looking along
     the corridor) std (10.9, 5.4) px with the principal point 44 px left of the centre."""
-    max_relative_focal_std: float = 0.1
-    """Above this std(f)/f the frames could not tell f: nothing is pooled."""
-    hfov_range_deg: tuple[float, float] = (30.0, 120.0)
+    max_relative_focal_std: float = FocalConfig.max_relative_std
+    """Above this std(f)/f the frames could not tell f: nothing is pooled (as `FocalConfig.max_relative_std`)."""
+    hfov_range_deg: tuple[float, float] = FocalConfig.hfov_range_deg
     """Fields of view searched (as `FocalConfig.hfov_range_deg`); a fit that ends at either (log f within
     `_AT_BOUND` of it) is refused: the frames then say only that f lies beyond."""
     with_normals: bool = False
