@@ -58,12 +58,14 @@ from rich.console import Console
 from rich.table import Table
 
 from ..errors import InputError
-from ..formats.datasets import ICSL_CORRIDOR_K, read_icsl_depth
+from ..formats.datasets import ICL_NUIM_K_OPENCV, ICSL_CORRIDOR_K, read_icsl_depth
+from ..formats.images import natural_key
 from ..rotations import log_so3, nearest_symmetric
 
 AUC_CUTOFF = 0.25
 ICSL_FX = float(ICSL_CORRIDOR_K[0, 0])
-ICL_FX = 481.20
+ICL_FX = float(ICL_NUIM_K_OPENCV[0, 0])
+ICL_CENTRE = (float(ICL_NUIM_K_OPENCV[0, 2]), float(ICL_NUIM_K_OPENCV[1, 2]))
 
 
 def horizon_error(line_est, line_true, height: int, width: int) -> float:
@@ -169,7 +171,7 @@ def pooled_scores(folders: list[Path], analyser, stride: int = 1, reference=icsl
     its principal point's distance from `centre_true` (when known)."""
     angles, nees, sequences = [], [], []
     for folder in folders:
-        paths = sorted((folder / "rgb").glob("*.png"), key=lambda p: (len(p.stem), p.stem))[::stride]
+        paths = sorted((folder / "rgb").glob("*.png"), key=natural_key)[::stride]
         results = list(analyser.analyse_same_camera(paths))
         if not results:
             raise InputError(f"{folder / 'rgb'}: no PNG frames to pool a K over")
@@ -301,7 +303,7 @@ def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, i
         ICSL_CORRIDOR_K, np.zeros(0), origin="the dataset's published intrinsics")), icsl_stride)
     icsl_pooled = pooled_scores(icsl_folders, analyser, icsl_stride)
     icl_pooled = pooled_scores([data / "icl_nuim_office_kt3"], analyser, icsl_stride, reference=None, fx_true=ICL_FX,
-                               centre_true=(319.5, 239.5))
+                               centre_true=ICL_CENTRE)
     icl = icl_scores(data / "icl_nuim_office_kt3", cues)
     icsl_rgb = sorted((data / "icsl_corridor_more" / "rgb").glob("*.png"))
     sequences = {"ICL kt3": rgb_sequence(data / "icl_nuim_office_kt3", cues),
