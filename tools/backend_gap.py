@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from uareme_fusion.backends.visual_noise_share import VisualNoiseShare
-from uareme_fusion.benchmarks.horizon import (backend_errors, backend_rows, chained_reference, icsl_depth_reference,
+from uareme_fusion.benchmarks.horizon import (backend_errors, backend_rows, icsl_more_reference, real_sequences,
                                               rgb_sequence)
 from uareme_fusion.evaluation.backend_factory import make_backend
 from uareme_fusion.evaluation.compare import errors_over_time, run_backend
@@ -51,12 +51,12 @@ class FixedShare(VisualNoiseShare):
 
 def sequences(data: Path, by_cue: bool) -> dict:
     """name -> `VisualSequence` with a reference, as `bench horizon` builds them (and ICSL-more by cue)."""
-    rgb = data / "icsl_corridor_more" / "rgb"
-    reference = chained_reference([icsl_depth_reference(p).R_cm for p in sorted(rgb.glob("*.png"))])
-    out = {"ICSL more": rgb_sequence(rgb, CUES, reference), "ICL kt3": rgb_sequence(data / "icl_nuim_office_kt3", CUES)}
+    reference = icsl_more_reference(data)
+    real = real_sequences(data, CUES, reference)
+    out = {name: real[name] for name in ("ICSL more", "ICL kt3")}
     if by_cue:
         for cues in ("lines", "normals"):
-            out[f"ICSL more, {cues} only"] = rgb_sequence(rgb, cues, reference)
+            out[f"ICSL more, {cues} only"] = rgb_sequence(data / "icsl_corridor_more" / "rgb", cues, reference)
     return out
 
 

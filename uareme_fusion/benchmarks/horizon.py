@@ -281,6 +281,20 @@ def chained_reference(R_cm: list[np.ndarray]) -> np.ndarray:
     return np.swapaxes(np.array(out), 1, 2)
 
 
+def icsl_more_reference(data: Path) -> np.ndarray:
+    """`chained_reference` of the depth rotations of `data`/icsl_corridor_more's frames (N, 3, 3)."""
+    rgb = sorted((data / "icsl_corridor_more" / "rgb").glob("*.png"))
+    return chained_reference([icsl_depth_reference(p).R_cm for p in rgb])
+
+
+def real_sequences(data: Path, cues: str, icsl_reference: np.ndarray | None = None) -> dict:
+    """The RGB-only sequences the backends are scored on, by name: ICL kt3 (its ground truth) and
+    ICSL-more (against `icsl_reference`, by default `icsl_more_reference`)."""
+    reference = icsl_more_reference(data) if icsl_reference is None else icsl_reference
+    return {"ICL kt3": rgb_sequence(data / "icl_nuim_office_kt3", cues),
+            "ICSL more": rgb_sequence(data / "icsl_corridor_more" / "rgb", cues, reference)}
+
+
 def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, icsl_stride: int = 2,
         console: Console | None = None, ecd_only: bool = False) -> dict:
     """Every figure of the module docstring beside its goal and baseline (only ECD's with `ecd_only`);
@@ -305,11 +319,7 @@ def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, i
     icl_pooled = pooled_scores([data / "icl_nuim_office_kt3"], analyser, icsl_stride, reference=None, fx_true=ICL_FX,
                                centre_true=ICL_CENTRE)
     icl = icl_scores(data / "icl_nuim_office_kt3", cues)
-    icsl_rgb = sorted((data / "icsl_corridor_more" / "rgb").glob("*.png"))
-    sequences = {"ICL kt3": rgb_sequence(data / "icl_nuim_office_kt3", cues),
-                 "ICSL more": rgb_sequence(data / "icsl_corridor_more" / "rgb", cues,
-                                           chained_reference([icsl_depth_reference(p).R_cm for p in icsl_rgb]))}
-    backends = {name: backend_scores(seq) for name, seq in sequences.items()}
+    backends = {name: backend_scores(seq) for name, seq in real_sequences(data, cues).items()}
     table = _table(f"bench horizon (cues {cues}; data under {data})")
     _ecd_rows(table, ecd)
     for how, scores in (("no intrinsics", icsl), ("dataset K given", icsl_given)):
