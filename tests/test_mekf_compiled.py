@@ -343,3 +343,20 @@ def test_kernels_see_the_fields_that_python_sees():
     for view, (name, shape) in zip(kernel_views, state_buffer.FIELDS):
         assert view.shape == shape and np.shares_memory(view, x)
         assert np.array_equal(view, python_views[name])
+
+
+@needs_numba
+def test_warm_up_loads_every_kernel_a_filter_with_an_imu_calls():
+    """In a fresh process (numba loads a kernel at its first call), `warm_up` leaves no kernel of the
+    stream to come to load: IMU-only in bulk, then with frames; without an IMU, or in visual-only
+    mode, it loads nothing."""
+    code = ("from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels as K\n"
+            "from uareme_fusion.backends import imu_stream\n"
+            "names = ('KERNEL', 'ACCEL_UPDATE', 'SEGMENTS', 'STAGE', 'INTEGRATE_STAGED', 'VISUAL_UPDATE')\n"
+            "loaded = lambda: ''.join(str(len(getattr(K, n).signatures)) for n in names)\n"
+            "Mekf('handheld').warm_up(False, True); Mekf(MekfConfig(mode='visual_only')).warm_up(True, True)\n"
+            "print(loaded()); Mekf('imu_only').warm_up(True, False); print(loaded())\n"
+            "Mekf('handheld').warm_up(True, True); print(loaded(), len(imu_stream._ROWS_IF_CLEAN.signatures))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["000000", "101000", "111111", "1"]  # IMU-only: integrate, segments

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from uareme_fusion.backends.mekf import Mekf
 from uareme_fusion.drivers.base import ImuBatch, SourceInfo
 from uareme_fusion.errors import InputError
 from uareme_fusion.pipeline import RunConfig
@@ -40,6 +41,23 @@ def test_run_writes_trajectory_csv_and_summary_that_agree(tmp_path):
     assert 0.3 < on_disk["nees"]["mean"] < 10
     assert set(on_disk["timing_ms"]) >= {"normals", "solver", "backend", "total"} and on_disk["fps"] > 0
     assert on_disk["imu_samples"] > 1000
+
+
+def test_backend_warms_up_before_the_first_event(tmp_path, monkeypatch):
+    """The pipeline has the backend load its kernels before it reads the source (a live stream's first
+    frames would wait for them), telling it whether IMU samples and frames will come; the time is reported."""
+    calls = []
+    monkeypatch.setattr(Mekf, "warm_up", lambda self, *has: calls.append(("warm_up", *has)))
+    for imu in (True, False):
+        src = WalkSource(seconds=1.0, imu=imu)
+
+        def events(events=src.events):
+            calls.append("first event")  # runs at the first `next`
+            yield from events()
+        monkeypatch.setattr(src, "events", events)
+        summary = run_source(src, tmp_path, RunConfig(backend="mekf"))
+        assert calls == [("warm_up", imu, True), "first event"] and summary["warm_up_s"] >= 0.0
+        calls.clear()
 
 
 def test_blank_frames_give_no_visual_and_are_counted(tmp_path):

@@ -36,6 +36,11 @@ class Backend(ABC):
     def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
         """Best guess of `R_cm` at `t_s` to initialise the solver; None before any estimate."""
 
+    def warm_up(self, has_imu: bool, has_frames: bool) -> None:
+        """Load or compile now what the first estimates would otherwise wait for; `has_imu`, `has_frames`:
+        whether IMU samples and frames will come. A pipeline calls this before its stream starts, so
+        that a live stream's first frames do not stall. Nothing by default."""
+
     def process_imu_segments(self, t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray,
                              ends: np.ndarray) -> Estimates:
         """An IMU-only stream in bulk: samples as in `process_imu`, cut into segments (segment i is

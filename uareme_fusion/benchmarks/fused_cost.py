@@ -4,8 +4,11 @@ and with the visual update, measured on a replay of a simulated run.
 A fused run is recorded as `run_scenario` drives it (`RecordingMekf`: its IMU batches, frame times
 and the solver's visual rotations), then replayed through a fresh filter as a pipeline drives one:
 `process_imu` and `propagate_to` (the prediction the solver starts from), then `process_frame`.
-Before each of those two timed blocks the solver runs on a normal map, as in a run, so that the
-filter finds the caches as a run leaves them: the same filter in a warm loop costs about 2.3x less.
+Two ways: in a loop, the library's calls alone one after the other (how issue 17 measured the
+library's cost with 1/30 s batches); and between solver calls, the solver run on a normal map
+before each of those two timed blocks, as in a run, so that the filter finds the caches as a run
+leaves them (about 2.5x the loop's cost: after a solver call each Python step, numpy call and numba
+call of the filter costs several times what it costs warm).
 Each block is timed with `time.perf_counter_ns` (tens of nanoseconds a read; the thread's CPU-time
 clock is a system call that costs about a microsecond after a solver call, as much as the filter).
 `Mekf._fuse_visual` (the visual update proper: on the compiled path one call that stacks a due
@@ -84,21 +87,23 @@ class VisualUpdateTimedMekf(Mekf):
         return wrote_estimate
 
 
-def replay_cost_us(inputs: FusedInputs, config: MekfConfig, normal_map: NormalMap) -> tuple[float, float]:
+def replay_cost_us(inputs: FusedInputs, config: MekfConfig, normal_map: NormalMap | None) -> tuple[float, float]:
     """One replay of `inputs` through a fresh filter with `config`, the solver run on `normal_map`
-    before each timed block (see the module docstring): `(us per IMU sample without the visual
-    update, with it)`."""
+    before each timed block, or nothing between them when None (see the module docstring): `(us
+    per IMU sample without the visual update, with it)`."""
     filt = VisualUpdateTimedMekf(config)
     clock = time.perf_counter_ns
     total_ns = 0
     for t_frame, batch, visual in inputs.frames:
-        solve_manhattan(normal_map.normals, normal_map.kappa)  # what ran before the frame's samples
+        if normal_map is not None:
+            solve_manhattan(normal_map.normals, normal_map.kappa)  # what ran before the frame's samples
         t0 = clock()
         if batch is not None:
             filt.process_imu(*batch)
         filt.propagate_to(t_frame)
         total_ns += clock() - t0
-        solve_manhattan(normal_map.normals, normal_map.kappa, R_init=filt.predicted_R_cm(t_frame))
+        if normal_map is not None:
+            solve_manhattan(normal_map.normals, normal_map.kappa, R_init=filt.predicted_R_cm(t_frame))
         t0 = clock()
         filt.process_frame(t_frame, visual)
         total_ns += clock() - t0
@@ -106,23 +111,15 @@ def replay_cost_us(inputs: FusedInputs, config: MekfConfig, normal_map: NormalMa
     return 1e-3 * (total_ns - filt.visual_update_ns) / n, 1e-3 * total_ns / n
 
 
-def fused_cost_us(inputs: FusedInputs, config: MekfConfig, repeats: int = 3) -> tuple[float, float]:
-    """Medians over `repeats` replays of `replay_cost_us`."""
+REPLAYS = ("loop", "between_solver")
+"""The two ways `fused_cost_us` replays a run (see the module docstring)."""
+
+
+def fused_cost_us(inputs: FusedInputs, config: MekfConfig, repeats: int = 3) -> dict[str, tuple[float, float]]:
+    """{way of `REPLAYS`: medians over `repeats` replays of `replay_cost_us`}, the two ways alternated."""
     normal_map = manhattan_normal_map(np.eye(3), np.random.default_rng(0), 120, 160, noise_deg=VISUAL_NOISE_DEG,
                                       correlation_px=VISUAL_CORRELATION_PX)
-    costs = np.array([replay_cost_us(inputs, config, normal_map) for _ in range(repeats)])
-    return float(np.median(costs[:, 0])), float(np.median(costs[:, 1]))
-
-
-def warm_fused_path(preset: str = "handheld") -> None:
-    """Run every compiled kernel a fused run takes (numba loads or compiles them at their first call)
-    on one second of a camera at rest with frames, so that no timed run pays for it."""
-    filt = Mekf(preset)
-    R_cm = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
-    visual = VisualRotation(R_cm, 1e-4 * np.eye(3), cost=0.0, iterations=1, n_valid=1000)
-    t_imu = np.arange(1, 401) / 200.0
-    gyro, accel = np.zeros((t_imu.size, 3)), np.tile([0.0, -9.81, 0.0], (t_imu.size, 1))
-    for k, t_frame in enumerate(np.arange(1, 60) / 30.0):
-        batch = (t_imu > t_frame - 1 / 30.0) & (t_imu <= t_frame)
-        filt.process_imu(t_imu[batch], gyro[batch], accel[batch])
-        filt.process_frame(t_frame, visual if k % 5 else None)
+    costs = np.array([[replay_cost_us(inputs, config, between) for between in (None, normal_map)]
+                      for _ in range(repeats)])  # (repeats, way, without / with)
+    medians = np.median(costs, axis=0)
+    return {way: (float(medians[k, 0]), float(medians[k, 1])) for k, way in enumerate(REPLAYS)}

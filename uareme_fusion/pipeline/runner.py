@@ -85,6 +85,8 @@ class RunStats:
     status_counts: Counter = field(default_factory=Counter)
     times: StageTimes = field(default_factory=StageTimes)
     wall_s: float = 0.0
+    warm_up_s: float = 0.0
+    """Of `wall_s`, what the backend took to load before the first event (`Backend.warm_up`)."""
     stopped: str = "end"
     error: str | None = None
     signal: int | None = None
@@ -97,7 +99,7 @@ class RunStats:
                 "status_counts": dict(sorted(self.status_counts.items())),
                 "timing_ms": self.times.mean_ms(self.estimates),
                 "fps": self.estimates / self.wall_s if self.wall_s > 0 else 0.0,
-                "wall_s": self.wall_s, "stopped": self.stopped, "error": self.error,
+                "wall_s": self.wall_s, "warm_up_s": self.warm_up_s, "stopped": self.stopped, "error": self.error,
                 **({"signal": self.signal} if self.signal is not None else {})}
 
     def interrupted(self, exc: BaseException | None = None, signum: int | None = None) -> None:
@@ -198,6 +200,8 @@ class Pipeline:
         start = time.perf_counter()
         events = iter(source.events())
         try:
+            self.backend.warm_up(source.info.has_imu, source.info.has_frames)  # before the first event: a live stream's first frames do not wait for it
+            stats.warm_up_s = time.perf_counter() - start
             if imu_only:
                 self._run_imu_only(events, max_frames, on_result)
             else:

@@ -231,6 +231,12 @@ class Mekf(Backend):
         if self.accel.due:
             self.accel_update()
 
+    def warm_up(self, has_imu: bool, has_frames: bool) -> None:
+        """`Backend.warm_up`: load the compiled kernels of the stream to come (`load_kernels`) unless
+        this filter runs without them."""
+        if has_imu and self.compiled and self.mode != MekfMode.VISUAL_ONLY:
+            load_kernels(has_frames)
+
     def process_imu_segments(self, t_s, gyro_rad_s, accel_m_s2, ends) -> Estimates:
         """`Backend.process_imu_segments` (an IMU-only stream in bulk), with clean stretches of the
         stream in one compiled call (`segments.py`)."""
@@ -492,3 +498,30 @@ class Mekf(Backend):
         else:
             bias_i = self._bias_in_imu(b_c[0])
         return Estimate(t_s, R_wc, cov, status_of(bits), R_wm if self.manhattan_initialised else None, bias_i)
+
+
+_KERNELS_LOADED: set = set()  # which of `load_kernels`' two sets this process has loaded
+
+
+def load_kernels(with_frames: bool = True) -> None:
+    """Have numba load (from its disk cache) or compile every kernel a filter with an IMU calls, with
+    frames or IMU-only in bulk (`with_frames` False), by running a scratch filter through them (one or
+    two seconds at rest), once per process. numba loads a kernel at its first call (about 0.4 s for
+    the fused ones here), which would otherwise stall a live stream's first frames."""
+    if with_frames in _KERNELS_LOADED or not kernels_available():
+        return
+    t_imu = np.arange(1, 401) / 200.0
+    gyro, accel = np.zeros((t_imu.size, 3)), np.tile([0.0, -9.81, 0.0], (t_imu.size, 1))
+    if with_frames:
+        filt = Mekf(MekfConfig(mode="visual_imu"))
+        R_cm = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+        visual = VisualRotation(R_cm, 1e-4 * np.eye(3), cost=0.0, iterations=1, n_valid=1000)
+        for k, t_frame in enumerate(np.arange(1, 60) / 30.0):
+            batch = (t_imu > t_frame - 1 / 30.0) & (t_imu <= t_frame)
+            filt.process_imu(t_imu[batch], gyro[batch], accel[batch])
+            filt.process_frame(t_frame, visual if k % 5 else None)
+    else:
+        filt = Mekf(MekfConfig(mode="imu_only"))
+        for half in (slice(0, 200), slice(200, 400)):  # the first initialises the filter
+            filt.process_imu_segments(t_imu[half], gyro[half], accel[half], np.arange(10, 201, 10))
+    _KERNELS_LOADED.add(with_frames)
