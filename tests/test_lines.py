@@ -108,12 +108,17 @@ def test_focal_search_is_global_at_the_assumed_and_first_focal_lengths_only(monk
     K = assumed_K(H, W, 75.0)
     R_true = exp_so3([0.2, 0.5, -0.1])
     seg = manhattan_segments(R_true, K, W, H, noise_px=1.0, rng=np.random.default_rng(4))
-    starts = []
-    solve = JointSolver.solve
-    monkeypatch.setattr(JointSolver, "solve", lambda self, nm, lines, R_init=None, t_s=None: (
-        starts.append(R_init is None), solve(self, nm, lines, R_init, t_s))[1])
+    starts = []  # (method, global search) of each solve
+    for name in ("solve", "rotation"):
+        def spy(self, nm, lines, R_init=None, method=getattr(JointSolver, name), name=name, **t_s):
+            starts.append((name, R_init is None))
+            return method(self, nm, lines, R_init, **t_s)
+        monkeypatch.setattr(JointSolver, name, spy)
     visual, focal = solve_with_focal(JointSolver(), None, seg)
-    assert starts[:2] == [True, True] and not any(starts[2:]) and len(starts) >= 19
+    # The reference solve at the assumed f, then the grid's rotations alone (no covariance), a global
+    # search at its first f only; the final solve and the slope start from the grid's best.
+    assert starts[:3] == [("solve", True), ("rotation", True), ("rotation", False)]
+    assert starts[2:20] == [("rotation", False)] * 18 and not any(g for _, g in starts[2:])
     assert focal.source == "estimated" and abs(focal.hfov_deg - 75.0) < 0.05 * 75.0
     assert _error_and_nees(visual, R_true)[0] < 1.5
 
@@ -376,3 +381,18 @@ def test_horizon_height_follows_the_vp_its_segments_see_from_nearer():
         t = _vp_height([vp(near, 0.2), vp(far, 2.0)], n, lambda t: np.ones_like(t), None, math.radians(1.0),
                        AtlantaConfig())
         assert t == pytest.approx(-near, abs=0.005)
+
+
+def test_rotation_alone_is_the_solves_rotation():
+    """`JointSolver.rotation` (what searches use: no covariance) gives exactly `solve`'s R_cm, with both
+    cues, segments alone and normals alone, from a global search and from a start."""
+    rng = np.random.default_rng(11)
+    K = assumed_K(H, W, 70.0)
+    R_true = exp_so3([0.3, -0.2, 0.4])
+    lines = segment_moments(manhattan_segments(R_true, K, W, H, noise_px=1.0, clutter=20, rng=rng), K)
+    nm = _normal_map(R_true, rng)
+    for normal_map, moments in ((nm, lines), (None, lines), (nm, None)):
+        for R_init in (None, exp_so3([0.3, -0.15, 0.35])):
+            solver = JointSolver()
+            np.testing.assert_array_equal(solver.rotation(normal_map, moments, R_init),
+                                          solver.solve(normal_map, moments, R_init).R_cm)

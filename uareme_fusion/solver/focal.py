@@ -93,6 +93,13 @@ def solve_given_K(solver: JointSolver, normal_map: NormalMap | None, segments: L
     return solver.solve(normal_map, lines, R_init, t_s=t_s)
 
 
+def rotation_given_K(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments | None,
+                     K: np.ndarray, R_init=None) -> np.ndarray:
+    """`solve_given_K`'s rotation `R_cm` alone (`JointSolver.rotation`: no covariance, which costs more)."""
+    lines = segment_moments(segments, K) if segments is not None and len(segments) else None
+    return solver.rotation(normal_map, lines, R_init)
+
+
 def solve_with_focal(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments, R_init=None,
                      config: FocalConfig | None = None, t_s: float | None = None) -> tuple[VisualRotation, FocalEstimate]:
     """Rotation and focal length together (see the module docstring); `segments` sets the image size.
@@ -123,9 +130,8 @@ def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s) -> tuple[V
     profile, rotations = [], []
     for lf in log_f:  # the first f searched globally, each next one from the previous f's rotation
         K = centred_K(math.exp(lf), h, w)
-        v = solve_given_K(solver, normal_map, segments, K, rotations[-1] if rotations else None, t_s)
-        rotations.append(v.R_cm)
-        profile.append(pixel_consistency(segments, K, v.R_cm, cfg.endpoint_noise_px))
+        rotations.append(rotation_given_K(solver, normal_map, segments, K, rotations[-1] if rotations else None))
+        profile.append(pixel_consistency(segments, K, rotations[-1], cfg.endpoint_noise_px))
     i = best_interior_peak(np.array(profile))
     if i is None:
         return reference, FocalEstimate(K_assumed, "assumed", width=w)
@@ -142,7 +148,7 @@ def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s) -> tuple[V
     f = math.exp(lf_best)
     K = centred_K(f, h, w)
     visual = solve_given_K(solver, normal_map, segments, K, rotations[i], t_s)
-    slope = _rotation_slope(solver, normal_map, segments, f, visual.R_cm, t_s)
+    slope = _rotation_slope(solver, normal_map, segments, f, visual.R_cm)
     visual = replace_cov(visual, solver, visual.cov + std_log_f**2 * np.outer(slope, slope))
     return visual, FocalEstimate(K, "estimated", std_px=f * std_log_f, width=w)
 
@@ -173,17 +179,17 @@ def pixel_consistency(segments: LineSegments, K: np.ndarray, R_cm: np.ndarray, n
     return float((w * np.exp(-0.5 * (c / s) ** 2)).sum() / max(w.sum(), 1e-300))
 
 
-def _rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, f_px: float, R_cm, t_s,
+def _rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, f_px: float, R_cm,
                     h: float = 0.02) -> np.ndarray:
     """d delta / d log f: how the solved rotation moves (right perturbation, rad) as f changes."""
     return rotation_slope(solver, normal_map, segments, lambda s: centred_K(f_px * math.exp(s), segments.height,
-                                                                             segments.width), R_cm, t_s, h)
+                                                                             segments.width), R_cm, h)
 
 
-def rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, K_at, R_cm, t_s, h: float) -> np.ndarray:
+def rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, K_at, R_cm, h: float) -> np.ndarray:
     """d delta / d s (3,) by central differences: how the solved rotation moves (right perturbation, rad)
     as the intrinsics follow `K_at(s)` from `K_at(0)` (the K that gave `R_cm`), steps of +-h."""
-    ends = [solve_given_K(solver, normal_map, segments, K_at(s * h), R_cm, t_s).R_cm for s in (1, -1)]
+    ends = [rotation_given_K(solver, normal_map, segments, K_at(s * h), R_cm) for s in (1, -1)]
     return log_so3(R_cm.T @ ends[0]) / (2 * h) - log_so3(R_cm.T @ ends[1]) / (2 * h)
 
 

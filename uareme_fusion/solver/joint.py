@@ -225,15 +225,10 @@ class JointSolver:
               t_s: float | None = None) -> VisualRotation:
         """`R_cm` and its covariance from the cues present. Raises `InputError` when neither is usable."""
         t_s = (normal_map.t_s if normal_map is not None else float("nan")) if t_s is None else t_s
-        use_lines = self.line_cue_present(lines)
-        if not use_lines:
-            if normal_map is None:
-                raise InputError("No visual cue in this frame: no normal map and too few line segments")
-            return self.normal_solver.solve(normal_map, R_init)
         t0 = time.perf_counter()
-        normal_cue = self._normal_cue(normal_map) if normal_map is not None else None
-        line_cue = _LineCue(lines, self.line_config, beside_normals=normal_cue is not None)
-        cues: list[_Cue] = [line_cue] if normal_cue is None else [normal_cue, line_cue]
+        cues = self._cues(normal_map, lines)
+        if cues is None:
+            return self.normal_solver.solve(normal_map, R_init)
         t1 = time.perf_counter()
         R_cm, cues, iterations, converged, others = self._solve_cues(cues, R_init)
         cov = self._covariance(cues, R_cm)
@@ -243,7 +238,26 @@ class JointSolver:
         return self._result(cues, R_cm, cov, iterations, converged, t_s, {"moments": 1e3 * (t1 - t0),
                                                                          "optimise": 1e3 * (t2 - t1)})
 
+    def rotation(self, normal_map: NormalMap | None, lines: LineMoments | None, R_init=None) -> np.ndarray:
+        """`solve`'s `R_cm` alone (the same rotation), without the covariance, which costs two more
+        refinements (the cues' disagreement): for searches that only compare or difference rotations."""
+        cues = self._cues(normal_map, lines)
+        if cues is None:
+            return self.normal_solver.solve(normal_map, R_init).R_cm
+        return self._solve_cues(cues, R_init)[0]
+
     # --- cues -------------------------------------------------------------------------------------
+    def _cues(self, normal_map: NormalMap | None, lines: LineMoments | None) -> list[_Cue] | None:
+        """The cues of a solve with segments; None without usable segments (the normals-only solver's
+        case); `InputError` when neither cue is usable."""
+        if not self.line_cue_present(lines):
+            if normal_map is None:
+                raise InputError("No visual cue in this frame: no normal map and too few line segments")
+            return None
+        normal_cue = self._normal_cue(normal_map) if normal_map is not None else None
+        line_cue = _LineCue(lines, self.line_config, beside_normals=normal_cue is not None)
+        return [line_cue] if normal_cue is None else [normal_cue, line_cue]
+
     def _normal_cue(self, normal_map: NormalMap) -> _Cue | None:
         if self._moments_of is None or self._moments_of[0] is not normal_map:
             self._moments_of = (normal_map, normal_moments(normal_map.normals, normal_map.kappa))

@@ -196,7 +196,7 @@ def solve_with_pooled_K(solver: JointSolver, normal_map: NormalMap | None, segme
             f, cx, cy = np.array([pooled.f_px, *pooled.K[:2, 2]]) + s * shift
             return pinhole(f, f, cx, cy)
 
-        slopes.append(rotation_slope(solver, normal_map, segments, K_at, visual.R_cm, t_s, step_px))
+        slopes.append(rotation_slope(solver, normal_map, segments, K_at, visual.R_cm, step_px))
     S = np.array(slopes).T
     return replace_cov(visual, solver, visual.cov + S @ pooled.cov_px2 @ S.T)
 
