@@ -114,16 +114,11 @@ def _kernel_cache_lock():
 
 def warm_compiled_kernels() -> None:
     """Call each compiled kernel once with the argument types the package uses (numba's cache keys):
-    the EKF's batch, segment and accelerometer-update kernels, and the float32/float64 normal moments."""
-    from uareme_fusion.backends.mekf import Mekf, MekfConfig
+    the EKF's (`load_kernels`: IMU-only in bulk and with frames) and the float32/float64 normal moments."""
+    from uareme_fusion.backends.mekf.filter import load_kernels
     from uareme_fusion.solver.moments import fused_moments
 
     for dtype in (np.float32, np.float64):
         fused_moments(np.ones((4, 3), dtype), np.ones(4, dtype))
-    t = np.arange(0.0, 1.0, 0.005)
-    gyro, accel = np.zeros((t.size, 3)), np.tile([0.0, 0.0, 9.81], (t.size, 1))
-    batches = Mekf(MekfConfig())  # IMU batches between frames: the batch and the update kernels
-    batches.process_imu(t, gyro, accel)
-    batches.process_frame(1.0, None)
-    segments = Mekf(MekfConfig(mode="imu_only"))  # an IMU-only stream in bulk: the segment kernel
-    segments.process_imu_segments(t, gyro, accel, np.arange(10, t.size + 1, 10))
+    for with_frames in (False, True):
+        load_kernels(with_frames)

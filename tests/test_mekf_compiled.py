@@ -286,6 +286,24 @@ def test_kernels_that_fail_to_compile_fall_back_to_the_reference_after_one_warni
     assert_same_filters(a, b, ea, eb)
 
 
+def test_a_kernel_that_fails_in_the_warm_up_moves_the_filter_to_the_reference(monkeypatch):
+    """`warm_up` runs the kernels on a scratch filter; should one fail there, the filter that asked is on
+    the reference path before its first sample (one warning line), not only the scratch one."""
+    from uareme_fusion.backends.mekf import filter as mekf_filter
+
+    for name in ("KERNEL", "ACCEL_UPDATE", "SEGMENTS", "STAGE", "INTEGRATE_STAGED", "VISUAL_UPDATE"):
+        monkeypatch.setattr(kernels, name, _broken_kernel)  # restored after the test, as is what follows
+    monkeypatch.setattr(mekf_filter, "_KERNELS_LOADED", set())
+    monkeypatch.setattr(jit, "_warned", False)
+    monkeypatch.delenv("UAREME_NO_JIT", raising=False)
+    filt = Mekf("handheld")
+    assert filt.compiled
+    with pytest.warns(RuntimeWarning) as caught:
+        filt.warm_up(has_imu=True, has_frames=True)
+    assert sum("compiled kernels unavailable" in str(w.message) for w in caught) == 1
+    assert not filt.compiled and not filt._stages_frames and not filt._visual_compiled
+
+
 def _doubled(x):
     return 2.0 * x
 

@@ -119,7 +119,8 @@ def fused_cost_us(inputs: FusedInputs, config: MekfConfig, repeats: int = 3) -> 
     """{way of `REPLAYS`: medians over `repeats` replays of `replay_cost_us`}, the two ways alternated."""
     normal_map = manhattan_normal_map(np.eye(3), np.random.default_rng(0), 120, 160, noise_deg=VISUAL_NOISE_DEG,
                                       correlation_px=VISUAL_CORRELATION_PX)
-    costs = np.array([[replay_cost_us(inputs, config, between) for between in (None, normal_map)]
+    between = {"loop": None, "between_solver": normal_map}  # what runs between the timed blocks
+    costs = np.array([[replay_cost_us(inputs, config, between[way]) for way in REPLAYS]
                       for _ in range(repeats)])  # (repeats, way, without / with)
     medians = np.median(costs, axis=0)
     return {way: (float(medians[k, 0]), float(medians[k, 1])) for k, way in enumerate(REPLAYS)}

@@ -46,12 +46,13 @@ from ..drivers.broad import read_broad
 from ..evaluation.scenarios import RunResult, run_scenario
 from ..evaluation.statistics import error_stats, rmse
 from ..rotations import tilt_error_deg, up_in_camera
-from .fused_cost import fused_cost_us, recording_mekf_factory
+from .fused_cost import REPLAYS, fused_cost_us, recording_mekf_factory
 from .peers import vqf_6d_R_wi
 from .reference_timing import imu_delay_s, retimed_reference
 
 EUROC_BESIDE_BROAD = Path("euroc_v1_02_first40s") / "mav0"
 """EuRoC V1_02's first 40 s, in the folder holding the BROAD folder (`../shared/data`)."""
+REPLAY_LABELS = {"loop": "in a loop:", "between_solver": "between solver calls:"}
 GOALS = {"online": 0.95, "offline": 0.85, "euroc": 1.0, "batch_us": 1.0, "run_us": 2.0, "fused_us": 3.0}
 """Issue 17: ratios to vqf 6D (accuracy) and us per IMU sample (cost)."""
 # Same settings on every BROAD trial: the `imu_only` preset (accelerometer low-passed in the
@@ -239,7 +240,7 @@ def run(seeds: int = 5, quick: bool = False, broad_dir: Path = Path("../shared/d
     bus_s, room_s = (40.0, 20.0) if quick else (90.0, 40.0)
     nees_all = []
     imu_us: dict[str, list[float]] = {"broad": []}  # CPU time
-    fused_us: dict[str, list] = {"handheld": [], "bus": []}  # (without, with the visual update), wall time
+    fused_us: dict[str, list] = {"handheld": [], "bus": []}  # ({way: (without, with the visual update)}, per frame)
     vis_ms, vis_wall_ms = [], []
 
     made: list = []  # the filters of the fused runs, which record what they were fed (`fused_cost`)
@@ -326,15 +327,16 @@ def run(seeds: int = 5, quick: bool = False, broad_dir: Path = Path("../shared/d
           "updates, checks, flags, estimates), wall time on replays (`fused_cost`), in a loop of the library's "
           "calls and between solver calls as in a pipeline; with the visual update in brackets")
     for name, label in (("handheld", "30 fps (handheld)"), ("bus", "15 fps (bus)")):
-        runs, per_frame = [r for r, _ in fused_us[name]], float(np.median([n for _, n in fused_us[name]] or [np.nan]))
+        runs = [r for r, _ in fused_us[name]]
+        per_frame = float(np.median([n for _, n in fused_us[name]])) if runs else float("nan")
         figures["fused_us"][name] = {}
-        for way, way_label in (("loop", "in a loop:           "), ("between_solver", "between solver calls:")):
+        for way in REPLAYS:
             without, with_visual = np.median([r[way] for r in runs], axis=0) if runs else (np.nan, np.nan)
             figures["fused_us"][name][way] = {"without_visual_update": float(without),
                                               "with_visual_update": float(with_visual)}
             goal = f"   [goal <= {GOALS['fused_us']:g}]" if name == "handheld" else ""
-            print(f"  fused, 200 Hz IMU at {label}, {way_label} {without:.1f} us per IMU sample ({with_visual:.1f}); "
-                  f"{without * per_frame:.0f} us per frame ({with_visual * per_frame:.0f}){goal}")
+            print(f"  fused, 200 Hz IMU at {label + ',':18s} {REPLAY_LABELS[way]:21s} {without:.1f} us per IMU sample "
+                  f"({with_visual:.1f}); {without * per_frame:.0f} us per frame ({with_visual * per_frame:.0f}){goal}")
     print("  IMU only: CPU time of the filter's thread (wall clock in brackets)")
     peers = {k: float(np.median(v)) if v else float("nan") for k, v in peer_us.items()}
     broad_us = float(np.median(imu_us["broad"])) if imu_us["broad"] else float("nan")

@@ -200,7 +200,8 @@ class Pipeline:
         start = time.perf_counter()
         events = iter(source.events())
         try:
-            self.backend.warm_up(source.info.has_imu, source.info.has_frames)  # before the first event: a live stream's first frames do not wait for it
+            # Before the first event: a live stream's first frames do not wait for the backend's loading.
+            self.backend.warm_up(source.info.has_imu, source.info.has_frames)
             stats.warm_up_s = time.perf_counter() - start
             if imu_only:
                 self._run_imu_only(events, max_frames, on_result)

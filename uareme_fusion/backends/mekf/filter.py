@@ -234,8 +234,11 @@ class Mekf(Backend):
     def warm_up(self, has_imu: bool, has_frames: bool) -> None:
         """`Backend.warm_up`: load the compiled kernels of the stream to come (`load_kernels`) unless
         this filter runs without them."""
-        if has_imu and self.compiled and self.mode != MekfMode.VISUAL_ONLY:
+        if has_imu and self.compiled and self.motion.uses_imu:
             load_kernels(has_frames)
+            if not kernels_available():  # a kernel failed there (`compiled.fall_back`): the reference path
+                self.compiled = False
+                self.set_motion(self.motion)
 
     def process_imu_segments(self, t_s, gyro_rad_s, accel_m_s2, ends) -> Estimates:
         """`Backend.process_imu_segments` (an IMU-only stream in bulk), with clean stretches of the
