@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from helpers import cli
+from uareme_fusion.drivers.base import Source
+from uareme_fusion.drivers.images import ImageSource
 from uareme_fusion.errors import InputError
 from uareme_fusion.pinhole import focal_from_hfov, pinhole
 from uareme_fusion.pipeline.single_image import ImageAnalyser
@@ -138,24 +140,63 @@ def test_icsl_frames_pool_one_K(shared_data):
     assert np.linalg.norm(focal.K[:2, 2] - [316.2, 245.5]) < 10.0
 
 
+class _LiveFolder(Source):
+    """An image folder read as a live camera is: once, in order (no `sample_frames`)."""
+
+    def __init__(self, folder):
+        self.images = ImageSource(folder)
+        self.info, self.notes = self.images.info, []
+
+    def events(self):
+        return self.images.events()
+
+
 def test_a_stream_without_intrinsics_runs_on_the_K_pooled_over_its_first_frames(tmp_path, monkeypatch):
+    """A live stream without K pools one over its first `FOCAL_ATTEMPTS` frames with segments, then
+    keeps it (`pooled_from` says from which frame and what it replaced)."""
     from uareme_fusion.pipeline import RunConfig, cues
-    from uareme_fusion.pipeline.session import run_to_folder
+    from uareme_fusion.pipeline.session import run_source
 
     FOCAL_ATTEMPTS = 12  # the default 30 behaves the same, at 2.5x the test's time
     monkeypatch.setattr(cues, "FOCAL_ATTEMPTS", FOCAL_ATTEMPTS)
     frames = tmp_path / "frames"
     frames.mkdir()
     _drawn_folder(frames, FOCAL_ATTEMPTS + 2, 7)
-    summary = run_to_folder(frames, tmp_path / "out", RunConfig(backend="single", cues="lines"))
+    (tmp_path / "out").mkdir()
+    summary = run_source(_LiveFolder(frames), tmp_path / "out", RunConfig(backend="single", cues="lines"))
     intrinsics = summary["intrinsics"]
-    assert intrinsics["intrinsics_origin"].startswith(f"estimated from {FOCAL_ATTEMPTS} frames")
+    assert intrinsics["intrinsics_origin"] == f"estimated from {FOCAL_ATTEMPTS} frames (focal length and principal point pooled)"
     assert abs(intrinsics["f_px"] - 520.0) < 0.03 * 520.0
     assert intrinsics["principal_point_std_px"] is not None  # determined, near the true one (19 px off-centre)
     assert np.linalg.norm(np.array(intrinsics["K"])[:2, 2] - K_TRUE[:2, 2]) < 4.0
     switch = intrinsics["pooled_from"]  # the last attempt's frame (the first frames hold segments)
     assert switch["frame"] == FOCAL_ATTEMPTS - 1 and switch["before"].startswith("the median of")
     assert 0.8 * 520.0 < switch["f_px_before"] < 1.2 * 520.0
+
+
+def test_a_recording_without_intrinsics_runs_every_frame_on_a_K_pooled_before_the_run(tmp_path, monkeypatch):
+    """A recording (an image folder) has its K pooled over `FOCAL_ATTEMPTS` frames spread over it before
+    the run: every frame is solved with that K, and it never changes mid-stream (no `pooled_from`)."""
+    from uareme_fusion.pipeline import RunConfig, cues
+    from uareme_fusion.pipeline.session import run_to_folder
+
+    monkeypatch.setattr(cues, "FOCAL_ATTEMPTS", 8)
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    _drawn_folder(frames, 20, 7)
+    assert ImageSource(frames).sample_frames(8)[-1].index == 19  # spread to the last frame
+    solved_with = []
+    solve = cues.solve_given_K
+    monkeypatch.setattr(cues, "solve_given_K", lambda solver, nm, seg, K, *rest, **kw: (
+        solved_with.append(K.copy()), solve(solver, nm, seg, K, *rest, **kw))[1])
+    summary = run_to_folder(frames, tmp_path / "out", RunConfig(backend="single", cues="lines"))
+    intrinsics = summary["intrinsics"]
+    assert intrinsics["intrinsics_origin"] == ("estimated from 8 frames (focal length and principal point pooled), "
+                                               "spread over the recording, before the run")
+    assert "pooled_from" not in intrinsics and summary["frames"] == 20
+    assert abs(intrinsics["f_px"] - 520.0) < 0.03 * 520.0
+    assert np.linalg.norm(np.array(intrinsics["K"])[:2, 2] - K_TRUE[:2, 2]) < 4.0
+    assert len(solved_with) == 20 and all(np.array_equal(K, intrinsics["K"]) for K in solved_with)
 
 
 def test_exact_normals_hold_the_rotations_and_pin_an_off_centre_principal_point():

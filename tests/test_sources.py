@@ -80,6 +80,21 @@ def test_video_file_frames_times_and_rgb_order(video):
     assert abs(int(rgb[..., 2].mean()) - 200) < 6 and abs(int(rgb[..., 1].mean()) - 70) < 6 and rgb[..., 0].mean() < 6
 
 
+def test_recordings_sample_frames_spread_over_them_and_leave_the_stream_as_it_is(video, tmp_path):
+    """A video file and an image folder give frames spread evenly over them, first and last included,
+    the same images the stream yields, and the stream still starts at frame 0."""
+    for i in range(5):
+        cv2.imwrite(str(tmp_path / f"{i}.png"), np.full((8, 8, 3), 40 * i, np.uint8))
+    for spec, count in ((video, 20), (tmp_path, 5)):
+        with open_source(str(spec)) as src:
+            sampled = src.sample_frames(4)
+            frames = list(src.events())
+        assert [f.index for f in sampled] == ([0, 6, 13, 19] if count == 20 else [0, 1, 3, 4])
+        assert len(frames) == count and frames[0].index == 0
+        for f in sampled:
+            np.testing.assert_array_equal(f.rgb, frames[f.index].rgb)
+
+
 def test_video_explicit_fps_overrides_container_clock(video):
     with open_source(str(video), fps=10.0) as src:
         times = [f.t_s for f in src.events()]

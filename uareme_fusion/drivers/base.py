@@ -79,6 +79,11 @@ class SourceInfo:
     source.json `platform`); the EKF preset when none is asked for. None: unknown."""
 
 
+def spread_indices(count: int, n: int) -> list[int]:
+    """Up to `n` indices spread evenly over `range(count)`, first and last included."""
+    return np.unique(np.linspace(0, count - 1, min(n, count)).round().astype(int)).tolist() if count > 0 else []
+
+
 class Source(ABC):
     """A stream of `Frame` and `ImuBatch` events in timestamp order. Use as a context manager."""
 
@@ -87,6 +92,13 @@ class Source(ABC):
     """What the driver left out or did not use (printed and put in summary.json); sources set it."""
     fixes: list[str]
     """Automatic repairs of the input (e.g. IMU units), printed as warnings and put in summary.json."""
+
+    def sample_frames(self, n: int) -> list[Frame] | None:
+        """Up to `n` frames spread evenly over a recording, read apart from the stream (`events` is left
+        as it is), for what is best known before the stream runs (the camera's K from the scene); frames
+        that do not decode are left out (the stream reports them). None where the source cannot: a live
+        camera, a source read once. None unless a source says otherwise."""
+        return None
 
     @abstractmethod
     def events(self) -> Iterator[Frame | ImuBatch]:

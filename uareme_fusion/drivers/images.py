@@ -27,7 +27,7 @@ from uareme_fusion.errors import InputError, SourceError
 from uareme_fusion.types import Frame
 
 from ..formats.images import IMAGE_SUFFIXES, images_in_folder, natural_key, read_rgb
-from .base import Source, SourceInfo
+from .base import Source, SourceInfo, spread_indices
 
 DEFAULT_FPS = 30.0
 EPOCH_UNITS = {"ns": (1e-9, 10**17, 10**19), "us": (1e-6, 10**14, 10**16), "ms": (1e-3, 10**11, 10**13)}
@@ -129,3 +129,13 @@ class ImageSource(Source):
     def events(self) -> Iterator[Frame]:
         for i in range(len(self.paths)):
             yield self.read_frame(i)
+
+    def sample_frames(self, n: int) -> list[Frame]:
+        """`Source.sample_frames`: every k-th image."""
+        frames = []
+        for i in spread_indices(len(self.paths), n):
+            try:
+                frames.append(self.read_frame(i))
+            except SourceError:
+                continue
+        return frames

@@ -25,7 +25,7 @@ from uareme_fusion.errors import InputError, SourceError
 from uareme_fusion.types import Frame
 
 from ..formats.images import to_rgb8
-from .base import Source, SourceInfo
+from .base import Source, SourceInfo, spread_indices
 
 WEBCAM_PATTERN = re.compile(r"^webcam(?::(\d+))?$")
 DEFAULT_FPS = 30.0
@@ -118,6 +118,23 @@ class VideoSource(Source):
             yield Frame(t_s=float(t), rgb=to_rgb8(image), index=index)
             last_t = t
             index += 1
+
+    def sample_frames(self, n: int) -> list[Frame] | None:
+        """`Source.sample_frames` for a file (a second reader seeking to every k-th frame); None for a
+        webcam or a file whose frame count the container does not state."""
+        if self.camera is not None or not self.info.n_frames:
+            return None
+        cap = cv2.VideoCapture(self.spec)
+        try:
+            frames = []
+            for i in spread_indices(self.info.n_frames, n):
+                cap.set(cv2.CAP_PROP_POS_FRAMES, i)
+                ok, image = cap.read()
+                if ok and image is not None:
+                    frames.append(Frame(t_s=i / (self.fps or DEFAULT_FPS), rgb=to_rgb8(image), index=i))
+            return frames
+        finally:
+            cap.release()
 
     def close(self) -> None:
         if self._cap is not None:

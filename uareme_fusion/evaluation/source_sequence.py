@@ -24,11 +24,12 @@ def source_sequence(source: Source, cfg: RunConfig, progress=None) -> VisualSequ
     is called after each frame when given."""
     if not source.info.has_frames:
         raise InputError(f"{source.info.name}: 'compare' needs frames to compare visual backends (IMU only)")
-    from ..pipeline.cues import parse_cues
+    from ..pipeline.cues import parse_cues, pool_before_run
     from ..pipeline.session import visual_stages
 
     cues = parse_cues(cfg.cues)
     normals, cue_solver = visual_stages(cfg, source.info)
+    pool_before_run(cue_solver, source)  # as a run does
     t_frames, visuals, imu = [], [], []
     solver = ChainedSolver(cue_solver)
     for event in source.events():

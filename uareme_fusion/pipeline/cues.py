@@ -6,10 +6,14 @@ joint solver (`solver/joint.py`). Without intrinsics, the focal length is estima
 confident per-frame estimates (one camera per stream) meanwhile, then the K pooled over those frames
 (`solver/self_calibration.py`: f, and the principal point when they determine it), and keeps it
 (summary.json's `intrinsics.pooled_from` says from which frame, and what it replaced).
+A recording (a video file, an image folder: `Source.sample_frames`) has its K pooled before the run
+instead, over `FOCAL_ATTEMPTS` frames spread over it (`pool_before_run`), and every frame is solved
+with it: the first frames do not wait for a K, and it does not change mid-stream.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 import numpy as np
@@ -144,6 +148,40 @@ class CueSolver:
             self.focal = self._assumed(h, w)
         return self._solve_at(self.focal, normal_map, segments, R_init, frame.t_s)
 
+    def pool_before(self, frames: list[Frame]) -> bool:
+        """The stream's K pooled over `frames` (without K, spread over a recording: `pool_before_run`)
+        before it runs, each solved alone from its segments; then kept for every frame, as a K pooled
+        mid-stream is. False, changing nothing, when the frames cannot tell one (too few with segments,
+        f undetermined) or have a K or differ in size."""
+        if self.detector is None or self.focal is not None or not frames:
+            return False
+        if any(f.K is not None or f.rgb is None or f.rgb.shape != frames[0].rgb.shape for f in frames):
+            return False
+        evidence, focal_px = [], []
+        for frame in frames:
+            segments = self.detector.detect(frame.rgb)
+            if not len(segments):
+                continue
+            try:
+                visual, focal = solve_with_focal(self.solver, None, segments, None, self.focal_config, t_s=frame.t_s)
+            except InputError:  # too few segments for the line cue alone
+                continue
+            evidence.append(FrameEvidence(segments, visual.R_cm))
+            if focal.source == "estimated":
+                focal_px.append(focal.f_px)
+        if not evidence:
+            return False
+        h, w = frames[0].rgb.shape[:2]
+        f_init = float(np.median(focal_px)) if focal_px else self._assumed(h, w).f_px
+        pooled = pool_intrinsics(evidence, f_init)
+        if pooled is None:
+            return False
+        focal = pooled.focal_estimate()
+        self.focal = dataclasses.replace(focal, origin=f"{focal.origin}, spread over the recording, before the run")
+        self._attempts, self._size = FOCAL_ATTEMPTS, (w, h)
+        log.warning("intrinsics: K %s (f %.1f px)", self.focal.origin, self.focal.f_px)  # shown, as a switch is
+        return True
+
     def _switch_to(self, pooled: FocalEstimate, frame: Frame) -> None:
         """Use the pooled K from `frame` on; record and log the change (one line)."""
         n = len(self._focal_px)
@@ -161,6 +199,15 @@ class CueSolver:
         if self.pooled_switch is not None:
             doc["pooled_from"] = self.pooled_switch
         return doc
+
+
+def pool_before_run(cues: "CueSolver | None", source) -> bool:
+    """`CueSolver.pool_before` over `FOCAL_ATTEMPTS` frames spread over `source` (`Source.sample_frames`)
+    when it is a recording whose frames have no K and the line cue runs; False otherwise."""
+    if cues is None or cues.detector is None or source.info.K is not None or not source.info.has_frames:
+        return False
+    frames = source.sample_frames(FOCAL_ATTEMPTS)
+    return bool(frames) and cues.pool_before(frames)
 
 
 def stream_focal(focal_px: list[float], height: int, width: int) -> FocalEstimate:
