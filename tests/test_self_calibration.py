@@ -199,6 +199,23 @@ def test_a_recording_without_intrinsics_runs_every_frame_on_a_K_pooled_before_th
     assert len(solved_with) == 20 and all(np.array_equal(K, intrinsics["K"]) for K in solved_with)
 
 
+def test_ctrl_c_while_K_is_pooled_before_the_run_still_leaves_a_summary(tmp_path, monkeypatch):
+    """The pre-pass runs inside the pipeline's run: a Ctrl-C there ends the run as one at frame 0 does."""
+    from uareme_fusion.pipeline import RunConfig, cues
+    from uareme_fusion.pipeline.session import run_to_folder
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    _drawn_folder(frames, 4, 7)
+
+    def interrupted(self, frames):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cues.CueSolver, "pool_before", interrupted)
+    summary = run_to_folder(frames, tmp_path / "out", RunConfig(backend="single", cues="lines"))
+    assert summary["stopped"] == "interrupted" and summary["frames"] == 0
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["stopped"] == "interrupted"
+
+
 def test_exact_normals_hold_the_rotations_and_pin_an_off_centre_principal_point():
     from uareme_fusion.solver.self_calibration import SelfCalibrationConfig
 

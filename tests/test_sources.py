@@ -93,6 +93,10 @@ def test_recordings_sample_frames_spread_over_them_and_leave_the_stream_as_it_is
         assert len(frames) == count and frames[0].index == 0
         for f in sampled:
             np.testing.assert_array_equal(f.rgb, frames[f.index].rgb)
+    with open_source(str(video)) as src:  # a run that stops at frame 10 samples its first 10 frames
+        assert [f.index for f in src.sample_frames(4, limit=10)] == [0, 3, 6, 9]
+    with record(ImageSource(tmp_path), tmp_path / "recorded") as src:  # recording passes them through
+        assert [f.index for f in src.sample_frames(4)] == [0, 1, 3, 4]
 
 
 def test_video_explicit_fps_overrides_container_clock(video):

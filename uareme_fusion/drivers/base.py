@@ -79,8 +79,10 @@ class SourceInfo:
     source.json `platform`); the EKF preset when none is asked for. None: unknown."""
 
 
-def spread_indices(count: int, n: int) -> list[int]:
-    """Up to `n` indices spread evenly over `range(count)`, first and last included."""
+def spread_indices(count: int, n: int, limit: int | None = None) -> list[int]:
+    """Up to `n` indices spread evenly over `range(count)` (over its first `limit` when given), first and
+    last included."""
+    count = count if limit is None else min(count, limit)
     return np.unique(np.linspace(0, count - 1, min(n, count)).round().astype(int)).tolist() if count > 0 else []
 
 
@@ -93,11 +95,12 @@ class Source(ABC):
     fixes: list[str]
     """Automatic repairs of the input (e.g. IMU units), printed as warnings and put in summary.json."""
 
-    def sample_frames(self, n: int) -> list[Frame] | None:
-        """Up to `n` frames spread evenly over a recording, read apart from the stream (`events` is left
-        as it is), for what is best known before the stream runs (the camera's K from the scene); frames
-        that do not decode are left out (the stream reports them). None where the source cannot: a live
-        camera, a source read once. None unless a source says otherwise."""
+    def sample_frames(self, n: int, limit: int | None = None) -> list[Frame] | None:
+        """Up to `n` frames spread evenly over a recording (over its first `limit` frames when given: a
+        run that stops there), read apart from the stream (`events` is left as it is), for what is best
+        known before the stream runs (the camera's K from the scene); frames that do not decode are left
+        out (the stream reports them). None where the source cannot: a live camera, a source read once.
+        None unless a source says otherwise."""
         return None
 
     @abstractmethod

@@ -130,10 +130,10 @@ class ImageSource(Source):
         for i in range(len(self.paths)):
             yield self.read_frame(i)
 
-    def sample_frames(self, n: int) -> list[Frame]:
+    def sample_frames(self, n: int, limit: int | None = None) -> list[Frame]:
         """`Source.sample_frames`: every k-th image."""
         frames = []
-        for i in spread_indices(len(self.paths), n):
+        for i in spread_indices(len(self.paths), n, limit):
             try:
                 frames.append(self.read_frame(i))
             except SourceError:

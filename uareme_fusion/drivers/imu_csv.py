@@ -126,8 +126,8 @@ class MergedSource(Source):
     def events(self) -> Iterator:
         yield from interleave(self._frames_checked(), self._imu_batches(), self.info.imu_time_offset_s)
 
-    def sample_frames(self, n: int):
-        return self.camera.sample_frames(n)
+    def sample_frames(self, n: int, limit: int | None = None):
+        return self.camera.sample_frames(n, limit)
 
     def ground_truth(self) -> GroundTruth | None:
         return self.camera.ground_truth() or self.imu.ground_truth()

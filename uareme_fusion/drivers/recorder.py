@@ -164,6 +164,10 @@ class RecordingSource(Source):
                 raise
             yield event
 
+    def sample_frames(self, n: int, limit: int | None = None):
+        """The recorded source's (a live camera's None: its replay then runs as it did)."""
+        return self.source.sample_frames(n, limit)
+
     def ground_truth(self) -> GroundTruth | None:
         return self.source.ground_truth()
 

@@ -119,7 +119,7 @@ class VideoSource(Source):
             last_t = t
             index += 1
 
-    def sample_frames(self, n: int) -> list[Frame] | None:
+    def sample_frames(self, n: int, limit: int | None = None) -> list[Frame] | None:
         """`Source.sample_frames` for a file (a second reader seeking to every k-th frame); None for a
         webcam or a file whose frame count the container does not state."""
         if self.camera is not None or not self.info.n_frames:
@@ -127,7 +127,7 @@ class VideoSource(Source):
         cap = cv2.VideoCapture(self.spec)
         try:
             frames = []
-            for i in spread_indices(self.info.n_frames, n):
+            for i in spread_indices(self.info.n_frames, n, limit):
                 cap.set(cv2.CAP_PROP_POS_FRAMES, i)
                 ok, image = cap.read()
                 if ok and image is not None:

@@ -29,7 +29,7 @@ def source_sequence(source: Source, cfg: RunConfig, progress=None) -> VisualSequ
 
     cues = parse_cues(cfg.cues)
     normals, cue_solver = visual_stages(cfg, source.info)
-    pool_before_run(cue_solver, source)  # as a run does
+    pool_before_run(cue_solver, source, cfg.max_frames)  # as a run does
     t_frames, visuals, imu = [], [], []
     solver = ChainedSolver(cue_solver)
     for event in source.events():

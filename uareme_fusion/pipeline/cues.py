@@ -24,7 +24,7 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
 from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
                             unknown_centre_floor)
 from ..solver.joint import JointSolver
-from ..solver.self_calibration import FrameEvidence, pool_intrinsics
+from ..solver.self_calibration import FrameEvidence, SelfCalibrationConfig, pool_intrinsics
 from ..solver import solve_manhattan
 from ..types import Frame, NormalMap, VisualRotation
 
@@ -153,8 +153,8 @@ class CueSolver:
         before it runs, each solved alone from its segments; then kept for every frame, as a K pooled
         mid-stream is. False, changing nothing, when the frames cannot tell one (too few with segments,
         f undetermined) or have a K or differ in size."""
-        if self.detector is None or self.focal is not None or not frames:
-            return False
+        if self.detector is None or self.focal is not None or len(frames) < SelfCalibrationConfig.min_frames:
+            return False  # (too few frames to pool: the stream's own path does its frames once)
         if any(f.K is not None or f.rgb is None or f.rgb.shape != frames[0].rgb.shape for f in frames):
             return False
         evidence, focal_px = [], []
@@ -201,12 +201,13 @@ class CueSolver:
         return doc
 
 
-def pool_before_run(cues: "CueSolver | None", source) -> bool:
-    """`CueSolver.pool_before` over `FOCAL_ATTEMPTS` frames spread over `source` (`Source.sample_frames`)
-    when it is a recording whose frames have no K and the line cue runs; False otherwise."""
+def pool_before_run(cues: "CueSolver | None", source, max_frames: int | None = None) -> bool:
+    """`CueSolver.pool_before` over `FOCAL_ATTEMPTS` frames spread over `source` (`Source.sample_frames`;
+    over its first `max_frames` when the run stops there) when it is a recording whose frames have no K
+    and the line cue runs; False otherwise."""
     if cues is None or cues.detector is None or source.info.K is not None or not source.info.has_frames:
         return False
-    frames = source.sample_frames(FOCAL_ATTEMPTS)
+    frames = source.sample_frames(FOCAL_ATTEMPTS, max_frames)
     return bool(frames) and cues.pool_before(frames)
 
 

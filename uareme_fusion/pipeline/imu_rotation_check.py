@@ -88,6 +88,9 @@ class _TappedSource(Source):
                 self.on_imu(event)
             yield event
 
+    def sample_frames(self, n: int, limit: int | None = None):
+        return self.source.sample_frames(n, limit)
+
     def ground_truth(self):
         return self.source.ground_truth()
 

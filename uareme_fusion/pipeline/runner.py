@@ -26,7 +26,7 @@ from ..drivers.base import Source
 from ..errors import InputError, OutputError, SourceError
 from ..types import Estimate, Estimates, Frame, ImuBatch, NormalMap, Status, VisualRotation
 from . import stop_signals
-from .cues import solve_frame
+from .cues import pool_before_run, solve_frame
 
 STAGES = ("source", "normals", "solver", "backend", "sinks")
 IMU_ONLY_BULK_BATCHES = 256
@@ -86,7 +86,8 @@ class RunStats:
     times: StageTimes = field(default_factory=StageTimes)
     wall_s: float = 0.0
     warm_up_s: float = 0.0
-    """Of `wall_s`, what the backend took to load before the first event (`Backend.warm_up`)."""
+    """Of `wall_s`, what ran before the first event: a recording's K pooled before the run
+    (`cues.pool_before_run`) and the backend's loading (`Backend.warm_up`)."""
     stopped: str = "end"
     error: str | None = None
     signal: int | None = None
@@ -200,7 +201,9 @@ class Pipeline:
         start = time.perf_counter()
         events = iter(source.events())
         try:
-            # Before the first event: a live stream's first frames do not wait for the backend's loading.
+            # Before the first event: a recording's K from frames spread over it, and the backend's loading
+            # (a live stream's first frames do not wait for it).
+            pool_before_run(self.cues, source, max_frames)
             self.backend.warm_up(source.info.has_imu, source.info.has_frames)
             stats.warm_up_s = time.perf_counter() - start
             if imu_only:

@@ -25,7 +25,7 @@ from ..io.safe_files import ENVIRONMENT_ERRNOS, ReservedFile
 from ..rotations import align_constant
 from ..types import Status
 from .config import RunConfig
-from .cues import CueSolver, parse_cues, pool_before_run
+from .cues import CueSolver, parse_cues
 from .imu_rotation_check import ImuRotationCheck
 from .runner import Pipeline, RunStats
 from . import stop_signals
@@ -110,7 +110,6 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
     extra_sinks = list(extra_sinks)
     log = EstimateLog() if evaluate else None
     pipeline = build_pipeline(source, cfg)  # a bad backend setting stops here, before any file is written
-    pool_before_run(pipeline.cues, source)  # a recording without K: its K from frames spread over it
     summary_file = ReservedFile(out / "summary.json", json.dumps({"command": command, "stopped": "running"}) + "\n")
     check = ImuRotationCheck.for_source(source)
     sinks = [TumTrajectoryWriter(out / "trajectory.tum"), EstimatesCsvWriter(out / "estimates.csv"),
