@@ -90,7 +90,7 @@ def test_real_icsl_stream_rgb_only_filters_no_worse_than_single(shared_data, tmp
     from uareme_fusion.benchmarks.horizon import chained_reference, icsl_depth_reference, rgb_sequence
     from uareme_fusion.pipeline import cues
 
-    monkeypatch.setattr(cues, "pool_before_run", lambda *recording: False)  # as a live camera
+    monkeypatch.setattr(cues, "pool_before_run", lambda *recording: None)  # as a live camera
 
     frames = sorted((shared_data / "icsl_corridor_more" / "rgb").glob("*.png"))[:40]
     (tmp_path / "rgb").mkdir()

@@ -181,8 +181,8 @@ def run(seconds: float = 10.0, memory_minutes: float = 10.0, normals: str = "lea
     shown = f"{DEFAULT_THREADS} (default)" if threads is None else str(threads)
     print(f"pipeline, 640x480 input, {normals} normals ({shown} torch threads), mekf + 200 Hz IMU, "
           f"{tp['frames']} frames:")
-    print(f"  ms per frame: {stages}; total {tp['pipeline_ms']:.1f} ms; before the stream, the backend's warm-up "
-          f"(`Backend.warm_up`: numba loads the EKF's kernels, once per process) {tp['warm_up_ms']:.0f} ms")
+    print(f"  ms per frame: {stages}; total {tp['pipeline_ms']:.1f} ms; before the stream (`warm_up_s`: here the "
+          f"backend's warm-up, numba loading the EKF's kernels once per process) {tp['warm_up_ms']:.0f} ms")
     print(f"  {tp['fps']:.1f} fps (goal >= {FPS_GOAL:g}: ratio {tp['fps'] / FPS_GOAL:.2f}); CPU {tp['cpu_ms_per_frame']:.1f} ms "
           f"per frame = {tp['cpu_fps']:.1f} fps on an idle core (load average {os.getloadavg()[0]:.1f} "
           f"on {os.cpu_count()} cores)")

@@ -179,7 +179,7 @@ class CueSolver:
         focal = pooled.focal_estimate()
         self.focal = dataclasses.replace(focal, origin=f"{focal.origin}, spread over the recording, before the run")
         self._attempts, self._size = FOCAL_ATTEMPTS, (w, h)
-        log.warning("intrinsics: K %s (f %.1f px)", self.focal.origin, self.focal.f_px)  # shown, as a switch is
+        log.warning("intrinsics: K %s (f %.1f px)", self.focal.origin, self.focal.f_px)  # one line, as `_switch_to`
         return True
 
     def _switch_to(self, pooled: FocalEstimate, frame: Frame) -> None:
@@ -201,14 +201,15 @@ class CueSolver:
         return doc
 
 
-def pool_before_run(cues: "CueSolver | None", source, max_frames: int | None = None) -> bool:
+def pool_before_run(cues: "CueSolver | None", source, max_frames: int | None = None) -> None:
     """`CueSolver.pool_before` over `FOCAL_ATTEMPTS` frames spread over `source` (`Source.sample_frames`;
     over its first `max_frames` when the run stops there) when it is a recording whose frames have no K
-    and the line cue runs; False otherwise."""
+    and the line cue runs."""
     if cues is None or cues.detector is None or source.info.K is not None or not source.info.has_frames:
-        return False
+        return
     frames = source.sample_frames(FOCAL_ATTEMPTS, max_frames)
-    return bool(frames) and cues.pool_before(frames)
+    if frames:
+        cues.pool_before(frames)
 
 
 def stream_focal(focal_px: list[float], height: int, width: int) -> FocalEstimate:

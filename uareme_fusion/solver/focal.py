@@ -86,18 +86,21 @@ def segment_moments(segments: LineSegments, K: np.ndarray) -> LineMoments:
     return line_moments(planes[ok], segments.weights[ok])
 
 
+def _moments_if_any(segments: LineSegments | None, K: np.ndarray) -> LineMoments | None:
+    """`segment_moments`, None without segments."""
+    return segment_moments(segments, K) if segments is not None and len(segments) else None
+
+
 def solve_given_K(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments | None,
                   K: np.ndarray, R_init=None, t_s: float | None = None) -> VisualRotation:
     """The joint solve with known intrinsics (segments may be None or empty)."""
-    lines = segment_moments(segments, K) if segments is not None and len(segments) else None
-    return solver.solve(normal_map, lines, R_init, t_s=t_s)
+    return solver.solve(normal_map, _moments_if_any(segments, K), R_init, t_s=t_s)
 
 
 def rotation_given_K(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments | None,
                      K: np.ndarray, R_init=None) -> np.ndarray:
     """`solve_given_K`'s rotation `R_cm` alone (`JointSolver.rotation`: no covariance, which costs more)."""
-    lines = segment_moments(segments, K) if segments is not None and len(segments) else None
-    return solver.rotation(normal_map, lines, R_init)
+    return solver.rotation(normal_map, _moments_if_any(segments, K), R_init)
 
 
 def solve_with_focal(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments, R_init=None,
