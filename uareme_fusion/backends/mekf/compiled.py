@@ -32,6 +32,11 @@ def fall_back(filt, exc: BaseException) -> None:
     switched to the reference path (see the module docstring)."""
     jit.disable(exc)
     K.disable_all()
+    to_reference_path(filt)
+
+
+def to_reference_path(filt) -> None:
+    """`filt` on the reference path from now on: not compiled, its motion's paths chosen again."""
     filt.compiled = False
     filt.set_motion(filt.motion)
 

@@ -21,7 +21,7 @@ from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
 from .compiled import (STAGE_ROWS, accel_update_compiled, harvest_kernel_counters, integrate_staged_compiled,
-                       kernels_available, stage_compiled, visual_update_compiled)
+                       kernels_available, stage_compiled, to_reference_path, visual_update_compiled)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
                            visual_model)
@@ -236,9 +236,8 @@ class Mekf(Backend):
         this filter runs without them."""
         if has_imu and self.compiled and self.motion.uses_imu:
             load_kernels(has_frames)
-            if not kernels_available():  # a kernel failed there (`compiled.fall_back`): the reference path
-                self.compiled = False
-                self.set_motion(self.motion)
+            if not kernels_available():  # a kernel failed there (`compiled.fall_back`)
+                to_reference_path(self)
 
     def process_imu_segments(self, t_s, gyro_rad_s, accel_m_s2, ends) -> Estimates:
         """`Backend.process_imu_segments` (an IMU-only stream in bulk), with clean stretches of the
