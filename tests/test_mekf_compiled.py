@@ -22,6 +22,14 @@ needs_numba = pytest.mark.skipif(not mekf_compiled.kernels_available(),
                                  reason="numba not installed: no compiled path")
 
 
+def fresh_python(code: str, timeout_s: float) -> subprocess.CompletedProcess:
+    """`code` run in a new interpreter (numba loads a kernel at its first call, once per process),
+    which must exit 0; its output."""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout_s)
+    assert out.returncode == 0, out.stderr
+    return out
+
+
 def stream(seed: int, duration_s: float = 30.0, rate_hz: float = 200.0):
     traj = make_trajectory("walk", duration_s=duration_s, seed=seed)
     t, gyro, accel = simulate_imu(traj, rate_hz=rate_hz, seed=seed + 1)
@@ -193,8 +201,7 @@ def test_without_numba_the_reference_runs_after_one_warning_line():
             "f.process_imu(t, np.zeros((t.size, 3)), np.tile([0, 0, 9.81], (t.size, 1))); f.flush()\n"
             "m = normal_moments(np.ones((4, 3)))\n"
             "print(f.counters['accel_updates'], m.n_valid)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
+    out = fresh_python(code, timeout_s=120)
     assert out.stdout.split() == ["24", "4"]
     warnings = [line for line in out.stderr.splitlines() if "compiled kernels unavailable" in line]
     assert len(warnings) == 1
@@ -375,6 +382,4 @@ def test_warm_up_loads_every_kernel_a_filter_with_an_imu_calls():
             "Mekf('handheld').warm_up(False, True); Mekf(MekfConfig(mode='visual_only')).warm_up(True, True)\n"
             "print(loaded()); Mekf('imu_only').warm_up(True, False); print(loaded())\n"
             "Mekf('handheld').warm_up(True, True); print(loaded(), len(imu_stream._ROWS_IF_CLEAN.signatures))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["000000", "101000", "111111", "1"]  # IMU-only: integrate, segments
+    assert fresh_python(code, timeout_s=300).stdout.split() == ["000000", "101000", "111111", "1"]  # IMU-only: integrate, segments
