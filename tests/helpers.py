@@ -29,8 +29,9 @@ from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.sim.trajectory import make_trajectory
 from uareme_fusion.types import Frame
 
-SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-"""`../shared/data` beside the repository (real sequences for measurement; absent in some checkouts)."""
+SHARED_DATA = Path(os.environ.get("UAREME_SHARED_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
+"""`../shared/data` beside the repository, or `$UAREME_SHARED_DATA` (real sequences for measurement; absent in
+some checkouts)."""
 
 
 def shared_data_or_skip() -> Path:

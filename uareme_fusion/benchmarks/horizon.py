@@ -295,15 +295,24 @@ def real_sequences(data: Path, cues: str, icsl_reference: np.ndarray | None = No
             "ICSL more": rgb_sequence(data / "icsl_corridor_more" / "rgb", cues, reference)}
 
 
-def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, icsl_stride: int = 2,
-        console: Console | None = None, ecd_only: bool = False) -> dict:
-    """Every figure of the module docstring beside its goal and baseline (only ECD's with `ecd_only`);
-    returns them as a dict."""
+def run(data: Path, cues: str = "normals,lines,sky", ecd_limit: int | None = None, icsl_stride: int = 2,
+        console: Console | None = None, ecd_only: bool = False, uav_only: bool = False) -> dict:
+    """Every figure of the module docstring beside its goal and baseline (only ECD's with `ecd_only`,
+    only horizon_uav's with `uav_only`: `benchmarks/horizon_uav.py`); returns them as a dict."""
     from ..drivers.intrinsics import CameraModel
     from ..pipeline.single_image import ImageAnalyser
+    from . import horizon_uav
 
     console = console or Console()
     analyser = ImageAnalyser(cues=cues)
+    uav = (horizon_uav.uav_scores(data / "horizon_uav", analyser)
+           if not ecd_only and (data / "horizon_uav").is_dir() else None)
+    if uav_only:
+        table = _table(f"bench horizon, horizon_uav only (cues {cues}; data under {data})")
+        if uav is not None:
+            horizon_uav.uav_rows(table, uav)
+        console.print(table)
+        return {"horizon_uav": uav}
     ecd = ecd_scores(data / "eurasian_cities", analyser, ecd_limit)
     ecd.pop("errors")
     if ecd_only:
@@ -320,8 +329,12 @@ def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, i
                                centre_true=ICL_CENTRE)
     icl = icl_scores(data / "icl_nuim_office_kt3", cues)
     backends = {name: backend_scores(seq) for name, seq in real_sequences(data, cues).items()}
+    indoor = horizon_uav.indoor_known(data, analyser, icsl_stride)
     table = _table(f"bench horizon (cues {cues}; data under {data})")
     _ecd_rows(table, ecd)
+    if uav is not None:
+        horizon_uav.uav_rows(table, uav)
+    horizon_uav.indoor_rows(table, indoor)
     for how, scores in (("no intrinsics", icsl), ("dataset K given", icsl_given)):
         table.add_row(f"ICSL RGB vs depth rotation, {how}, mean ({scores['frames']} frames)",
                       f"{scores['mean_angle_deg']:.2f} deg", "<= 2 deg", f"median {scores['median_angle_deg']:.2f} deg")
@@ -347,7 +360,7 @@ def run(data: Path, cues: str = "normals,lines", ecd_limit: int | None = None, i
                           "" if vs is None else f"{vs['mean']:+.4f} deg vs single, paired per frame "
                           f"(95 % {vs['low']:+.4f} .. {vs['high']:+.4f})")
     console.print(table)
-    return {"ecd": ecd, "icsl": icsl, "icsl_given_K": icsl_given, "icsl_pooled_K": icsl_pooled, "icl_kt3": icl,
+    return {"ecd": ecd, "horizon_uav": uav, "indoor_horizon_known": indoor, "icsl": icsl, "icsl_given_K": icsl_given, "icsl_pooled_K": icsl_pooled, "icl_kt3": icl,
             "icl_kt3_pooled_K": icl_pooled, "backends_rgb_only": backends}
 
 

@@ -46,9 +46,10 @@ def bench(
                                   "every IMU-only file, beside vqf and imufusion."),
     threads: int = typer.Option(None, "--threads", min=1, max=256,
                                 help="pipeline: torch CPU threads of the learned normals (default 1)."),
-    cues: str = typer.Option("normals,lines", "--cues", help="horizon: visual cues (normals, lines or both)."),
+    cues: str = typer.Option("normals,lines,sky", "--cues", help="horizon: visual cues (normals, lines, sky)."),
     ecd_limit: int = typer.Option(None, "--ecd-limit", min=1, help="horizon: score only the first N ECD images."),
     ecd_only: bool = typer.Option(False, "--ecd-only", help="horizon: only the ECD figures (a third of the time)."),
+    uav_only: bool = typer.Option(False, "--uav-only", help="horizon: only the horizon_uav figures (open country)."),
     json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
 ) -> None:
     """Time a benchmark on this machine and print its figures against the goals."""
@@ -72,9 +73,10 @@ def bench(
         from ..benchmarks import horizon
 
         data = data or Path("../shared/data")
-        if not (data / "eurasian_cities").is_dir():
-            raise fail(f"--data {data}: no eurasian_cities/ folder there (see shared/data/README.md)")
-        results = horizon.run(data, cues, ecd_limit, ecd_only=ecd_only)
+        needed = "horizon_uav" if uav_only else "eurasian_cities"
+        if not (data / needed).is_dir():
+            raise fail(f"--data {data}: no {needed}/ folder there (see shared/data/README.md)")
+        results = horizon.run(data, cues, ecd_limit, ecd_only=ecd_only, uav_only=uav_only)
     elif what == "mekf":
         from ..benchmarks import mekf
 

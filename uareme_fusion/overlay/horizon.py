@@ -41,28 +41,10 @@ def horizon_segment(up_c: np.ndarray, K: np.ndarray, height: int, width: int) ->
     pixels, ordered so that the sky lies on the left of the direction p0 -> p1 as seen in the image
     (a level camera gives a left-to-right segment). None when the horizon misses the image, e.g. a
     camera looking straight up or down (the line is then at infinity)."""
-    a, b, c = horizon_line(up_c, K)
-    norm = np.hypot(a, b)
-    if norm <= _AT_INFINITY * abs(c):
+    line = horizon_line(up_c, K)
+    if np.hypot(line[0], line[1]) <= _AT_INFINITY * abs(line[2]):
         return None
-    # Liang-Barsky clipping of p(t) = p_foot + t d, with d the line direction (sky on its left).
-    p_foot = -c * np.array([a, b]) / norm**2
-    d = np.array([-b, a]) / norm
-    t_lo, t_hi = -np.inf, np.inf
-    for p, q in ((-d[0], p_foot[0]), (d[0], width - 1 - p_foot[0]), (-d[1], p_foot[1]), (d[1], height - 1 - p_foot[1])):
-        if p == 0.0:
-            if q < 0.0:
-                return None
-            continue
-        t = q / p
-        if p < 0.0:
-            t_lo = max(t_lo, t)
-        else:
-            t_hi = min(t_hi, t)
-    if not t_hi > t_lo:
-        return None
-    p0, p1 = p_foot + t_lo * d, p_foot + t_hi * d
-    return (float(p0[0]), float(p0[1])), (float(p1[0]), float(p1[1]))
+    return _clip_line(line, height, width)
 
 
 def on_sky_side(points_xy: np.ndarray, up_c: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -90,17 +72,30 @@ def draw_horizon(
     K: np.ndarray,
     fov_note: str | None = None,
     colour_rgb: tuple[int, int, int] = HORIZON_RGB,
+    std_px: float | None = None,
+    known: bool = True,
 ) -> np.ndarray:
     """A copy of `rgb` (H, W, 3) uint8 with the horizon drawn anti-aliased, a short tick at its middle
     pointing to the sky, and `fov_note` (e.g. `camera.assumed_fov_note()`) written bottom-left when
-    given. When the horizon misses the image, "horizon out of view" is written top-left instead."""
+    given. `std_px`: its standard deviation along its normal, drawn as a shaded band of +-1 std with
+    thin edges. When the horizon misses the image, "horizon off-screen" and where it lies (above,
+    below, left or right, and how far from the centre) is written top-left instead; when not `known`,
+    nothing is drawn but the note "horizon unknown"."""
     image = check_rgb(rgb).copy()
     height, width = image.shape[:2]
     up_c = check_vector3(up_c, "up_c")
+    if not known:
+        outlined_text(image, "horizon unknown (no structure or sky fixes it)", (8, 8 + text_height_px(image)), colour_rgb)
+        if fov_note:
+            outlined_text(image, fov_note, (8, height - 8))
+        return image
     segment = horizon_segment(up_c, K, height, width)
     thickness = stroke_px(height, width)
+    band = std_px is not None and np.isfinite(std_px) and std_px >= 1.0
+    if band:
+        _draw_band(image, horizon_line(up_c, K), float(std_px), colour_rgb, max(thickness // 2, 1))
     if segment is None:
-        outlined_text(image, "horizon out of view", (8, 8 + text_height_px(image)), colour_rgb)
+        outlined_text(image, off_screen_note(up_c, K, height, width), (8, 8 + text_height_px(image)), colour_rgb)
     else:
         p0, p1 = np.asarray(segment[0]), np.asarray(segment[1])
         outlined_line(image, p0, p1, colour_rgb, thickness)
@@ -111,6 +106,59 @@ def draw_horizon(
     if fov_note:
         outlined_text(image, fov_note, (8, height - 8))
     return image
+
+
+def off_screen_note(up_c: np.ndarray, K: np.ndarray, height: int, width: int) -> str:
+    """"horizon off-screen, N px above" (below, left, right: where its nearest point to the image centre
+    lies, N its distance from the centre), or "horizon at infinity" for a camera looking straight up or down."""
+    a, b, c = horizon_line(up_c, K)
+    norm = np.hypot(a, b)
+    if norm <= _AT_INFINITY * abs(c):
+        return "horizon off-screen (at infinity: camera looking straight up or down)"
+    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    dist = (a * centre[0] + b * centre[1] + c) / norm  # > 0: the centre is on the sky side
+    foot = centre - dist * np.array([a, b]) / norm
+    d = foot - centre
+    where = ("below" if d[1] > 0 else "above") if abs(d[1]) >= abs(d[0]) else ("right" if d[0] > 0 else "left")
+    return f"horizon off-screen, {abs(dist):.0f} px {where} the centre"
+
+
+def _draw_band(image: np.ndarray, line: np.ndarray, std_px: float, colour_rgb, thickness: int) -> None:
+    """Shade the pixels within `std_px` of `line` (a x + b y + c = 0, [a, b] unit) and draw the band's edges, in place."""
+    height, width = image.shape[:2]
+    ys, xs = np.mgrid[0:height, 0:width]
+    inside = np.abs(line[0] * xs + line[1] * ys + line[2]) <= std_px
+    if inside.any():
+        tint = np.asarray(colour_rgb, np.float32)
+        image[inside] = (0.75 * image[inside] + 0.25 * tint).astype(np.uint8)
+    for shift in (-std_px, std_px):
+        edge = np.array([line[0], line[1], line[2] + shift])
+        seg = _clip_line(edge, height, width)
+        if seg is not None:
+            cv2.line(image, fixed_point(seg[0]), fixed_point(seg[1]), colour_rgb, thickness, cv2.LINE_AA, SHIFT_BITS)
+
+
+def _clip_line(line: np.ndarray, height: int, width: int) -> Segment | None:
+    """A line a x + b y + c = 0 ([a, b] unit) clipped to the image `[0, width-1] x [0, height-1]` by
+    Liang-Barsky, ordered so that its positive side lies on the left of p0 -> p1; None when it misses."""
+    a, b, c = line
+    p_foot = -c * np.array([a, b])
+    d = np.array([-b, a])
+    t_lo, t_hi = -np.inf, np.inf
+    for p, q in ((-d[0], p_foot[0]), (d[0], width - 1 - p_foot[0]), (-d[1], p_foot[1]), (d[1], height - 1 - p_foot[1])):
+        if p == 0.0:
+            if q < 0.0:
+                return None
+            continue
+        t = q / p
+        if p < 0.0:
+            t_lo = max(t_lo, t)
+        else:
+            t_hi = min(t_hi, t)
+    if not t_hi > t_lo:
+        return None
+    p0, p1 = p_foot + t_lo * d, p_foot + t_hi * d
+    return (float(p0[0]), float(p0[1])), (float(p1[0]), float(p1[1]))
 
 
 def draw_manhattan_axes(

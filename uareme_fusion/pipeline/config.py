@@ -64,8 +64,8 @@ class RunConfig(BaseModel):
             except ConfigError as exc:  # "imu_rotation 'x': why" -> "why" (the key and value are named by pydantic)
                 raise ValueError(str(exc).split(": ", 1)[-1]) from None
         return value
-    cues: str = "normals,lines"
-    """Visual cues of the joint solver: normals, lines, or both (comma-separated); see pipeline/cues.py."""
+    cues: str = "normals,lines,sky"
+    """Visual cues of the joint solver: normals, lines, sky (comma-separated); see pipeline/cues.py."""
 
     @field_validator("cues")
     @classmethod

@@ -24,14 +24,16 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
 from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
                             unknown_centre_floor)
 from ..solver.joint import JointSolver
+from ..solver.sky_horizon import SkyDetector
 from ..solver.self_calibration import FrameEvidence, SelfCalibrationConfig, pool_intrinsics
 from ..solver import solve_manhattan
 from ..types import Frame, NormalMap, VisualRotation
 
 log = logging.getLogger(__name__)
 
-VALID_CUES = ("normals", "lines")
-DEFAULT_CUES = "normals,lines"
+VALID_CUES = ("normals", "lines", "sky")
+DEFAULT_CUES = "normals,lines,sky"
+"""sky: the sky/ground boundary as a horizon (`solver/sky_horizon.py`), for open scenes."""
 
 
 def parse_cues(spec: str | tuple | list) -> tuple[str, ...]:
@@ -61,8 +63,12 @@ class CueSolver:
     """
 
     def __init__(self, lines: bool = True, assumed_fov_deg: float = DEFAULT_FOV_DEG,
-                 detector: SegmentDetector | None = None):
+                 detector: SegmentDetector | None = None, sky: bool = False):
         self.detector = (detector or SegmentDetector()) if lines else None
+        self.sky = SkyDetector() if sky else None
+        """The sky boundary cue (`solver/sky_horizon.py`), None without it."""
+        self._sky_now = None
+        """The current frame's sky boundary (None: none, or not looked for)."""
         self.solver = JointSolver()
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.focal: FocalEstimate | None = None
@@ -81,6 +87,7 @@ class CueSolver:
         self._frames += 1
         other_size = self._other_size(frame)
         segments = self.detector.detect(frame.rgb) if self.detector is not None and frame.rgb is not None else None
+        self._sky_now = self.sky.detect(frame.rgb) if self.sky is not None and frame.rgb is not None else None
         try:
             if other_size:
                 return self._solve_alone(frame, normal_map, segments, R_init)
@@ -112,7 +119,7 @@ class CueSolver:
     def _solve_at(self, focal: FocalEstimate, normal_map, segments: LineSegments | None, R_init,
                   t_s: float) -> VisualRotation:
         """The joint solve with `focal`'s K, with the floor of a principal point not given."""
-        visual = solve_given_K(self.solver, normal_map, segments, focal.K, R_init, t_s=t_s)
+        visual = solve_given_K(self.solver, normal_map, segments, focal.K, R_init, t_s=t_s, sky=self._sky_now)
         return unknown_centre_floor(visual, focal, self.focal_config, self.solver)
 
     def _index(self, frame: Frame) -> int:
@@ -123,10 +130,11 @@ class CueSolver:
         if frame.K is not None:
             self.focal = FocalEstimate(np.asarray(frame.K, float), "given", width=frame.rgb.shape[1]
                                        if frame.rgb is not None else 0)
-            return solve_given_K(self.solver, normal_map, segments, frame.K, R_init, t_s=frame.t_s)
+            return solve_given_K(self.solver, normal_map, segments, frame.K, R_init, t_s=frame.t_s, sky=self._sky_now)
         if segments is not None and len(segments) and self._attempts < FOCAL_ATTEMPTS:
             self._attempts += 1
-            visual, focal = solve_with_focal(self.solver, normal_map, segments, R_init, self.focal_config, t_s=frame.t_s)
+            visual, focal = solve_with_focal(self.solver, normal_map, segments, R_init, self.focal_config, t_s=frame.t_s,
+                                             sky=self._sky_now)
             self._evidence.append(FrameEvidence(segments, visual.R_cm))
             if focal.source == "estimated":
                 self._focal_px.append(focal.f_px)

@@ -32,11 +32,14 @@ from ..overlay.horizon import horizon_line
 from ..rotations import quat_xyzw
 from ..solver.atlanta import AtlantaHorizon, estimate_horizon
 from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal, unknown_centre_floor
+from ..solver.horizon_estimate import (HorizonKnownConfig, HorizonUncertainty, aligned_rotation, horizon_known,
+                                      horizon_uncertainty, up_covariance)
 from ..solver.joint import JointSolver
+from ..solver.sky_horizon import SkyDetector, SkyHorizon
 from ..solver.manhattan import up_candidate
 from ..solver.self_calibration import FrameEvidence, SelfCalibrationConfig, pool_intrinsics, solve_with_pooled_K
 from ..types import Frame, NormalMap, VisualRotation
-from .cues import DEFAULT_CUES, parse_cues
+from .cues import DEFAULT_CUES, VALID_CUES, parse_cues
 from .stages import CappedNormals, make_normal_estimator
 
 IMAGE_DETECT_WIDTH_PX = 640
@@ -56,6 +59,12 @@ class ImageAnalysis:
     timing_ms: dict
     atlanta: AtlantaHorizon | None = None
     """The segments' Atlanta-world horizon when they showed one (`up_c` then comes from it)."""
+    sky: SkyHorizon | None = None
+    """The sky boundary that took part as the third cue (None: no sky found, or not looked for)."""
+    uncertainty: HorizonUncertainty | None = None
+    """The horizon's standard deviations (`solver/horizon_estimate.py`)."""
+    known: bool = True
+    """Whether the scene fixes the horizon (`horizon_known`); False: no horizon is given."""
 
     @property
     def horizon(self) -> np.ndarray:
@@ -64,7 +73,7 @@ class ImageAnalysis:
 
     def as_dict(self) -> dict:
         v = self.visual
-        cues = {name: v.cues.get(name, {"present": False}) for name in ("normals", "lines")}
+        cues = {name: v.cues.get(name, {"present": False}) for name in VALID_CUES}
         if not v.cues:  # the normals-only solver
             cues["normals"] = {"share": 1.0, "cost": v.cost, "valid_pixels": v.n_valid}
         for entry in cues.values():
@@ -73,7 +82,8 @@ class ImageAnalysis:
                 "cov_rad2": v.cov.tolist(), "std_deg": np.degrees(np.sqrt(np.diag(v.cov))).tolist(),
                 "up_c": self.up_c.tolist(), "analysed_size_px": [self.rgb.shape[1], self.rgb.shape[0]],
                 "quality": v.quality, "cost": v.cost, "valid_pixels": v.n_valid,
-                **self.focal.as_dict(), "horizon": self.horizon.tolist(), **self._horizon_source(), "cues": cues,
+                **self.focal.as_dict(), "horizon_known": self.known,
+                "horizon": self.horizon.tolist() if self.known else None, **self._horizon_source(), "cues": cues,
                 "timing_ms": self.timing_ms,
                 "conventions": "camera OpenCV (x right, y down, z forward); R_cm maps Manhattan to camera "
                                "coordinates; cov of the right perturbation; up_c = up from the "
@@ -82,14 +92,23 @@ class ImageAnalysis:
                                "positive on the sky side"}
 
     def _horizon_source(self) -> dict:
-        if self.atlanta is None:
-            return {"horizon_source": "manhattan", "horizon_std_px": None}
-        return {"horizon_source": "atlanta", "horizon_std_px": self.atlanta.t_std_px}
+        u = self.uncertainty
+        source = "atlanta" if self.atlanta is not None else "sky" if self.sky is not None else "manhattan"
+        std = self.atlanta.t_std_px if self.atlanta is not None else u.offset_std_px if u is not None else None
+        return {"horizon_source": source, "horizon_std_px": _finite_or_none(std),
+                "horizon_angle_std_deg": _finite_or_none(u.angle_std_deg) if u is not None else None,
+                "horizon_in_image": u.in_image if u is not None else None,
+                "horizon_centre_offset_px": _finite_or_none(u.centre_offset_px) if u is not None else None,
+                "sky": self.sky.as_dict() if self.sky is not None else None}
 
 
 ANALYSIS_MAX_PIXELS = 4_000_000
 """Larger images are decoded at 1/2, 1/4 or 1/8 size for `analyse_image` (normals are estimated at
 far lower resolution; a 48-megapixel photo at full size needs 4 GB through the pipeline)."""
+
+
+def _finite_or_none(x) -> float | None:
+    return float(x) if x is not None and np.isfinite(x) else None
 
 
 def image_paths(inputs: list[str | Path]) -> list[Path]:
@@ -118,6 +137,7 @@ class ImageAnalyser:
         self.estimator = (CappedNormals(make_normal_estimator(normals, SourceInfo(name="image")), kappa_cap)
                           if "normals" in self.cues else None)
         self.detector = (detector or SegmentDetector(IMAGE_DETECT_WIDTH_PX)) if "lines" in self.cues else None
+        self.sky = SkyDetector() if "sky" in self.cues else None
         self.camera = camera
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.solver = JointSolver()
@@ -156,7 +176,7 @@ class ImageAnalyser:
                 raise InputError(f"{path}: {seen.rgb.shape[1]}x{seen.rgb.shape[0]} px, but {paths[0]} is "
                                  f"{size[1]}x{size[0]}: one camera's images have one size")
             visual, focal = self._solve_alone(seen)
-            alone.append((_Seen(seen.path, None, None, seen.segments, None, seen.timing_ms), visual, focal))
+            alone.append((_Seen(seen.path, None, None, seen.segments, None, seen.timing_ms, seen.sky), visual, focal))
             evidence.append(FrameEvidence(seen.segments, visual.R_cm))
         estimated = [focal.f_px for _, _, focal in alone if focal.source == "estimated"]
         f_init = float(np.median(estimated)) if estimated else alone[0][2].f_px
@@ -173,7 +193,8 @@ class ImageAnalyser:
             t0 = time.perf_counter()
             if pooled is not None:  # the frames' floor stays: systematic errors escape the pooled K's std
                 focal = pooled.focal_estimate()
-                visual = unknown_centre_floor(solve_with_pooled_K(self.solver, seen.normal_map, seen.segments, pooled),
+                visual = unknown_centre_floor(solve_with_pooled_K(self.solver, seen.normal_map, seen.segments, pooled,
+                                                                  sky=seen.sky),
                                               focal, self.focal_config, self.solver)
             yield self._analysis(seen, visual, focal, t0)
 
@@ -195,7 +216,10 @@ class ImageAnalyser:
         t1 = time.perf_counter()
         segments = self.detector.detect(rgb) if self.detector else None
         t2 = time.perf_counter()
-        return _Seen(path, rgb, normal_map, segments, given_K, {"normals": 1e3 * (t1 - t0), "lines": 1e3 * (t2 - t1)})
+        sky = self.sky.detect(rgb) if self.sky else None
+        t3 = time.perf_counter()
+        return _Seen(path, rgb, normal_map, segments, given_K, {"normals": 1e3 * (t1 - t0), "lines": 1e3 * (t2 - t1),
+                                                                "sky": 1e3 * (t3 - t2)}, sky)
 
     def _normals(self, rgb: np.ndarray) -> NormalMap | None:
         """The image's normal map (None without the normal cue)."""
@@ -208,27 +232,44 @@ class ImageAnalyser:
         try:
             if given_K is not None or segments is None or not len(segments):
                 K = given_K if given_K is not None else assumed_K(h, w, self.focal_config.assumed_fov_deg)
-                visual = solve_given_K(self.solver, normal_map, segments, K)
+                visual = solve_given_K(self.solver, normal_map, segments, K, sky=seen.sky)
                 focal = (FocalEstimate(K, "given", width=w, origin=self.camera.origin) if given_K is not None
                          else FocalEstimate(K, "assumed", width=w))
                 if given_K is None:
                     visual = unknown_centre_floor(visual, focal, self.focal_config, self.solver)
                 return visual, focal
-            return solve_with_focal(self.solver, normal_map, segments, config=self.focal_config)
+            return solve_with_focal(self.solver, normal_map, segments, config=self.focal_config, sky=seen.sky)
         except InputError:
             raise InputError(f"{seen.path}: no confident normals and no line segments in this image "
                              "(blank or dark?)") from None
 
     def _analysis(self, seen: "_Seen", visual: VisualRotation, focal: FocalEstimate, t0: float) -> ImageAnalysis:
-        """Up and the horizon (the segments' Atlanta horizon when they show one) of a solved image;
-        `t0` when its solve began."""
+        """Up and the horizon of a solved image, one answer (`solver/horizon_estimate.py`): with a sky
+        boundary among the cues, the solve's axis nearest the sky's up; else the segments' Atlanta horizon
+        when they show one, else the Manhattan axis nearest image up; `R_cm` turned onto that up. `t0`:
+        when its solve began."""
         segments = seen.segments
-        _, up_c = up_candidate(visual.R_cm)
-        atlanta = estimate_horizon(segments, focal.K, up_c) if segments is not None else None
+        sky = seen.sky if "sky" in visual.cues else None
+        if sky is not None:
+            up_c = up_candidate(visual.R_cm, sky.observation(focal.K).up_c)[1]
+            atlanta = None
+        else:
+            _, up_c = up_candidate(visual.R_cm)
+            atlanta = estimate_horizon(segments, focal.K, up_c) if segments is not None else None
+            if atlanta is not None:
+                up_c = atlanta.up_c(focal.K)
+        visual = dataclasses.replace(visual, R_cm=aligned_rotation(visual.R_cm, up_c))
+        h, w = seen.rgb.shape[:2]
+        uncertainty = horizon_uncertainty(up_c, up_covariance(visual.R_cm, visual.cov, up_c), focal.K, h, w)
         if atlanta is not None:
-            up_c = atlanta.up_c(focal.K)
+            uncertainty = dataclasses.replace(uncertainty, offset_std_px=atlanta.t_std_px)
+        lines = visual.cues.get("lines", {})
+        supported = (sky is not None or atlanta is not None
+                     or lines.get("effective_segments", 0.0) >= HorizonKnownConfig.min_effective_segments)
+        known = horizon_known(uncertainty, supported, h)
         timing = {**seen.timing_ms, "solver": 1e3 * (time.perf_counter() - t0)}
-        return ImageAnalysis(seen.path, seen.rgb, seen.normal_map, segments, visual, up_c, focal, timing, atlanta)
+        return ImageAnalysis(seen.path, seen.rgb, seen.normal_map, segments, visual, up_c, focal, timing, atlanta,
+                             sky, uncertainty, known)
 
 
 @dataclass(frozen=True)
@@ -241,6 +282,7 @@ class _Seen:
     segments: LineSegments | None
     given_K: np.ndarray | None
     timing_ms: dict
+    sky: SkyHorizon | None = None
 
 
 def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float = 75.0,
@@ -252,8 +294,9 @@ def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float =
 def image_overlay(analysis: ImageAnalysis, panes: bool = True) -> np.ndarray:
     """The horizon and axes drawn with the image's own focal length (estimated, given or assumed)."""
     assumed = analysis.focal.source == "assumed"  # drawn with the "assumed FOV" note
+    std = analysis.as_dict()["horizon_std_px"]
     image = draw_overlay(analysis.rgb, analysis.up_c, analysis.visual.R_cm, None if assumed else analysis.focal.K,
-                         analysis.focal.hfov_deg)
+                         analysis.focal.hfov_deg, std_px=std, known=analysis.known)
     if panes and analysis.normal_map is not None:
         return side_by_side(image, analysis.normal_map)
     return image

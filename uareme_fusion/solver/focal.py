@@ -91,24 +91,31 @@ def _moments_if_any(segments: LineSegments | None, K: np.ndarray) -> LineMoments
     return segment_moments(segments, K) if segments is not None and len(segments) else None
 
 
+def _sky_at(sky, K: np.ndarray):
+    """The sky boundary (`sky_horizon.SkyHorizon`, or None) as an up observation under K."""
+    return sky.observation(K) if sky is not None else None
+
+
 def solve_given_K(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments | None,
-                  K: np.ndarray, R_init=None, t_s: float | None = None) -> VisualRotation:
-    """The joint solve with known intrinsics (segments may be None or empty)."""
-    return solver.solve(normal_map, _moments_if_any(segments, K), R_init, t_s=t_s)
+                  K: np.ndarray, R_init=None, t_s: float | None = None, sky=None) -> VisualRotation:
+    """The joint solve with known intrinsics (segments may be None or empty; `sky`: a sky boundary, the
+    third cue, or None)."""
+    return solver.solve(normal_map, _moments_if_any(segments, K), R_init, t_s=t_s, horizon=_sky_at(sky, K))
 
 
 def rotation_given_K(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments | None,
-                     K: np.ndarray, R_init=None) -> np.ndarray:
+                     K: np.ndarray, R_init=None, sky=None) -> np.ndarray:
     """`solve_given_K`'s rotation `R_cm` alone (`JointSolver.rotation`: no covariance, which costs more)."""
-    return solver.rotation(normal_map, _moments_if_any(segments, K), R_init)
+    return solver.rotation(normal_map, _moments_if_any(segments, K), R_init, horizon=_sky_at(sky, K))
 
 
 def solve_with_focal(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments, R_init=None,
-                     config: FocalConfig | None = None, t_s: float | None = None) -> tuple[VisualRotation, FocalEstimate]:
+                     config: FocalConfig | None = None, t_s: float | None = None,
+                     sky=None) -> tuple[VisualRotation, FocalEstimate]:
     """Rotation and focal length together (see the module docstring); `segments` sets the image size.
     The rotation's covariance includes `unknown_centre_floor`."""
     cfg = config or FocalConfig()
-    visual, focal = _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s)
+    visual, focal = _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s, sky)
     return unknown_centre_floor(visual, focal, cfg, solver), focal
 
 
@@ -116,16 +123,16 @@ def unknown_centre_floor(visual: VisualRotation, focal: FocalEstimate, config: F
                          solver: JointSolver) -> VisualRotation:
     """`visual` with (principal_point_std_fraction * width / f)^2 added to each variance (capped), when
     segments took part; the normals use no intrinsics, so a normals-only rotation is returned as it is."""
-    if "lines" not in visual.cues:
+    if "lines" not in visual.cues and "sky" not in visual.cues:
         return visual
     std_rad = config.principal_point_std_fraction * focal.width / focal.f_px
     return replace_cov(visual, solver, visual.cov + std_rad**2 * np.eye(3))
 
 
-def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s) -> tuple[VisualRotation, FocalEstimate]:
+def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s, sky=None) -> tuple[VisualRotation, FocalEstimate]:
     h, w = segments.height, segments.width
     K_assumed = assumed_K(h, w, cfg.assumed_fov_deg)
-    reference = solve_given_K(solver, normal_map, segments, K_assumed, R_init, t_s)
+    reference = solve_given_K(solver, normal_map, segments, K_assumed, R_init, t_s, sky)
     if "lines" not in reference.cues:
         return reference, FocalEstimate(K_assumed, "assumed", width=w)
     lo, hi = (focal_from_hfov(w, a) for a in cfg.hfov_range_deg[::-1])
@@ -133,7 +140,7 @@ def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s) -> tuple[V
     profile, rotations = [], []
     for lf in log_f:  # the first f searched globally, each next one from the previous f's rotation
         K = centred_K(math.exp(lf), h, w)
-        rotations.append(rotation_given_K(solver, normal_map, segments, K, rotations[-1] if rotations else None))
+        rotations.append(rotation_given_K(solver, normal_map, segments, K, rotations[-1] if rotations else None, sky))
         profile.append(pixel_consistency(segments, K, rotations[-1], cfg.endpoint_noise_px))
     i = best_interior_peak(np.array(profile))
     if i is None:
@@ -150,8 +157,8 @@ def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s) -> tuple[V
         return reference, FocalEstimate(K_assumed, "assumed", width=w)
     f = math.exp(lf_best)
     K = centred_K(f, h, w)
-    visual = solve_given_K(solver, normal_map, segments, K, rotations[i], t_s)
-    slope = _rotation_slope(solver, normal_map, segments, f, visual.R_cm)
+    visual = solve_given_K(solver, normal_map, segments, K, rotations[i], t_s, sky)
+    slope = _rotation_slope(solver, normal_map, segments, f, visual.R_cm, sky=sky)
     visual = replace_cov(visual, solver, visual.cov + std_log_f**2 * np.outer(slope, slope))
     return visual, FocalEstimate(K, "estimated", std_px=f * std_log_f, width=w)
 
@@ -183,16 +190,17 @@ def pixel_consistency(segments: LineSegments, K: np.ndarray, R_cm: np.ndarray, n
 
 
 def _rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, f_px: float, R_cm,
-                    h: float = 0.02) -> np.ndarray:
+                    h: float = 0.02, sky=None) -> np.ndarray:
     """d delta / d log f: how the solved rotation moves (right perturbation, rad) as f changes."""
     return rotation_slope(solver, normal_map, segments, lambda s: centred_K(f_px * math.exp(s), segments.height,
-                                                                             segments.width), R_cm, h)
+                                                                             segments.width), R_cm, h, sky)
 
 
-def rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, K_at, R_cm, h: float) -> np.ndarray:
+def rotation_slope(solver: JointSolver, normal_map, segments: LineSegments, K_at, R_cm, h: float,
+                   sky=None) -> np.ndarray:
     """d delta / d s (3,) by central differences: how the solved rotation moves (right perturbation, rad)
     as the intrinsics follow `K_at(s)` from `K_at(0)` (the K that gave `R_cm`), steps of +-h."""
-    ends = [rotation_given_K(solver, normal_map, segments, K_at(s * h), R_cm) for s in (1, -1)]
+    ends = [rotation_given_K(solver, normal_map, segments, K_at(s * h), R_cm, sky) for s in (1, -1)]
     return log_so3(R_cm.T @ ends[0]) / (2 * h) - log_so3(R_cm.T @ ends[1]) / (2 * h)
 
 

@@ -222,11 +222,12 @@ class JointSolver:
         return lines is not None and lines.n_effective >= self.line_config.min_effective_segments
 
     def solve(self, normal_map: NormalMap | None, lines: LineMoments | None, R_init=None,
-              t_s: float | None = None) -> VisualRotation:
-        """`R_cm` and its covariance from the cues present. Raises `InputError` when neither is usable."""
+              t_s: float | None = None, horizon=None) -> VisualRotation:
+        """`R_cm` and its covariance from the cues present (`horizon`: a `sky_horizon.HorizonObservation`,
+        the third cue). Raises `InputError` when none is usable."""
         t_s = (normal_map.t_s if normal_map is not None else float("nan")) if t_s is None else t_s
         t0 = time.perf_counter()
-        cues = self._cues(normal_map, lines)
+        cues = self._cues(normal_map, lines, horizon)
         if cues is None:
             return self.normal_solver.solve(normal_map, R_init)
         t1 = time.perf_counter()
@@ -238,25 +239,34 @@ class JointSolver:
         return self._result(cues, R_cm, cov, iterations, converged, t_s, {"moments": 1e3 * (t1 - t0),
                                                                          "optimise": 1e3 * (t2 - t1)})
 
-    def rotation(self, normal_map: NormalMap | None, lines: LineMoments | None, R_init=None) -> np.ndarray:
+    def rotation(self, normal_map: NormalMap | None, lines: LineMoments | None, R_init=None,
+                 horizon=None) -> np.ndarray:
         """`solve`'s `R_cm` alone (the same rotation), without the covariance, which costs two more
         refinements (the cues' disagreement): for searches that only compare or difference rotations."""
-        cues = self._cues(normal_map, lines)
+        cues = self._cues(normal_map, lines, horizon)
         if cues is None:
             return self.normal_solver.solve(normal_map, R_init).R_cm
         return self._solve_cues(cues, R_init)[0]
 
     # --- cues -------------------------------------------------------------------------------------
-    def _cues(self, normal_map: NormalMap | None, lines: LineMoments | None) -> list[_Cue] | None:
-        """The cues of a solve with segments; None without usable segments (the normals-only solver's
-        case); `InputError` when neither cue is usable."""
+    def _cues(self, normal_map: NormalMap | None, lines: LineMoments | None, horizon=None) -> list[_Cue] | None:
+        """The cues of a solve with segments or a sky horizon (`sky_horizon.HorizonCue`, last); None with
+        neither (the normals-only solver's case); `InputError` when no cue is usable."""
+        sky = []
+        if horizon is not None:
+            from .sky_horizon import HorizonCue
+
+            sky = [HorizonCue(horizon)]
         if not self.line_cue_present(lines):
-            if normal_map is None:
+            if normal_map is None and not sky:
                 raise InputError("No visual cue in this frame: no normal map and too few line segments")
-            return None
+            if not sky:
+                return None
+            normal_cue = self._normal_cue(normal_map) if normal_map is not None else None
+            return ([normal_cue] if normal_cue is not None else []) + sky
         normal_cue = self._normal_cue(normal_map) if normal_map is not None else None
         line_cue = _LineCue(lines, self.line_config, beside_normals=normal_cue is not None)
-        return [line_cue] if normal_cue is None else [normal_cue, line_cue]
+        return ([line_cue] if normal_cue is None else [normal_cue, line_cue]) + sky
 
     def _normal_cue(self, normal_map: NormalMap) -> _Cue | None:
         if self._moments_of is None or self._moments_of[0] is not normal_map:

@@ -180,12 +180,12 @@ def _fit(problem: "_Problem", f_init_px: float, cfg: SelfCalibrationConfig):
 
 def solve_with_pooled_K(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments | None,
                         pooled: PooledIntrinsics, R_init=None, t_s: float | None = None,
-                        step_px: float = 2.0) -> VisualRotation:
+                        step_px: float = 2.0, sky=None) -> VisualRotation:
     """One frame's joint solve with the pooled K, its covariance widened by K's: cov += S C S^T, C the
     covariance of (f, cx, cy) and S = d delta / d (f, cx, cy) by central differences of `step_px` (the
     normals alone do not depend on K: a frame without segments is returned as solved)."""
-    visual = solve_given_K(solver, normal_map, segments, pooled.K, R_init, t_s)
-    if "lines" not in visual.cues:
+    visual = solve_given_K(solver, normal_map, segments, pooled.K, R_init, t_s, sky)
+    if "lines" not in visual.cues and "sky" not in visual.cues:
         return visual
     slopes = []
     for k in range(3):
@@ -196,7 +196,7 @@ def solve_with_pooled_K(solver: JointSolver, normal_map: NormalMap | None, segme
             f, cx, cy = np.array([pooled.f_px, *pooled.K[:2, 2]]) + s * shift
             return pinhole(f, f, cx, cy)
 
-        slopes.append(rotation_slope(solver, normal_map, segments, K_at, visual.R_cm, step_px))
+        slopes.append(rotation_slope(solver, normal_map, segments, K_at, visual.R_cm, step_px, sky))
     S = np.array(slopes).T
     return replace_cov(visual, solver, visual.cov + S @ pooled.cov_px2 @ S.T)
 

@@ -1,0 +1,113 @@
+"""One answer per frame: up, the rotation, the horizon line and its uncertainty from the same estimate.
+
+A frame's up vector comes from the joint solve (the Manhattan axis nearest image up, or, with a sky
+boundary among the cues, the axis nearest the sky's up) or from the segments' Atlanta horizon. The
+rotation reported beside it is the solve's `R_cm` turned by the smallest rotation that carries its up
+axis onto that up (`aligned_rotation`), so that the horizon `l ~ K^-T up_c`, the axes drawn from
+`R_cm` and `up_c` never disagree. The horizon's standard deviations (`HorizonUncertainty`) come from
+the covariance of up: its offset at the image centre along the line's normal (px) and its angle (deg),
+by central differences through `overlay.horizon.horizon_line`. The horizon is known when a cue that
+can fix it took part (segments of man-made structure, the Atlanta horizon, a sky boundary) and both
+standard deviations are within `HorizonKnownConfig`'s limits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..overlay.horizon import horizon_line
+
+
+@dataclass(frozen=True)
+class HorizonKnownConfig:
+    max_std_fraction: float = 0.1
+    """The horizon's std at the image centre (along its normal) must be below this fraction of the height."""
+    max_angle_std_deg: float = 5.0
+    """... and its angle's std below this."""
+    min_effective_segments: float = 8.0
+    """Man-made structure: at least this many effective segments in the line cue."""
+
+
+@dataclass(frozen=True)
+class HorizonUncertainty:
+    offset_std_px: float
+    """Std of the horizon's signed distance from the image centre, along its normal (pixels)."""
+    angle_std_deg: float
+    """Std of its angle in the image (the camera's roll), degrees."""
+    centre_offset_px: float
+    """Signed distance of the image centre from the horizon (positive: the centre is below it, on the ground side)."""
+    in_image: bool
+    """Whether the line crosses the image."""
+
+
+def up_axis(R_cm: np.ndarray, up_c: np.ndarray) -> tuple[int, float]:
+    """(k, sign): the column of `R_cm` nearest the direction `up_c`, and the sign that turns it towards it."""
+    dots = np.asarray(R_cm, float).T @ np.asarray(up_c, float)
+    k = int(np.argmax(np.abs(dots)))
+    return k, float(np.sign(dots[k]) or 1.0)
+
+
+def aligned_rotation(R_cm: np.ndarray, up_c: np.ndarray) -> np.ndarray:
+    """`R_cm` turned by the smallest rotation (in the camera frame) that carries its axis nearest `up_c`
+    onto `up_c` (unit): the other axes follow, so one rotation holds the frame's up."""
+    k, sign = up_axis(R_cm, up_c)
+    r = sign * np.asarray(R_cm, float)[:, k]
+    u = np.asarray(up_c, float) / np.linalg.norm(up_c)
+    axis = np.cross(r, u)
+    s, c = np.linalg.norm(axis), float(r @ u)
+    if s < 1e-12:
+        return np.asarray(R_cm, float)
+    turn = Rotation.from_rotvec(axis / s * np.arctan2(s, c)).as_matrix()
+    return turn @ np.asarray(R_cm, float)
+
+
+def up_covariance(R_cm: np.ndarray, cov_rad2: np.ndarray, up_c: np.ndarray) -> np.ndarray:
+    """Covariance (3x3, camera frame) of up_c = sign R_cm e_k under the right perturbation delta of R_cm
+    with covariance `cov_rad2`: d up = -R_cm [s e_k]x delta."""
+    k, sign = up_axis(R_cm, up_c)
+    e = np.zeros(3)
+    e[k] = sign
+    skew = np.array([[0, -e[2], e[1]], [e[2], 0, -e[0]], [-e[1], e[0], 0]])
+    J = -np.asarray(R_cm, float) @ skew
+    return J @ np.asarray(cov_rad2, float) @ J.T
+
+
+def horizon_uncertainty(up_c: np.ndarray, cov_up: np.ndarray, K: np.ndarray, height: int,
+                        width: int) -> HorizonUncertainty:
+    """The horizon's standard deviations (`HorizonUncertainty`) from up's covariance `cov_up` (camera frame)."""
+    up_c = np.asarray(up_c, float) / np.linalg.norm(up_c)
+    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0, 1.0])
+
+    def offset_angle(u):
+        line = horizon_line(u / np.linalg.norm(u), K)
+        return np.array([float(line @ centre), np.arctan2(line[1], line[0])])
+
+    a = np.array([1.0, 0.0, 0.0]) if abs(up_c[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(up_c, a)
+    e1 /= np.linalg.norm(e1)
+    basis = np.stack([e1, np.cross(up_c, e1)], axis=1)
+    h = 1e-4
+    J = np.zeros((2, 2))
+    for i in range(2):
+        d = offset_angle(up_c + h * basis[:, i]) - offset_angle(up_c - h * basis[:, i])
+        d[1] = (d[1] + np.pi) % (2 * np.pi) - np.pi
+        J[:, i] = d / (2 * h)
+    C = J @ (basis.T @ cov_up @ basis) @ J.T
+    line = horizon_line(up_c, K)
+    offset = float(line @ centre)
+    corners = np.array([[0, 0, 1], [width - 1, 0, 1], [0, height - 1, 1], [width - 1, height - 1, 1]], float) @ line
+    finite = np.all(np.isfinite(C)) and np.hypot(line[0], line[1]) > 0.5
+    return HorizonUncertainty(offset_std_px=float(np.sqrt(max(C[0, 0], 0.0))) if finite else float("inf"),
+                              angle_std_deg=float(np.degrees(np.sqrt(max(C[1, 1], 0.0)))) if finite else float("inf"),
+                              centre_offset_px=-offset, in_image=bool(corners.min() < 0 < corners.max()))
+
+
+def horizon_known(uncertainty: HorizonUncertainty, supported: bool, height: int,
+                  config: HorizonKnownConfig | None = None) -> bool:
+    """Whether a cue that can fix the horizon took part and its standard deviations are small enough."""
+    cfg = config or HorizonKnownConfig()
+    return bool(supported and uncertainty.offset_std_px <= cfg.max_std_fraction * height
+                and uncertainty.angle_std_deg <= cfg.max_angle_std_deg)
