@@ -32,8 +32,8 @@ from ..overlay.horizon import horizon_line
 from ..rotations import quat_xyzw
 from ..solver.atlanta import AtlantaHorizon, estimate_horizon
 from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal, unknown_centre_floor
-from ..solver.horizon_estimate import (HorizonKnownConfig, HorizonUncertainty, aligned_rotation, horizon_known,
-                                      horizon_uncertainty, up_covariance)
+from ..solver.horizon_estimate import (HorizonKnownConfig, HorizonUncertainty, SkyVetoConfig, aligned_rotation,
+                                      horizon_known, horizon_uncertainty, sky_vetoed, up_covariance)
 from ..solver.joint import JointSolver
 from ..solver.sky_horizon import SkyDetector, SkyHorizon
 from ..solver.manhattan import up_candidate
@@ -138,6 +138,7 @@ class ImageAnalyser:
                           if "normals" in self.cues else None)
         self.detector = (detector or SegmentDetector(IMAGE_DETECT_WIDTH_PX)) if "lines" in self.cues else None
         self.sky = SkyDetector() if "sky" in self.cues else None
+        self.sky_veto = SkyVetoConfig()
         self.camera = camera
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.solver = JointSolver()
@@ -193,9 +194,9 @@ class ImageAnalyser:
             t0 = time.perf_counter()
             if pooled is not None:  # the frames' floor stays: systematic errors escape the pooled K's std
                 focal = pooled.focal_estimate()
-                visual = unknown_centre_floor(solve_with_pooled_K(self.solver, seen.normal_map, seen.segments, pooled,
-                                                                  sky=seen.sky),
+                visual = unknown_centre_floor(solve_with_pooled_K(self.solver, seen.normal_map, seen.segments, pooled),
                                               focal, self.focal_config, self.solver)
+                visual = self._with_sky(seen, visual, focal)
             yield self._analysis(seen, visual, focal, t0)
 
     def _read(self, path: Path) -> tuple[np.ndarray, float]:
@@ -232,16 +233,37 @@ class ImageAnalyser:
         try:
             if given_K is not None or segments is None or not len(segments):
                 K = given_K if given_K is not None else assumed_K(h, w, self.focal_config.assumed_fov_deg)
-                visual = solve_given_K(self.solver, normal_map, segments, K, sky=seen.sky)
+                visual = solve_given_K(self.solver, normal_map, segments, K)
                 focal = (FocalEstimate(K, "given", width=w, origin=self.camera.origin) if given_K is not None
                          else FocalEstimate(K, "assumed", width=w))
                 if given_K is None:
                     visual = unknown_centre_floor(visual, focal, self.focal_config, self.solver)
-                return visual, focal
-            return solve_with_focal(self.solver, normal_map, segments, config=self.focal_config, sky=seen.sky)
+            else:
+                visual, focal = solve_with_focal(self.solver, normal_map, segments, config=self.focal_config)
         except InputError:
-            raise InputError(f"{seen.path}: no confident normals and no line segments in this image "
-                             "(blank or dark?)") from None
+            if seen.sky is None:
+                raise InputError(f"{seen.path}: no confident normals and no line segments in this image "
+                                 "(blank or dark?)") from None
+            focal = (FocalEstimate(given_K, "given", width=w, origin=self.camera.origin) if given_K is not None
+                     else FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w))
+            visual = None
+        return self._with_sky(seen, visual, focal), focal
+
+    def _with_sky(self, seen: "_Seen", visual: VisualRotation | None, focal: FocalEstimate) -> VisualRotation:
+        """The structure's solve `visual` (None: no normals or segments) solved again with the sky boundary as
+        the third cue, from the structure's rotation turned onto the sky's up, under the same K; unchanged
+        without a sky, or when man-made verticals put the horizon elsewhere (`sky_vetoed`)."""
+        if seen.sky is None:
+            return visual
+        atlanta = None
+        if visual is not None and seen.segments is not None:
+            atlanta = estimate_horizon(seen.segments, focal.K, up_candidate(visual.R_cm)[1])
+        if atlanta is not None and sky_vetoed(seen.sky, atlanta, self.sky_veto):
+            return visual
+        R0 = aligned_rotation(visual.R_cm, seen.sky.observation(focal.K).up_c) if visual is not None else None
+        with_sky = solve_given_K(self.solver, seen.normal_map, seen.segments, focal.K, R0, sky=seen.sky)
+        return with_sky if focal.source == "given" else unknown_centre_floor(with_sky, focal, self.focal_config,
+                                                                             self.solver)
 
     def _analysis(self, seen: "_Seen", visual: VisualRotation, focal: FocalEstimate, t0: float) -> ImageAnalysis:
         """Up and the horizon of a solved image, one answer (`solver/horizon_estimate.py`): with a sky

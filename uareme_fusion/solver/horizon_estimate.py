@@ -32,6 +32,38 @@ class HorizonKnownConfig:
 
 
 @dataclass(frozen=True)
+class SkyVetoConfig:
+    """When man-made structure overrules a sky boundary (a city skyline is no horizon). ECD (the 5 photos
+    where the sky checks passed, all with their skyline 0.45-2.5 H off the true horizon): the Atlanta
+    horizon had 23-128 effective vertical segments and a std of 0.018-0.037 H; horizon_uav (every 8th
+    photo): where its Atlanta horizon disagreed with the sky beyond the stds it had at most 8 effective
+    verticals (runways and field edges), or a std of 0.19 H and more."""
+
+    min_vertical_effective: float = 15.0
+    """Effective vertical segments behind the zenith (buildings) from which the structure may veto."""
+    max_std_fraction: float = 0.1
+    """... when its horizon's std is below this fraction of the height."""
+    sigmas: float = 3.0
+    """... and the two horizons differ (ECD score, fraction of the height) by more than this many of
+    their combined std, and by at least `min_difference_fraction`."""
+    min_difference_fraction: float = 0.05
+
+
+def sky_vetoed(sky, atlanta, config: SkyVetoConfig | None = None) -> bool:
+    """Whether the segments' Atlanta horizon (`solver/atlanta.py`), seen with vertical structure, overrules
+    the sky boundary `sky` (`solver/sky_horizon.py`): see `SkyVetoConfig`."""
+    from ..benchmarks.horizon import horizon_error
+
+    cfg = config or SkyVetoConfig()
+    h = sky.height
+    if atlanta.n_vertical < cfg.min_vertical_effective or atlanta.t_std_px > cfg.max_std_fraction * h:
+        return False
+    difference = horizon_error(sky.line, atlanta.line_px, h, sky.width)
+    combined = np.hypot(atlanta.t_std_px, sky.offset_std_px) / h
+    return bool(difference > max(cfg.sigmas * combined, cfg.min_difference_fraction))
+
+
+@dataclass(frozen=True)
 class HorizonUncertainty:
     offset_std_px: float
     """Std of the horizon's signed distance from the image centre, along its normal (pixels)."""

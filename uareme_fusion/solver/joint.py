@@ -145,6 +145,10 @@ class _Cue:
         on the copy: one start's weights never leak into another's)."""
         return copy.copy(self)
 
+    def labelled(self, R: np.ndarray) -> np.ndarray:
+        """The Manhattan labelling of the solution this cue asks for (the same frame; R itself for most)."""
+        return R
+
 
 class _NormalCue(_Cue):
     name = "normals"
@@ -232,6 +236,7 @@ class JointSolver:
             return self.normal_solver.solve(normal_map, R_init)
         t1 = time.perf_counter()
         R_cm, cues, iterations, converged, others = self._solve_cues(cues, R_init)
+        R_cm = _labelled(cues, R_cm)
         cov = self._covariance(cues, R_cm)
         cov = _disagreement_inflated(cov, self._cue_disagreement(cues, R_cm), self.config)
         cov = _with_other_minima(cov, R_cm, others, self.config)
@@ -246,7 +251,7 @@ class JointSolver:
         cues = self._cues(normal_map, lines, horizon)
         if cues is None:
             return self.normal_solver.solve(normal_map, R_init).R_cm
-        return self._solve_cues(cues, R_init)[0]
+        return _labelled(cues, self._solve_cues(cues, R_init)[0])
 
     # --- cues -------------------------------------------------------------------------------------
     def _cues(self, normal_map: NormalMap | None, lines: LineMoments | None, horizon=None) -> list[_Cue] | None:
@@ -394,6 +399,13 @@ class JointSolver:
             n_invalid=normals.moments.n_invalid if normals else 0,
             quality=float(np.clip(1.0 - cost / main.random_cost, 0.0, 1.0)), converged=converged, t_s=t_s,
             timing_ms=timing_ms, cues=summary)
+
+
+def _labelled(cues: list[_Cue], R_cm: np.ndarray) -> np.ndarray:
+    """`R_cm` relabelled as the cues ask (`_Cue.labelled`: the sky cue makes its up axis m's z)."""
+    for c in cues:
+        R_cm = c.labelled(R_cm)
+    return R_cm
 
 
 def _symmetric_offset(R: np.ndarray, R_ref: np.ndarray) -> np.ndarray:

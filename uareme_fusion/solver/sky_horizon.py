@@ -32,6 +32,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..rotations import log_so3, manhattan_symmetries
 from .joint import _Cue
 
 SKY_WEIGHTS = Path(__file__).with_name("weights") / "sky_mlp.npz"
@@ -63,7 +64,7 @@ class SkyHorizonConfig:
     biased by about a work pixel (texture features reach across it; 6 px at 480 on a synthetic scene)."""
     angle_floor_deg: float = 0.4
     """Added in quadrature to the angle's std: the roll error median on horizon_uav's even frames."""
-    min_side_fraction: float = 0.04
+    min_side_fraction: float = 0.01
     """Each side of the line must hold at least this fraction of the image."""
     min_separation: float = 1.6
     """Mean of (2 p - 1) on the sky side minus on the ground side (2 is perfect; chance 0). horizon_uav
@@ -73,9 +74,9 @@ class SkyHorizonConfig:
     """The boundary's inliers must span this fraction of the line's length inside the image."""
     max_residual_fraction: float = 0.012
     """Robust scatter of the boundary about its line, fraction of the work image's diagonal."""
-    min_texture_ratio: float = 0.9
+    min_texture_ratio: float = 0.8
     """Mean gradient on the ground side over the sky side: the ground is not the smoother side (horizon_uav:
-    1.006 at least, under clouds)."""
+    1.006 at least in every 3rd photo, 0.87 under clouds)."""
 
 
 @dataclass(frozen=True)
@@ -385,6 +386,15 @@ class HorizonCue(_Cue):
 
     def robust_cost(self, R, coarse: bool = False):
         return np.minimum(self.cost(R), 50.0)
+
+    def labelled(self, R: np.ndarray) -> np.ndarray:
+        """The labelling of R whose z axis is the axis nearest up_c, pointing up (the backends take m's z
+        as up without gravity), nearest R among those."""
+        options = np.asarray(R, float) @ manhattan_symmetries()  # (24, 3, 3)
+        up = options[:, :, 2] @ self.obs.up_c
+        keep = options[up > up.max() - 1e-9]
+        angles = [np.linalg.norm(log_so3(np.asarray(R, float).T @ Q)) for Q in keep]
+        return keep[int(np.argmin(angles))]
 
     def summary(self) -> dict:
         return {"up_c": self.obs.up_c.tolist()}
