@@ -23,7 +23,9 @@ from ..lines.detect import LineSegments, SegmentDetector
 from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
 from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
                             unknown_centre_floor)
+from ..solver.horizon_estimate import sky_and_segments
 from ..solver.joint import JointSolver
+from ..solver.manhattan import up_candidate
 from ..solver.sky_horizon import SkyDetector
 from ..solver.self_calibration import FrameEvidence, SelfCalibrationConfig, pool_intrinsics
 from ..solver import solve_manhattan
@@ -88,6 +90,11 @@ class CueSolver:
         other_size = self._other_size(frame)
         segments = self.detector.detect(frame.rgb) if self.detector is not None and frame.rgb is not None else None
         self._sky_now = self.sky.detect(frame.rgb) if self.sky is not None and frame.rgb is not None else None
+        if self._sky_now is not None:  # the segments join only with man-made verticals (`sky_and_segments`)
+            K = frame.K if frame.K is not None else (self.focal or self._assumed(*frame.rgb.shape[:2])).K
+            guess = (up_candidate(R_init, self._sky_now.observation(K).up_c)[1] if R_init is not None
+                     else self._sky_now.observation(K).up_c)
+            self._sky_now, segments = sky_and_segments(self._sky_now, segments, K, guess)
         try:
             if other_size:
                 return self._solve_alone(frame, normal_map, segments, R_init)
@@ -152,7 +159,8 @@ class CueSolver:
             if own is not None:
                 return own
         if self.focal is None:
-            h, w = (segments.height, segments.width) if segments is not None else normal_map.normals.shape[:2]
+            h, w = (segments.height, segments.width) if segments is not None else (
+                frame.rgb.shape[:2] if frame.rgb is not None else normal_map.normals.shape[:2])
             self.focal = self._assumed(h, w)
         return self._solve_at(self.focal, normal_map, segments, R_init, frame.t_s)
 

@@ -33,7 +33,7 @@ from ..rotations import quat_xyzw
 from ..solver.atlanta import AtlantaHorizon, estimate_horizon
 from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal, unknown_centre_floor
 from ..solver.horizon_estimate import (HorizonKnownConfig, HorizonUncertainty, SkyVetoConfig, aligned_rotation,
-                                      horizon_known, horizon_uncertainty, sky_vetoed, up_covariance)
+                                      horizon_known, horizon_uncertainty, sky_and_segments, up_covariance)
 from ..solver.joint import JointSolver
 from ..solver.sky_horizon import SkyDetector, SkyHorizon
 from ..solver.manhattan import up_candidate
@@ -251,17 +251,18 @@ class ImageAnalyser:
 
     def _with_sky(self, seen: "_Seen", visual: VisualRotation | None, focal: FocalEstimate) -> VisualRotation:
         """The structure's solve `visual` (None: no normals or segments) solved again with the sky boundary as
-        the third cue, from the structure's rotation turned onto the sky's up, under the same K; unchanged
-        without a sky, or when man-made verticals put the horizon elsewhere (`sky_vetoed`)."""
+        the third cue, from the structure's rotation turned onto the sky's up, under the same K, with the
+        segments only when they show man-made verticals (`sky_and_segments`); unchanged without a sky, or
+        when those verticals put the horizon elsewhere (`sky_vetoed`)."""
         if seen.sky is None:
             return visual
-        atlanta = None
-        if visual is not None and seen.segments is not None:
-            atlanta = estimate_horizon(seen.segments, focal.K, up_candidate(visual.R_cm)[1])
-        if atlanta is not None and sky_vetoed(seen.sky, atlanta, self.sky_veto):
+        sky_up = seen.sky.observation(focal.K).up_c
+        guess = up_candidate(visual.R_cm)[1] if visual is not None else sky_up
+        sky, segments = sky_and_segments(seen.sky, seen.segments, focal.K, guess, self.sky_veto)
+        if sky is None:
             return visual
-        R0 = aligned_rotation(visual.R_cm, seen.sky.observation(focal.K).up_c) if visual is not None else None
-        with_sky = solve_given_K(self.solver, seen.normal_map, seen.segments, focal.K, R0, sky=seen.sky)
+        R0 = aligned_rotation(visual.R_cm, sky_up) if visual is not None else None
+        with_sky = solve_given_K(self.solver, seen.normal_map, segments, focal.K, R0, sky=sky)
         return with_sky if focal.source == "given" else unknown_centre_floor(with_sky, focal, self.focal_config,
                                                                              self.solver)
 
@@ -314,10 +315,12 @@ def analyse_image(path: str | Path, normals: str = "learned", kappa_cap: float =
 
 
 def image_overlay(analysis: ImageAnalysis, panes: bool = True) -> np.ndarray:
-    """The horizon and axes drawn with the image's own focal length (estimated, given or assumed)."""
+    """The horizon (a +-1 std band) and axes drawn with the image's own focal length (estimated, given or
+    assumed); neither when the horizon is not known, but a note."""
     assumed = analysis.focal.source == "assumed"  # drawn with the "assumed FOV" note
     std = analysis.as_dict()["horizon_std_px"]
-    image = draw_overlay(analysis.rgb, analysis.up_c, analysis.visual.R_cm, None if assumed else analysis.focal.K,
+    axes = analysis.visual.R_cm if analysis.known else None  # no up glyph for an unknown horizon
+    image = draw_overlay(analysis.rgb, analysis.up_c, axes, None if assumed else analysis.focal.K,
                          analysis.focal.hfov_deg, std_px=std, known=analysis.known)
     if panes and analysis.normal_map is not None:
         return side_by_side(image, analysis.normal_map)
