@@ -65,17 +65,19 @@ def sky_vetoed(sky, atlanta, config: SkyVetoConfig | None = None) -> bool:
 
 def sky_and_segments(sky, segments, K: np.ndarray, up_guess_c: np.ndarray, config: SkyVetoConfig | None = None):
     """(sky, segments) for a solve with the sky boundary `sky`: the segments' Atlanta horizon (from
-    `up_guess_c`) decides. Without man-made verticals (fewer than `min_vertical_effective`) the segments
-    cannot tell up (a runway's or a field's edges: on horizon_uav they pulled the horizon off the sky's,
-    73.7 % pass with them against 96.9 % without), so the sky alone sets it: (sky, None). With them, a
-    disagreeing sky is vetoed: (None, segments); an agreeing one joins them: (sky, segments)."""
+    `up_guess_c`) decides. Without a confident one seen with man-made verticals (`SkyVetoConfig`'s
+    `min_vertical_effective` and `max_std_fraction`) the segments cannot tell up (a runway's or a field's
+    edges: on horizon_uav they pulled the horizon off the sky's, 73.7 % pass with them against 96.9 %
+    without), so the sky alone sets it: (sky, None). With one, a disagreeing sky is vetoed:
+    (None, segments); an agreeing one joins them: (sky, segments)."""
     from .atlanta import estimate_horizon
 
     cfg = config or SkyVetoConfig()
     if sky is None or segments is None or not len(segments):
         return sky, segments
     atlanta = estimate_horizon(segments, K, up_guess_c)
-    if atlanta is None or atlanta.n_vertical < cfg.min_vertical_effective:
+    if (atlanta is None or atlanta.n_vertical < cfg.min_vertical_effective
+            or atlanta.t_std_px > cfg.max_std_fraction * sky.height):
         return sky, None
     return (None, segments) if sky_vetoed(sky, atlanta, cfg) else (sky, segments)
 
