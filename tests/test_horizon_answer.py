@@ -13,8 +13,14 @@ from scipy.spatial.transform import Rotation
 
 from uareme_fusion.overlay.horizon import draw_horizon, horizon_line, off_screen_note
 from uareme_fusion.pinhole import centred_K
-from uareme_fusion.solver.horizon_estimate import (HorizonUncertainty, aligned_rotation, horizon_known,
-                                                   horizon_uncertainty, up_axis, up_covariance)
+from uareme_fusion.solver.horizon_estimate import (
+    HorizonUncertainty,
+    aligned_rotation,
+    horizon_known,
+    horizon_uncertainty,
+    up_axis,
+    up_covariance,
+)
 
 UP_LEVEL_C = np.array([0.0, -1.0, 0.0])
 

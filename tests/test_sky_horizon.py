@@ -11,8 +11,14 @@ import pytest
 from uareme_fusion.overlay.horizon import horizon_line
 from uareme_fusion.pinhole import centred_K
 from uareme_fusion.solver.joint import JointSolver
-from uareme_fusion.solver.sky_horizon import (HorizonCue, HorizonObservation, SkyDetector, detect_sky_horizon,
-                                              tangent_basis, up_from_line)
+from uareme_fusion.solver.sky_horizon import (
+    HorizonCue,
+    HorizonObservation,
+    SkyDetector,
+    detect_sky_horizon,
+    tangent_basis,
+    up_from_line,
+)
 
 
 def open_scene(height=480, width=480, roll_deg=12.0, offset_px=30.0, seed=0) -> tuple[np.ndarray, np.ndarray]:

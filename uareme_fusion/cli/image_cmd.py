@@ -32,7 +32,8 @@ def image_command(
     json_out: bool = typer.Option(False, "--json", help="Print one JSON object per image, one per line."),
     out: Optional[Path] = typer.Option(None, "--out", help="Overlay image (one input) or folder (several)."),
     normals: str = typer.Option("learned", "--normals", help="learned or a model file (.pt)."),
-    cues: str = typer.Option(DEFAULT_CUES, "--cues", help="Visual cues: normals, lines or both (comma-separated)."),
+    cues: str = typer.Option(DEFAULT_CUES, "--cues", help="Visual cues: normals, lines, sky (comma-separated; "
+                             "sky: the sky/ground boundary of open scenes)."),
     fov_deg: float = typer.Option(60.0, "--fov-deg",
                                   help="Horizontal field of view assumed when the scene cannot tell the focal length."),
     intrinsics: Optional[str] = _o["intrinsics"],
@@ -86,7 +87,13 @@ def _print_text(result, doc: dict) -> None:
     typer.echo(f"up in the camera frame: {np.round(result.up_c, 4)}")
     f_std = f" +- {doc['f_std_px']:.1f}" if doc["f_std_px"] is not None else ""
     typer.echo(f"focal length {doc['f_px']:.1f}{f_std} px ({doc['focal_source']}), HFOV {doc['hfov_deg']:.1f} deg")
-    typer.echo(f"horizon a x + b y + c = 0: {np.round(doc['horizon'], 4)}")
+    if not doc["horizon_known"]:
+        typer.echo("horizon unknown: no man-made structure or sky boundary fixes it in this image")
+    else:
+        std = doc["horizon_std_px"]
+        where = "" if doc["horizon_in_image"] else " (off-screen)"
+        typer.echo(f"horizon a x + b y + c = 0: {np.round(doc['horizon'], 4)}{where}, from {doc['horizon_source']}"
+                   + (f", std {std:.1f} px, {doc['horizon_angle_std_deg']:.2f} deg" if std is not None else ""))
     shares = ", ".join(f"{k} {e['share']:.2f}" for k, e in doc["cues"].items() if e.get("present"))
     typer.echo(f"information share: {shares}")
     typer.echo(", ".join(f"{k} {t:.1f} ms" for k, t in doc["timing_ms"].items()))

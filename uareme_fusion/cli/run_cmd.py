@@ -136,7 +136,7 @@ def _options():
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
         offline=typer.Option(None, "--offline", help="A recorded IMU-only file: smooth it forward and backward "
                              "(more accurate than the streaming filter)."),
-        cues=typer.Option(None, "--cues", help="Visual cues: normals, lines or both (comma-separated; default both)."),
+        cues=typer.Option(None, "--cues", help="Visual cues: normals, lines, sky (comma-separated; default all three)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
                                                      "(replay it later with 'run FOLDER')."),
         threads=typer.Option(None, "--threads", min=1, max=256,

@@ -12,7 +12,7 @@ likelihoods of sky, a boundary fitted robustly):
    by iteratively reweighted least squares (Tukey) as v = v0 + s u in the line's own frame; the
    covariance of (v0, s) from the residual scatter over the root of the effective number of
    boundary points (neighbouring points share errors: one point per `correlation_length_px`);
-4. checks that a sky is there at all (`SkyHorizon.check`): enough sky and ground on each side, the
+4. checks that a sky is there at all (`SkyHorizon.failed_checks`): enough sky and ground on each side, the
    two sides well told apart, the ground side textured and the sky side smooth, a long and straight
    boundary. A white wall or ceiling fails them: smooth on both sides, or a boundary that bends.
 
@@ -118,7 +118,7 @@ class SkyHorizon:
                 "separation": self.separation, "sky_fraction": self.sky_fraction, "span_fraction": self.span_fraction,
                 "residual_fraction": self.residual_fraction, "texture_ratio": self.texture_ratio}
 
-    def observation(self, K: np.ndarray) -> "HorizonObservation":
+    def observation(self, K: np.ndarray) -> HorizonObservation:
         """The line as world up in the camera frame under K, with its covariance (`up_from_line`)."""
         return up_from_line(self.line, self.cov_line, K, self.height, self.width)
 
@@ -138,7 +138,7 @@ def work_image(rgb: np.ndarray, work_size_px: int) -> np.ndarray:
     """`rgb` (H, W, 3) uint8 area-resized so that its longer side is `work_size_px`, float32 in [0, 1]."""
     h, w = rgb.shape[:2]
     s = work_size_px / max(h, w)
-    size = (max(int(round(w * s)), 8), max(int(round(h * s)), 8))
+    size = (max(round(w * s), 8), max(round(h * s), 8))
     return cv2.resize(rgb, size, interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
 
 
@@ -187,7 +187,7 @@ def _separating_line(p: np.ndarray, steps: int, coarse_px: int) -> tuple[np.ndar
     searched on the map area-resized to `coarse_px` (the boundary fit then refines it)."""
     h, w = p.shape
     k = coarse_px / max(h, w)
-    cw, ch = max(int(round(w * k)), 4), max(int(round(h * k)), 4)
+    cw, ch = max(round(w * k), 4), max(round(h * k), 4)
     q = cv2.resize(p, (cw, ch), interpolation=cv2.INTER_AREA)
     ys, xs = np.mgrid[0:ch, 0:cw]
     pts = np.stack([xs.ravel() - (cw - 1) / 2.0, ys.ravel() - (ch - 1) / 2.0], axis=1)
