@@ -82,7 +82,7 @@ def _print_text(result, doc: dict) -> None:
     v = result.visual
     typer.echo(f"{result.path}: quality {v.quality:.2f}, {v.n_valid} valid pixels, "
                f"{doc['cues']['lines'].get('segments', 0)} line segments")
-    typer.echo(f"R_cm (Manhattan axes as columns, camera frame):\n{v.R_cm}")
+    typer.echo(f"R_cm (Manhattan axes as columns, camera frame):\n{result.R_cm}")
     typer.echo(f"std (deg) about x, y, z: {np.round(doc['std_deg'], 3)}")
     typer.echo(f"up in the camera frame: {np.round(result.up_c, 4)}")
     f_std = f" +- {doc['f_std_px']:.1f}" if doc["f_std_px"] is not None else ""

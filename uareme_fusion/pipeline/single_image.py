@@ -65,6 +65,16 @@ class ImageAnalysis:
     """The horizon's standard deviations (`solver/horizon_estimate.py`)."""
     known: bool = True
     """Whether the scene fixes the horizon (`horizon_known`); False: no horizon is given."""
+    R_cm_reported: np.ndarray | None = None
+    """`visual.R_cm` turned onto `up_c` (`aligned_rotation`): the rotation of the JSON and the overlay, one
+    answer with the horizon. `visual` keeps the solve's own rotation (what a stream's backend gets); the
+    two differ when the Atlanta horizon sets up (ICSL, K pooled, vs depth: 1.65 deg mean for the solve's,
+    1.93 for the turned one; on ECD the Atlanta horizon is the better one)."""
+
+    @property
+    def R_cm(self) -> np.ndarray:
+        """The reported rotation (Manhattan to camera): `R_cm_reported`, else the solve's."""
+        return self.visual.R_cm if self.R_cm_reported is None else self.R_cm_reported
 
     @property
     def horizon(self) -> np.ndarray:
@@ -78,7 +88,7 @@ class ImageAnalysis:
             cues["normals"] = {"share": 1.0, "cost": v.cost, "valid_pixels": v.n_valid}
         for entry in cues.values():
             entry.setdefault("present", True)
-        return {"image": str(self.path), "R_cm": v.R_cm.tolist(), "q_cm_xyzw": quat_xyzw(v.R_cm).tolist(),
+        return {"image": str(self.path), "R_cm": self.R_cm.tolist(), "q_cm_xyzw": quat_xyzw(self.R_cm).tolist(),
                 "cov_rad2": v.cov.tolist(), "std_deg": np.degrees(np.sqrt(np.diag(v.cov))).tolist(),
                 "up_c": self.up_c.tolist(), "analysed_size_px": [self.rgb.shape[1], self.rgb.shape[0]],
                 "quality": v.quality, "cost": v.cost, "valid_pixels": v.n_valid,
@@ -281,9 +291,9 @@ class ImageAnalyser:
             atlanta = estimate_horizon(segments, focal.K, up_c) if segments is not None else None
             if atlanta is not None:
                 up_c = atlanta.up_c(focal.K)
-        visual = dataclasses.replace(visual, R_cm=aligned_rotation(visual.R_cm, up_c))
+        R_cm = aligned_rotation(visual.R_cm, up_c)
         h, w = seen.rgb.shape[:2]
-        uncertainty = horizon_uncertainty(up_c, up_covariance(visual.R_cm, visual.cov, up_c), focal.K, h, w)
+        uncertainty = horizon_uncertainty(up_c, up_covariance(R_cm, visual.cov, up_c), focal.K, h, w)
         if atlanta is not None:
             uncertainty = dataclasses.replace(uncertainty, offset_std_px=atlanta.t_std_px)
         lines = visual.cues.get("lines", {})
@@ -292,7 +302,7 @@ class ImageAnalyser:
         known = horizon_known(uncertainty, supported, h)
         timing = {**seen.timing_ms, "solver": 1e3 * (time.perf_counter() - t0)}
         return ImageAnalysis(seen.path, seen.rgb, seen.normal_map, segments, visual, up_c, focal, timing, atlanta,
-                             sky, uncertainty, known)
+                             sky, uncertainty, known, R_cm)
 
 
 @dataclass(frozen=True)
@@ -319,7 +329,7 @@ def image_overlay(analysis: ImageAnalysis, panes: bool = True) -> np.ndarray:
     assumed); neither when the horizon is not known, but a note."""
     assumed = analysis.focal.source == "assumed"  # drawn with the "assumed FOV" note
     std = analysis.as_dict()["horizon_std_px"]
-    axes = analysis.visual.R_cm if analysis.known else None  # no up glyph for an unknown horizon
+    axes = analysis.R_cm if analysis.known else None  # no up glyph for an unknown horizon
     image = draw_overlay(analysis.rgb, analysis.up_c, axes, None if assumed else analysis.focal.K,
                          analysis.focal.hfov_deg, std_px=std, known=analysis.known)
     if panes and analysis.normal_map is not None:
