@@ -1,4 +1,6 @@
 """Real-image accuracy of the RGB-only estimate: ECD horizons, ICSL and ICL-NUIM rotations, focal lengths.
+Open country (horizon_uav) and whether indoor frames keep their horizon: `benchmarks/horizon_uav.py`
+(`bench horizon --uav-only` for those rows alone).
 
 Each figure is printed beside its goal (issue 12) and its baseline:
 - ECD (Eurasian Cities, Barinova et al. 2010; academic use): horizon error = the largest vertical

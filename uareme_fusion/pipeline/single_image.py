@@ -5,8 +5,11 @@ Without gravity, "up" is the scene axis nearest image up (`solver.up_candidate`)
 Cues: learned normals and line segments (`cues`); without intrinsics the focal length comes from
 the segments when they tell it (`solver/focal.py`), else from an assumed field of view. Up comes
 from the segments' Atlanta-world horizon when they show one (`solver/atlanta.py`: the zenith and
-horizontal vanishing points in any directions), else from the Manhattan axis nearest image up. The horizon
-is `l ~ K^-T up_c` in pixels, scaled so that [a, b] is unit (a x + b y + c = 0, positive on the sky side).
+horizontal vanishing points in any directions), else from the Manhattan axis nearest image up. In open
+scenes a sky boundary (`solver/sky_horizon.py`, the third cue) sets up instead, unless man-made verticals
+put the horizon elsewhere (`solver/horizon_estimate.sky_and_segments`). The horizon is `l ~ K^-T up_c` in
+pixels, scaled so that [a, b] is unit (a x + b y + c = 0, positive on the sky side), with its std, and
+`horizon_known` false when no cue fixes it; the reported `R_cm` is turned onto `up_c` (one answer).
 """
 
 from __future__ import annotations
