@@ -104,7 +104,13 @@ def print_summary(summary: dict) -> None:
     if "are_deg" in summary and summary["are_deg"]:
         a, t = summary["are_deg"], summary["tilt_deg"]
         table.add_row("ARE deg (mean / median / max)", f"{a['mean']:.2f} / {a['median']:.2f} / {a['max']:.2f}")
-        table.add_row("tilt deg (mean / p95 / max)", f"{t['mean']:.2f} / {t['p95']:.2f} / {t['max']:.2f}")
+        table.add_row("tilt deg (mean / p95 / max)" + (", after the constant alignment (the reference is not "
+                      "gravity-aligned)" if "tilt_unaligned_deg" in summary else ""),
+                      f"{t['mean']:.2f} / {t['p95']:.2f} / {t['max']:.2f}")
+        if "tilt_unaligned_deg" in summary:
+            u = summary["tilt_unaligned_deg"]
+            table.add_row("tilt deg without alignment, against the reference's z (mean / p95 / max)",
+                          f"{u['mean']:.2f} / {u['p95']:.2f} / {u['max']:.2f}")
         table.add_row("NEES mean", f"{summary['nees']['mean']:.2f}")
     est = summary.get("imu_rotation_estimate", {})
     if est.get("observable"):
@@ -116,6 +122,8 @@ def print_summary(summary: dict) -> None:
                       "(their size differs from the first frame's)")
     table.add_row("outputs", ", ".join(summary["outputs"]))
     console.print(table)
+    if summary.get("normals_note"):
+        err_console.print(f"note: {summary['normals_note']}", markup=False, emoji=False)
     for line in summary.get("warnings", []):
         err_console.print(f"[bold yellow]warning:[/] {line}", markup=True, emoji=False, highlight=False)
 

@@ -28,7 +28,8 @@ class RunConfig(BaseModel):
     smoother: dict[str, Any] = Field(default_factory=dict)
     """Overrides of the smoother settings (configs/paper.yaml, section `smoother`)."""
     normals: str = "auto"
-    """auto (the source's exact normals when it has them, else learned), learned, depth, source, a
+    """auto (the source's exact normals when it has them, else depth when it has depth maps and
+    intrinsics, else learned: `stages.AutoNormals`), learned, depth, source, a
     TorchScript/state-dict model file (.pt), or a folder of precomputed normal maps (.npz/.npy/.png)."""
     kappa_cap: float = Field(75.0, gt=0)
     """Confidence cap applied before the solver (the paper's released config)."""

@@ -21,6 +21,7 @@ from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
 from ..errors import InputError, OutputError
 from ..evaluation.backend_factory import backend_kind, knows_gravity
 from ..evaluation.metrics import attitude_errors, error_summary
+from ..evaluation.statistics import error_stats
 from ..io.safe_files import ENVIRONMENT_ERRNOS, ReservedFile
 from ..rotations import align_constant
 from ..types import Status
@@ -119,13 +120,19 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
                          on_result=on_result)
     with stop_signals.writing():  # a signal now waits until summary.json is complete
         summary = summary_document(stats, cfg, command, source)
+        normals_note = getattr(pipeline.normals, "note", None)
+        if normals_note:
+            summary["notes"].append(normals_note)
+            summary["normals_note"] = normals_note
         if pipeline.cues is not None and pipeline.cues.focal is not None:  # K given, estimated or assumed
             summary["intrinsics"] = pipeline.cues.intrinsics_summary()
         for sink in extra_sinks:
             summary.update(getattr(sink, "summary", dict)())
         if check is not None:
             summary["imu_rotation_estimate"] = check.report()
-            summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w]
+            refused = check.refused is not None  # the run's error says it
+            summary["imu_rotation_estimate"]["refused_to_fuse"] = refused
+            summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w and not refused]
         if log is not None:
             summary.update(evaluation(log, truth, gravity_aware=knows_gravity(
                 backend_kind(cfg.backend, source.info.has_imu).name, source.info.has_imu)))
@@ -181,20 +188,37 @@ def summary_document(stats: RunStats, cfg: RunConfig, command: str, source: Sour
 
 
 def evaluation(log: EstimateLog, truth: GroundTruth, gravity_aware: bool) -> dict:
-    """ARE, tilt and NEES against `truth` over initialised estimates inside its time span.
+    """ARE, tilt and NEES against `truth` over initialised estimates inside its time span
+    (`evaluation_errors`), summarised; with a reference that is not gravity-aligned, also
+    `tilt_unaligned_deg`: the tilt against the reference's z axis without the alignment."""
+    t, errors, unaligned_tilt, note = evaluation_errors(log, truth, gravity_aware)
+    if len(t) == 0:
+        return {"evaluation_note": note, **error_summary(errors)}
+    out = {**error_summary(errors), "evaluation_note": note}
+    if unaligned_tilt is not None and errors["valid"].any():
+        out["tilt_unaligned_deg"] = error_stats(unaligned_tilt[errors["valid"]], ("mean", "rmse", "p95", "max"))
+    return out
+
+
+def evaluation_errors(log: EstimateLog, truth: GroundTruth, gravity_aware: bool):
+    """(t_s (N,), per-frame errors (`metrics.attitude_errors`: `are_deg`, `tilt_deg`, `nees`, `valid`),
+    tilt (N,) without alignment or None, note) of the estimates in `log` against `truth`; `valid`:
+    initialised estimates inside its time span.
 
     Without a gravity-aligned reference (e.g. ICL-NUIM) tilt is measured after the same constant
-    alignment as ARE, since the reference world's z is not up.
+    alignment as ARE, since the reference world's z is not up; the tilt against its z axis without
+    the alignment is returned beside it.
     """
     t, R_est, cov, status = log.arrays()
     if len(t) == 0:
-        return {"evaluation_note": "no estimates to score", **error_summary(
-            {"valid": np.zeros(0, bool), "are_deg": np.zeros(0), "tilt_deg": np.zeros(0), "nees": np.zeros(0)})}
+        empty = {"valid": np.zeros(0, bool), "are_deg": np.zeros(0), "tilt_deg": np.zeros(0), "nees": np.zeros(0)}
+        return t, empty, None, "no estimates to score"
     R_true, in_span = truth.at(t)
     valid = in_span & ((status & int(Status.NOT_INITIALISED)) == 0)
-    note = "tilt against the reference's z axis (gravity-aligned)"
+    note, unaligned_tilt = "tilt against the reference's z axis (gravity-aligned)", None
     if not truth.gravity_aligned and valid.any():
+        unaligned_tilt = attitude_errors(R_est, cov, valid, R_true)["tilt_deg"]
         R_est = align_constant(R_est[valid], R_true[valid]) @ R_est
         note = "reference is not gravity-aligned: tilt after the constant alignment used for ARE"
     errors = attitude_errors(R_est, cov, valid, R_true, yaw_only_nees=gravity_aware and truth.gravity_aligned)
-    return {**error_summary(errors), "evaluation_note": note}
+    return t, errors, unaligned_tilt, note
