@@ -7,7 +7,9 @@
 - `horizon`: RGB-only accuracy on real data (ECD horizon AUC, ICSL and ICL-NUIM rotations and focal
   lengths) beside goals and baselines (issue 12);
 - `mekf`: the EKF on simulated bus and room scenarios, BROAD and EuRoC, beside IMU-only peers (issues 5, 17);
-- `smoother`: the GTSAM smoother (paper and gyro-aided) against `single` on walk and shake (issue 6).
+- `smoother`: the GTSAM smoother (paper and gyro-aided) against `single` on walk and shake (issue 6);
+- `realdata`: every real development sequence, each cue set and backend beside its goal and its best
+  single input, with paired 95 % intervals (issues 29, 30).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import typer
 
 from .app import app, fail
 
-BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon", "mekf", "smoother")
+BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon", "mekf", "smoother", "realdata")
 
 
 @app.command()
@@ -38,10 +40,14 @@ def bench(
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
     data: Path = typer.Option(None, "--data", help="broad, mekf: folder of BROAD .hdf5 trials (default "
                               "../shared/data/broad_subset; needs the bench extra for vqf; mekf reads EuRoC "
-                              "V1_02 from euroc_v1_02_first40s/ beside it); horizon: the development data "
-                              "folder (default ../shared/data)."),
+                              "V1_02 from euroc_v1_02_first40s/ beside it); horizon, realdata: the development "
+                              "data folder (default ../shared/data)."),
     seeds: int = typer.Option(5, "--seeds", min=1, max=100, help="mekf, smoother: seeds per scenario."),
-    quick: bool = typer.Option(False, "--quick", help="mekf: shorter simulated runs (not the reported figures)."),
+    quick: bool = typer.Option(False, "--quick", help="mekf: shorter simulated runs; realdata: the first 20 frames "
+                               "of each sequence, no corridor_more (neither the reported figures)."),
+    sequences: str = typer.Option(None, "--sequences", help="realdata: comma-separated subset of tum, euroc, icsl, "
+                                  "icsl_more, kt3 (default all)."),
+    markdown_out: Path = typer.Option(None, "--markdown", help="realdata: also write the rows as a markdown table."),
     run_cost: bool = typer.Option(False, "--run-cost", help="mekf: only the whole-`run` cost per IMU sample on "
                                   "every IMU-only file, beside vqf and imufusion."),
     threads: int = typer.Option(None, "--threads", min=1, max=256,
@@ -54,8 +60,9 @@ def bench(
     """Time a benchmark on this machine and print its figures against the goals."""
     if what not in BENCHMARKS:
         raise typer.BadParameter(f"unknown benchmark '{what}'; choose from {', '.join(BENCHMARKS)}")
-    if json_out is not None and (json_out.is_dir() or not json_out.parent.is_dir()):
-        raise fail(f"--json {json_out}: cannot write a file there (a folder, or its folder does not exist)")
+    for option, path in (("--json", json_out), ("--markdown", markdown_out)):
+        if path is not None and (path.is_dir() or not path.parent.is_dir()):
+            raise fail(f"{option} {path}: cannot write a file there (a folder, or its folder does not exist)")
     if what == "solver":
         from ..benchmarks import solver
 
@@ -80,6 +87,18 @@ def bench(
 
         results = mekf.run(seeds=seeds, quick=quick, broad_dir=data or Path("../shared/data/broad_subset"),
                            run_cost=run_cost)
+    elif what == "realdata":
+        from ..benchmarks import realdata
+
+        wanted = realdata.SEQUENCES if sequences is None else tuple(s.strip() for s in sequences.split(",") if s.strip())
+        unknown = sorted(set(wanted) - set(realdata.SEQUENCES))
+        if unknown:
+            raise fail(f"--sequences: unknown {', '.join(unknown)}; choose from {', '.join(realdata.SEQUENCES)}")
+        results = realdata.run(data or Path("../shared/data"), quick=quick, wanted=wanted)
+        if markdown_out is not None:
+            from ..io.safe_files import write_text_atomic
+
+            write_text_atomic(markdown_out, realdata.markdown(results))
     elif what == "smoother":
         from ..benchmarks import smoother
 
