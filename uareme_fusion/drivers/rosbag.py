@@ -22,8 +22,9 @@ overrides it); otherwise the run is refused when the first frame arrives, naming
 
 Frames: `R_ci` is the identity (`--imu-rotation` gives it); the IMU's `frame_id` is in the notes.
 Ground truth (`ground_truth()`): a PoseStamped, PoseWithCovarianceStamped or Odometry topic taken as
-the attitude of the IMU body in a z-up world (REP 103), so `R_wc = R_wb @ R_ci^T` (the camera's own
-attitude when R_ci is the identity, as for a bag without IMU).
+the attitude of the IMU body, so `R_wc = R_wb @ R_ci^T` (the camera's own attitude when R_ci is the
+identity, as for a bag without IMU); its world is z up (gravity-aligned) when the header's frame_id
+is one of `Z_UP_FRAMES` (REP 103 / REP 105), otherwise evaluation aligns a constant rotation.
 A bag without an image topic is an IMU-only source (batches of `IMU_ONLY_BATCH_S`).
 """
 
@@ -54,6 +55,8 @@ BAG_SUFFIXES = (".bag", ".mcap", ".db3")
 METADATA = "metadata.yaml"
 NS_PER_S = 1_000_000_000
 SHOWN_UNUSED = 5
+Z_UP_FRAMES = ("map", "odom", "world", "earth", "enu")
+"""Pose frame_ids whose z axis is up by ROS convention (REP 103 ENU, REP 105 map / odom / earth)."""
 
 
 def is_bag(path: Path) -> bool:
@@ -134,6 +137,7 @@ class RosbagSource(Source):
         roles.pop(None, None)
         stamps = {"image": _Stamps(), "depth": _Stamps()}
         imu_rows, imu_stamps, pose_rows, pose_ns = [], _Stamps(), [], []
+        self._pose_frame_id = None
         self._info_msg = self._first_image = None
         self.imu_frame_id = None
         conns = [c for topic in roles for c in self._connections(topic)]
@@ -154,6 +158,7 @@ class RosbagSource(Source):
                 self.imu_frame_id = self.imu_frame_id or msg.header.frame_id
             elif role == "pose":
                 pose_ns.append(ros.stamp_ns(msg.header))
+                self._pose_frame_id = self._pose_frame_id or msg.header.frame_id
                 pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
                 pose_rows.append(ros.quaternion_xyzw(pose.orientation))
             else:
@@ -377,7 +382,8 @@ class RosbagSource(Source):
             raise InputError(f"{self.where}: {self.topics.pose} holds no poses to evaluate against")
         order = np.argsort(t_ns, kind="stable")
         R_wb = Rotation.from_quat(quat_xyzw[order]).as_matrix()
-        return GroundTruth(t_ns[order] * 1e-9, R_wb @ self.info.R_ci.T, gravity_aligned=True)
+        z_up = str(self._pose_frame_id).strip("/").lower() in Z_UP_FRAMES
+        return GroundTruth(t_ns[order] * 1e-9, R_wb @ self.info.R_ci.T, gravity_aligned=z_up)
 
     def close(self) -> None:
         reader, self.reader = getattr(self, "reader", None), None

@@ -9,7 +9,8 @@ What is written (`formats.ros_messages`; topics in `BagTopics`' defaults, `BAG_T
   and a `CameraInfo` with the frame's K (no distortion: frames are written as the source yields them);
 - each IMU sample as `sensor_msgs/Imu`, stamped on the camera clock (IMU stamp + `imu_time_offset_s`);
 - the source's ground truth as `geometry_msgs/PoseStamped`, orientation `R_wc @ R_ci` (what
-  `RosbagSource.ground_truth` reads back as `R_wc`).
+  `RosbagSource.ground_truth` reads back as `R_wc`), frame_id `world` when it is gravity-aligned,
+  `mocap` otherwise.
 Header stamps are the source's times plus `stamp_offset_s` (e.g. an epoch start); `image_stamp_shift_s`
 moves the camera topics' header stamps only (a camera on another clock), `image_receive_delay_s`
 makes the camera messages arrive late (receive time = stamp + delay). For tests and for converting a
@@ -35,6 +36,8 @@ BAG_TOPICS = {"image": "/camera/image_raw", "camera_info": "/camera/camera_info"
 CAMERA_FRAME_ID = "camera_optical"
 IMU_FRAME_ID = "imu_link"
 WORLD_FRAME_ID = "world"
+"""The poses' frame_id when the source's ground truth is gravity-aligned (z up), else `MOCAP_FRAME_ID`."""
+MOCAP_FRAME_ID = "mocap"
 STORAGES = ("ros1", "sqlite3", "mcap")
 IMAGE_ENCODINGS = ("rgb8", "bgr8", "mono8", "jpeg", "png")
 DEPTH_ENCODINGS = ("32FC1", "16UC1")
@@ -125,9 +128,10 @@ def write_bag(source: Source, path: str | Path, storage: str = "ros1", image_enc
                              _ns(event.t_s + stamp_offset_s + image_receive_delay_s), image_encoding, depth_encoding)
         truth = source.ground_truth()
         if truth is not None:
+            frame_id = WORLD_FRAME_ID if truth.gravity_aligned else MOCAP_FRAME_ID
             for t_s, R_wc in zip(truth.t_s, truth.R_wc):
                 t_ns = _ns(t_s + stamp_offset_s)
-                out.write(topics["pose"], ros.pose_message(out.types, out.header(t_ns, WORLD_FRAME_ID),
+                out.write(topics["pose"], ros.pose_message(out.types, out.header(t_ns, frame_id),
                                                            quat_xyzw(R_wc @ info.R_ci)), t_ns)
     finally:
         out.bag.close()
