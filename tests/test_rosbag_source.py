@@ -13,10 +13,13 @@ from scipy.spatial.transform import Rotation
 pytest.importorskip("rosbags", reason="the 'ros' extra (rosbags) is not installed")
 
 from rosbags.rosbag1 import Writer as Ros1Writer  # noqa: E402
+from rosbags.rosbag2 import Writer as Ros2Writer  # noqa: E402
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
 from helpers import cli, error_lines  # noqa: E402
 from uareme_fusion.drivers import open_source  # noqa: E402
+from uareme_fusion.drivers.bag_tf import static_rotation  # noqa: E402
+from uareme_fusion.drivers.extrinsics import with_imu_geometry  # noqa: E402
 from uareme_fusion.drivers.intrinsics import CameraModel, Undistorter  # noqa: E402
 from uareme_fusion.drivers.rosbag import RosbagSource  # noqa: E402
 from uareme_fusion.drivers.rosbag_writer import write_bag  # noqa: E402
@@ -275,3 +278,55 @@ def test_imu_only_bag_and_unreadable_files(tmp_path):
     proc = cli("run", tmp_path / "junk.bag", "--out", tmp_path / "out")
     assert proc.returncode == 2 and len(error_lines(proc)) == 1
     assert error_lines(proc)[0].startswith(f"error: {tmp_path / 'junk.bag'}: not a ROS bag rosbags can read")
+
+
+def test_camera_imu_rotation_from_tf_static(sim_dir, tmp_path):
+    R_ci = Rotation.from_euler("xyz", [90, 0, -90], degrees=True).as_matrix()  # an IMU mounted x forward, z up
+    with with_imu_geometry(open_source(str(sim_dir)), R_ci=R_ci) as src:
+        write_bag(src, tmp_path / "tf.bag")
+    with open_source(str(tmp_path / "tf.bag")) as bag:
+        np.testing.assert_allclose(bag.info.R_ci, R_ci, atol=1e-12)
+        assert any("from /tf_static, 'camera_optical' <- 'imu_link'" in note for note in bag.notes)
+        truth = bag.ground_truth()  # poses of the IMU body, R_wc = R_wb R_ci^T: the simulator's camera again
+    with open_source(str(sim_dir)) as folder:
+        np.testing.assert_allclose(truth.R_wc, folder.ground_truth().R_wc, atol=1e-9)
+    path = _bag_with_two_cameras(tmp_path / "stereo.bag")
+    with RosbagSource(path, image_topic="/left/image_raw", imu_topic="/left/imu") as src:
+        np.testing.assert_array_equal(src.info.R_ci, np.eye(3))
+        assert any("identity: no /tf_static chain joins the camera's frame_id 'left' and the IMU's 'left_imu'" in n
+                   for n in src.notes)
+
+
+def test_static_transform_chains_compose(tmp_path):
+    typestore = get_typestore(Stores.ROS2_HUMBLE)
+    types = typestore.types
+    R_cb = Rotation.from_euler("z", 30, degrees=True)  # base in camera
+    R_ib = Rotation.from_euler("x", 20, degrees=True)  # base in IMU: the chain runs camera -> base <- imu
+    with Ros2Writer(tmp_path / "chain", version=9) as bag:
+        conn = bag.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=typestore)
+        transforms = []
+        for parent, child, R in (("camera", "base_link", R_cb), ("/imu", "base_link", R_ib)):
+            x, y, z, w = R.as_quat()
+            transforms.append(types["geometry_msgs/msg/TransformStamped"](
+                header=ros.header(types, 0, parent), child_frame_id=child,
+                transform=types["geometry_msgs/msg/Transform"](
+                    translation=types["geometry_msgs/msg/Vector3"](x=1.0, y=0.0, z=0.0),
+                    rotation=types["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w))))
+        msg = types["tf2_msgs/msg/TFMessage"](transforms=transforms)
+        bag.write(conn, 1, typestore.serialize_cdr(msg, msg.__msgtype__))
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([tmp_path / "chain"]) as reader:
+        R_ci = static_rotation(reader, "camera", "imu")
+        assert static_rotation(reader, "camera", "lidar") is None
+    np.testing.assert_allclose(R_ci, (R_cb * R_ib.inv()).as_matrix(), atol=1e-12)
+
+
+def test_intrinsics_option_replaces_the_camera_info(bags, sim_dir):
+    with open_source(str(bags["ros1.bag"]), intrinsics="40,41,31.5,23.5") as bag:
+        np.testing.assert_array_equal(bag.info.K, [[40, 0, 31.5], [0, 41, 23.5], [0, 0, 1]])
+        assert bag.info.K_origin == "--intrinsics 40,41,31.5,23.5"
+        assert any("replaces the bag's /camera/camera_info" in note for note in bag.notes)
+        frame = next(e for e in bag.events() if isinstance(e, Frame))
+    with open_source(str(sim_dir)) as folder:
+        np.testing.assert_array_equal(frame.rgb, next(e for e in folder.events() if isinstance(e, Frame)).rgb)

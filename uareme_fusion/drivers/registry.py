@@ -117,6 +117,9 @@ def open_source(spec: str, imu: str | None = None, fps: float | None = None, int
     topics = {name: options.pop(name) for name in TOPIC_OPTIONS if options.get(name) is not None}
     for name in TOPIC_OPTIONS:
         options.pop(name, None)
+    if camera is not None and is_bag(Path(str(spec).strip()).expanduser()):
+        options["camera"] = camera  # a bag undistorts its raw frames with the given camera in place of its CameraInfo
+        camera = None
     source = _open(str(spec).strip(), fps, options, topics)
     if camera is not None:
         source = with_intrinsics(source, camera)

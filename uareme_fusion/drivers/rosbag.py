@@ -5,7 +5,8 @@ files) and a bare `.mcap` (or `.db3`), read with `rosbags` (the `ros` extra).
     with RosbagSource("rosbag2_2024_05_01/", image_topic="/cam/image_raw/compressed") as src: ...
 
 Topics are found by message type (`bag_topics.choose_topics`; options `image_topic`, `depth_topic`,
-`camera_info_topic`, `imu_topic`, `gt_topic` choose among several). Messages are converted by
+`camera_info_topic`, `imu_topic`, `gt_topic` choose among several; `camera`, the `--intrinsics`,
+replaces the CameraInfo). Messages are converted by
 `formats.ros_messages`: images to RGB uint8, depth to metres, the first CameraInfo to K and
 distortion, used as given (frames are undistorted with them and carry K; `info.K_origin` names the
 bag and topic), IMU messages to gyro rad/s and specific force m/s^2 (orientation unused), checked for
@@ -20,7 +21,9 @@ receive times do line them up, the IMU goes on the camera clock with the offset 
 median header-minus-receive times (`info.imu_time_offset_s`, a fix line; `--imu-time-offset-s`
 overrides it); otherwise the run is refused when the first frame arrives, naming both topics.
 
-Frames: `R_ci` is the identity (`--imu-rotation` gives it); the IMU's `frame_id` is in the notes.
+Frames: `R_ci` comes from `/tf_static` when its static transforms join the image's and the IMU's
+`frame_id` (`bag_tf.static_rotation`), else it is the identity (a note says which; `--imu-rotation`
+replaces it); the IMU's `frame_id` is in the notes.
 Ground truth (`ground_truth()`): a PoseStamped, PoseWithCovarianceStamped or Odometry topic taken as
 the attitude of the IMU body, so `R_wc = R_wb @ R_ci^T` (the camera's own attitude when R_ci is the
 identity, as for a bag without IMU); its world is z up (gravity-aligned) when the header's frame_id
@@ -44,6 +47,7 @@ from uareme_fusion.types import Frame, ImuBatch
 from ..formats import ros_messages as ros
 from ..formats.euroc import EurocImu
 from ..formats.tum import associate
+from .bag_tf import TF_STATIC_TOPIC, static_rotation
 from .bag_topics import BagTopics, choose, choose_topics
 from .base import GroundTruth, Source, SourceInfo, spread_indices
 from .imu_checks import check_imu_log
@@ -90,11 +94,13 @@ class RosbagSource(Source):
 
     def __init__(self, path: str | Path, image_topic: str | None = None, imu_topic: str | None = None,
                  depth_topic: str | None = None, camera_info_topic: str | None = None,
-                 gt_topic: str | None = None, use_imu: bool = True, max_dt_s: float = 0.02):
+                 gt_topic: str | None = None, use_imu: bool = True, max_dt_s: float = 0.02,
+                 camera: CameraModel | None = None):
         self.path = Path(path)
         self.where = str(path)
         self.notes: list[str] = []
         self.fixes: list[str] = []
+        self._given_camera = camera
         self.reader = _any_reader(self.path)
         try:
             self.reader.open()
@@ -116,6 +122,7 @@ class RosbagSource(Source):
             found = ", ".join(f"{t} ({m})" for t, m in list(self.topics.unused.items())[:SHOWN_UNUSED]) or "none"
             raise InputError(f"{self.where}: no sensor_msgs/Image, CompressedImage or Imu topic (topics: {found})")
         self._index(max_dt_s)
+        R_ci = self._imu_rotation()
         self._note_unused()
         has_frames = self.n_frames > 0
         fps = float(NS_PER_S / np.median(np.diff(self.frame_ns))) if self.n_frames > 1 else None
@@ -123,7 +130,7 @@ class RosbagSource(Source):
                                K=None if self.camera is None else self.camera.K,
                                K_origin=None if self.camera is None else self.camera.origin,
                                has_frames=has_frames, has_depth=self._depth_of is not None and bool(self._depth_of),
-                               has_imu=self.imu is not None, image_size=self._size,
+                               has_imu=self.imu is not None, image_size=self._size, R_ci=R_ci,
                                imu_time_offset_s=self._clock_fix_s())
 
     # The first pass: stamps of every image and depth message, the IMU, the first CameraInfo, the poses.
@@ -229,10 +236,33 @@ class RosbagSource(Source):
         self.notes += non_increasing_note(self.imu)
         self._imu_raw_ns = (t_ns, self._imu_receive_ns)
         self.notes.append(f"{self.where}: IMU from {self.topics.imu}: frame_id {self.imu_frame_id!r}, "
-                          f"{len(self.imu.t_s)} samples at {self.imu.rate_hz:.4g} Hz; R_ci identity unless "
-                          "--imu-rotation gives it")
+                          f"{len(self.imu.t_s)} samples at {self.imu.rate_hz:.4g} Hz")
+
+    def _imu_rotation(self) -> np.ndarray:
+        """R_ci from /tf_static between the image's and the IMU's frame_id, else the identity (noted)."""
+        self._tf_used = False
+        if self.imu is None or self._first_image is None:
+            return np.eye(3)
+        camera_frame = self._first_image.header.frame_id
+        R_ci = static_rotation(self.reader, camera_frame, self.imu_frame_id)
+        if R_ci is None:
+            self.notes.append(f"{self.where}: R_ci (camera from IMU) is the identity: no {TF_STATIC_TOPIC} chain joins "
+                              f"the camera's frame_id {camera_frame!r} and the IMU's {self.imu_frame_id!r} "
+                              "(--imu-rotation gives it)")
+            return np.eye(3)
+        self._tf_used = True
+        self.notes.append(f"{self.where}: R_ci (camera from IMU) from {TF_STATIC_TOPIC}, {camera_frame!r} <- "
+                          f"{self.imu_frame_id!r}: {np.round(R_ci, 4).tolist()}")
+        return R_ci
 
     def _camera(self) -> CameraModel | None:
+        """The given camera (`--intrinsics`: it replaces the CameraInfo, on the bag's raw frames), else the
+        first CameraInfo's, else None."""
+        if self._given_camera is not None:
+            if self._info_msg is not None:
+                self.notes.append(f"{self._given_camera.origin} replaces the bag's {self.topics.camera_info} "
+                                  "(sensor_msgs/CameraInfo)")
+            return check_camera(self._given_camera, self._given_camera.origin, self._size)
         if self._info_msg is None:
             if self.n_frames:
                 self.notes.append(f"{self.where}: no sensor_msgs/CameraInfo topic: intrinsics unknown")
@@ -247,6 +277,8 @@ class RosbagSource(Source):
 
     def _note_unused(self) -> None:
         unused = dict(self.topics.unused)
+        if self._tf_used:
+            unused.pop(TF_STATIC_TOPIC, None)
         for role, candidates in self.topics.candidates.items():
             unused.update({t: m for t, m in candidates.items() if t != getattr(self.topics, role)})
         if unused:

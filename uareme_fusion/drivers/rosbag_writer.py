@@ -8,6 +8,8 @@ What is written (`formats.ros_messages`; topics in `BagTopics`' defaults, `BAG_T
   `CompressedImage` (jpeg, png), its depth as `Image` 32FC1 (metres, exact) or 16UC1 (millimetres),
   and a `CameraInfo` with the frame's K (no distortion: frames are written as the source yields them);
 - each IMU sample as `sensor_msgs/Imu`, stamped on the camera clock (IMU stamp + `imu_time_offset_s`);
+- `/tf_static` (tf2_msgs/TFMessage) with the camera-IMU rotation `R_ci` (`camera_optical` <- `imu_link`)
+  when the source has an IMU;
 - the source's ground truth as `geometry_msgs/PoseStamped`, orientation `R_wc @ R_ci` (what
   `RosbagSource.ground_truth` reads back as `R_wc`), frame_id `world` when it is gravity-aligned,
   `mocap` otherwise.
@@ -49,11 +51,19 @@ def _writer(path: Path, storage: str):
     if storage == "ros1":
         from rosbags.rosbag1 import Writer
 
-        return Writer(path), get_typestore(Stores.ROS1_NOETIC)
+        from rosbags.typesys import get_types_from_msg
+
+        typestore = get_typestore(Stores.ROS1_NOETIC)
+        typestore.register(get_types_from_msg(TF_MESSAGE_ROS1, "tf2_msgs/msg/TFMessage"))
+        return Writer(path), typestore
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     return Writer(path, version=9, storage_plugin=plugin), get_typestore(Stores.ROS2_HUMBLE)
+
+
+TF_MESSAGE_ROS1 = "geometry_msgs/TransformStamped[] transforms\n"
+"""tf2_msgs/TFMessage, which rosbags' ROS 1 type store does not carry."""
 
 
 def _serialise(typestore, storage: str, msg) -> bytes:
@@ -118,6 +128,9 @@ def write_bag(source: Source, path: str | Path, storage: str = "ros1", image_enc
     imu_offset_s = stamp_offset_s + info.imu_time_offset_s
     camera_offset_s = stamp_offset_s + image_stamp_shift_s
     try:
+        if info.has_imu:
+            t_ns = _ns(stamp_offset_s)
+            out.write("/tf_static", _static_transform(out, t_ns, info.R_ci), t_ns)
         for event in source.events():
             if isinstance(event, ImuBatch):
                 for t_s, gyro, accel in zip(event.t_s, event.gyro_rad_s, event.accel_m_s2):
@@ -136,6 +149,17 @@ def write_bag(source: Source, path: str | Path, storage: str = "ros1", image_enc
     finally:
         out.bag.close()
     return out.counts
+
+
+def _static_transform(out: _BagOut, t_ns: int, R_ci: np.ndarray):
+    """A TFMessage of the IMU frame's attitude in the camera frame (`R_ci`, no translation)."""
+    types = out.types
+    x, y, z, w = map(float, quat_xyzw(np.asarray(R_ci, float)))
+    transform = types["geometry_msgs/msg/Transform"](translation=types["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+                                                     rotation=types["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w))
+    stamped = types["geometry_msgs/msg/TransformStamped"](header=out.header(t_ns, CAMERA_FRAME_ID),
+                                                          child_frame_id=IMU_FRAME_ID, transform=transform)
+    return types["tf2_msgs/msg/TFMessage"](transforms=[stamped])
 
 
 def _write_frame(out: _BagOut, frame: Frame, topics: dict, t_ns: int, receive_ns: int, image_encoding: str,
