@@ -330,3 +330,17 @@ def test_intrinsics_option_replaces_the_camera_info(bags, sim_dir):
         frame = next(e for e in bag.events() if isinstance(e, Frame))
     with open_source(str(sim_dir)) as folder:
         np.testing.assert_array_equal(frame.rgb, next(e for e in folder.events() if isinstance(e, Frame)).rgb)
+
+
+def test_horizon_ground_and_compare_take_a_bag(bags, tmp_path):
+    proc = cli("horizon", bags["ros1.bag"], "--out", tmp_path / "h.mp4", "--normals", "depth")
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "h.mp4").stat().st_size > 0
+    proc = cli("ground", bags["bare.mcap"], "--out", tmp_path / "g", "--normals", "depth")
+    assert proc.returncode == 0, proc.stderr
+    assert len(list((tmp_path / "g" / "masks").iterdir())) == FRAMES
+    proc = cli("compare", bags["ros2_db3"], "--out", tmp_path / "c", "--normals", "depth", "--gt-topic",
+               "/ground_truth/pose")
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((tmp_path / "c" / "compare.json").read_text())
+    assert len(doc["backends"]) >= 3
