@@ -344,3 +344,47 @@ def test_horizon_ground_and_compare_take_a_bag(bags, tmp_path):
     assert proc.returncode == 0, proc.stderr
     doc = json.loads((tmp_path / "c" / "compare.json").read_text())
     assert len(doc["backends"]) >= 3
+
+
+@pytest.mark.parametrize("store", ["ros1", "ros2"])
+def test_raw_header_stamps_match_deserialised_ones(store):
+    typestore = get_typestore(Stores.ROS1_NOETIC if store == "ros1" else Stores.ROS2_HUMBLE)
+    types = typestore.types
+    t_ns = 1_700_000_123_456_789_012
+    for msg in (ros.image_message(types, ros.header(types, t_ns, "camera"), np.zeros((2, 3), np.uint8), "mono8"),
+                ros.compressed_message(types, ros.header(types, t_ns, "c"), np.zeros((4, 4, 3), np.uint8), "png")):
+        if store == "ros1":
+            raw = typestore.serialize_ros1(msg, msg.__msgtype__)
+        else:
+            raw = typestore.serialize_cdr(msg, msg.__msgtype__)
+            big = typestore.serialize_cdr(msg, msg.__msgtype__, little_endian=False)
+            assert ros.raw_stamp_ns(big, cdr=True) == t_ns
+        assert ros.raw_stamp_ns(raw, cdr=store == "ros2") == t_ns == ros.stamp_ns(msg.header)
+
+
+def test_odometry_ground_truth_in_a_frame_that_is_not_z_up(tmp_path):
+    typestore = get_typestore(Stores.ROS2_HUMBLE)
+    types = typestore.types
+    R_wb = Rotation.from_euler("zyx", [40, 10, -5], degrees=True)
+    with Ros2Writer(tmp_path / "odom", version=9) as bag:
+        imu = bag.add_connection("/imu", ros.IMU, typestore=typestore)
+        odom = bag.add_connection("/vicon/odom", ros.ODOMETRY, typestore=typestore)
+        for k in range(300):
+            t_ns = 2 * 10**9 + k * 5_000_000
+            msg = ros.imu_message(types, ros.header(types, t_ns, "imu"), [0.0, 0.0, 0.0], [0.0, 0.0, 9.81])
+            bag.write(imu, t_ns, typestore.serialize_cdr(msg, ros.IMU))
+            if k % 10 == 0:
+                pose = ros.pose_message(types, ros.header(types, t_ns, "vicon"), R_wb.as_quat()).pose
+                cov = types["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36))
+                twist = types["geometry_msgs/msg/TwistWithCovariance"](
+                    twist=types["geometry_msgs/msg/Twist"](linear=types["geometry_msgs/msg/Vector3"](0.0, 0.0, 0.0),
+                                                           angular=types["geometry_msgs/msg/Vector3"](0.0, 0.0, 0.0)),
+                    covariance=np.zeros(36))
+                msg = types[ros.ODOMETRY](header=ros.header(types, t_ns, "vicon"), child_frame_id="body", pose=cov,
+                                          twist=twist)
+                bag.write(odom, t_ns, typestore.serialize_cdr(msg, ros.ODOMETRY))
+    with open_source(str(tmp_path / "odom")) as src:
+        assert not src.info.has_frames
+        truth = src.ground_truth()
+    assert len(truth.t_s) == 30 and truth.t_s[0] == 2.0 and not truth.gravity_aligned  # "vicon": no convention
+    np.testing.assert_allclose(truth.R_wc, np.repeat(R_wb.as_matrix()[None], 30, axis=0), atol=1e-12)

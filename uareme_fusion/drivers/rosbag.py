@@ -101,6 +101,7 @@ class RosbagSource(Source):
         self.notes: list[str] = []
         self.fixes: list[str] = []
         self._given_camera = camera
+        self._undistorter: Undistorter | None = None
         self.reader = _any_reader(self.path)
         try:
             self.reader.open()
@@ -152,13 +153,14 @@ class RosbagSource(Source):
             role = roles[connection.topic]
             if role == "camera_info" and self._info_msg is not None:
                 continue
-            msg = self._deserialize(raw, connection)
-            if role in stamps:
-                stamps[role].header_ns.append(ros.stamp_ns(msg.header))
-                stamps[role].receive_ns.append(receive_ns)
+            if role in stamps:  # images: only their stamps now (the stream deserialises them)
                 if role == "image" and self._first_image is None:
-                    self._first_image = msg
-            elif role == "imu":
+                    self._first_image = self._deserialize(raw, connection)
+                stamps[role].header_ns.append(ros.raw_stamp_ns(raw, self.reader.is2))
+                stamps[role].receive_ns.append(receive_ns)
+                continue
+            msg = self._deserialize(raw, connection)
+            if role == "imu":
                 imu_stamps.header_ns.append(ros.stamp_ns(msg.header))
                 imu_stamps.receive_ns.append(receive_ns)
                 imu_rows.append((*ros.vector3(msg.angular_velocity), *ros.vector3(msg.linear_acceleration)))
@@ -203,7 +205,6 @@ class RosbagSource(Source):
         self._kept = np.flatnonzero(keep)  # bag-order index of each yielded frame
         self.frame_ns = t_ns[keep]
         self.n_frames = len(self.frame_ns)
-        self._stamps = image
         self._depth_of: dict[int, int] | None = None
         self._depth_receive_ns = depth.arrays()[1]
         self._depth_ns = np.zeros(0, np.int64)
@@ -342,7 +343,7 @@ class RosbagSource(Source):
         frame = Frame(t_s=float(self.frame_ns[i]) * 1e-9, rgb=rgb, depth=depth,
                       K=None if self.camera is None else self.camera.K, index=i)
         if self.camera is not None and self.camera.distorted:
-            if getattr(self, "_undistorter", None) is None:
+            if self._undistorter is None:
                 self._undistorter = Undistorter(self.camera, rgb.shape[:2])
             frame = self._undistorter.frame(frame)
         return frame

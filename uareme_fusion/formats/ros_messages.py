@@ -44,6 +44,16 @@ def stamp_ns(header) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
+def raw_stamp_ns(raw: bytes, cdr: bool) -> int:
+    """The header stamp of a serialised message that starts with a std_msgs/Header (Image,
+    CompressedImage, ...), read without deserialising it: bytes 4-12 hold sec and nanosec in both
+    ROS 1 (after the uint32 seq, little-endian) and CDR (after the 4-byte encapsulation header, whose
+    second byte says little- (1) or big-endian (0))."""
+    order = "<" if not cdr or raw[1] == 1 else ">"
+    sec, nanosec = np.frombuffer(bytes(raw[4:12]), f"{order}u4")
+    return int(sec) * 1_000_000_000 + int(nanosec)
+
+
 def encoding_of(msg) -> str:
     """The lower-case encoding of an Image, or the format string of a CompressedImage."""
     return str(getattr(msg, "encoding", None) or getattr(msg, "format", "")).strip().lower()
