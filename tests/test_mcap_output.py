@@ -122,3 +122,12 @@ def test_mcap_path_is_checked(tmp_path, recorded):
     proc = cli("run", "sim:room", "--max-frames", "2", "--out", tmp_path / "o3", "--mcap", tmp_path / "link.mcap")
     assert proc.returncode == 2 and "symbolic link" in error_lines(proc)[0]
     assert not (tmp_path / "elsewhere.mcap").exists()
+
+
+def test_messages_follow_the_schemas_their_channels_declare(recorded):
+    jsonschema = pytest.importorskip("jsonschema")
+    with open(recorded / "run.mcap", "rb") as fh:
+        for schema, channel, message in make_reader(fh).iter_messages():
+            declared = json.loads(schema.data)
+            assert declared["title"] == schema.name
+            jsonschema.validate(json.loads(message.data), declared)

@@ -29,6 +29,8 @@ _XYZ = {"type": "object", "properties": {"x": _NUMBER, "y": _NUMBER, "z": _NUMBE
 _XYZW = {"type": "object", "properties": {"x": _NUMBER, "y": _NUMBER, "z": _NUMBER, "w": _NUMBER}}
 _COLOUR = {"type": "object", "properties": {"r": _NUMBER, "g": _NUMBER, "b": _NUMBER, "a": _NUMBER}}
 _NUMBERS = {"type": "array", "items": _NUMBER}
+_KEY_VALUES = {"type": "array", "items": {"type": "object", "properties": {"key": {"type": "string"},
+                                                                           "value": {"type": "string"}}}}
 
 
 def _schema(title: str, properties: dict) -> dict:
@@ -53,10 +55,10 @@ SCHEMA_OBJECTS = {
         "points": {"type": "array", "items": _schema("foxglove.PointsAnnotation", {
             "timestamp": _TIME, "type": {"type": "integer"}, "points": {"type": "array", "items": _XY},
             "outline_color": _COLOUR, "outline_colors": {"type": "array", "items": _COLOUR},
-            "fill_color": _COLOUR, "thickness": _NUMBER})},
+            "fill_color": _COLOUR, "thickness": _NUMBER, "metadata": _KEY_VALUES})},
         "texts": {"type": "array", "items": _schema("foxglove.TextAnnotation", {
             "timestamp": _TIME, "position": _XY, "text": {"type": "string"}, "font_size": _NUMBER,
-            "text_color": _COLOUR, "background_color": _COLOUR})}}),
+            "text_color": _COLOUR, "background_color": _COLOUR, "metadata": _KEY_VALUES})}}),
 }
 SCHEMAS = {name: json.dumps(schema, separators=(",", ":")).encode() for name, schema in SCHEMA_OBJECTS.items()}
 
@@ -101,12 +103,12 @@ def lines(t_ns: int, segments, rgb: tuple[int, int, int], thickness_px: float) -
     """A LINE_LIST points annotation of segments ((x0, y0), (x1, y1)) in OpenCV pixels."""
     points = [point(p) for segment in segments for p in segment]
     return {"timestamp": time(t_ns), "type": LINE_LIST, "points": points, "outline_color": colour(rgb),
-            "outline_colors": [], "fill_color": colour(rgb, 0.0), "thickness": float(thickness_px)}
+            "outline_colors": [], "fill_color": colour(rgb, 0.0), "thickness": float(thickness_px), "metadata": []}
 
 
 def text(t_ns: int, xy_opencv, content: str, font_size_px: float) -> dict:
     return {"timestamp": time(t_ns), "position": point(xy_opencv), "text": content, "font_size": float(font_size_px),
-            "text_color": colour((255, 255, 255)), "background_color": colour((0, 0, 0), 0.6)}
+            "text_color": colour((255, 255, 255)), "background_color": colour((0, 0, 0), 0.6), "metadata": []}
 
 
 def encode(message: dict) -> bytes:
