@@ -38,7 +38,8 @@ FRAMES = 12
 @pytest.fixture(scope="module")
 def sim_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("sim") / "room"
-    write_sequence("room", out, SequenceOptions(frames=FRAMES, width=64, height=48, fps=10.0, seed=1, imu_rate_hz=200.0))
+    options = SequenceOptions(frames=FRAMES, width=64, height=48, fps=10.0, seed=1, imu_rate_hz=200.0)
+    write_sequence("room", out, options)
     return out
 
 
@@ -51,7 +52,8 @@ def bags(sim_dir, tmp_path_factory):
     for name, storage, image, depth in (("ros1.bag", "ros1", "rgb8", "32FC1"), ("ros2_db3", "sqlite3", "bgr8", "16UC1"),
                                         ("ros2_mcap", "mcap", "png", "32FC1")):
         with open_source(str(sim_dir)) as src:
-            write_bag(src, root / name, storage=storage, image_encoding=image, depth_encoding=depth, stamp_offset_s=EPOCH_S)
+            write_bag(src, root / name, storage=storage, image_encoding=image, depth_encoding=depth,
+                      stamp_offset_s=EPOCH_S)
         made[name] = root / name
     bare = root / "bare.mcap"
     shutil.copy(next((root / "ros2_mcap").glob("*.mcap")), bare)
@@ -236,7 +238,8 @@ def test_depth_encodings_padded_rows_big_endian_and_refusals():
     mm = np.array([[0, 1500, 65535], [250, 1, 2]], np.uint16)
     np.testing.assert_allclose(ros.depth_metres(ros.image_message(types, head, mm, "16UC1"), "x"), mm / 1000.0)
     metres = np.array([[np.nan, 1.25, 3.0]], np.float32)
-    np.testing.assert_array_equal(ros.depth_metres(ros.image_message(types, head, metres, "32FC1"), "x"), [[0, 1.25, 3]])
+    depth = ros.depth_metres(ros.image_message(types, head, metres, "32FC1"), "x")
+    np.testing.assert_array_equal(depth, [[0, 1.25, 3]])
     padded = np.zeros((2, 8), np.uint8)  # a 2x2 rgb8 image in rows of 8 bytes
     padded[:, :6] = np.arange(12).reshape(2, 6)
     msg = types[ros.IMAGE](header=head, height=2, width=2, encoding="rgb8", is_bigendian=0, step=8, data=padded.ravel())

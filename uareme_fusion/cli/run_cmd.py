@@ -77,9 +77,10 @@ def print_notes(notes: list[str], fixes: list[str]) -> None:
         err_console.print(f"note: {note}", markup=False, emoji=False)
 
 
-def rerun_sinks(path: Optional[Path], mcap: Optional[Path] = None, source: Optional[str] = None):
-    """The sinks factory of `--rerun PATH` and `--mcap PATH` for `execute` (None without either)."""
-    if path is None and mcap is None:
+def viewer_sinks(rerun: Optional[Path], mcap: Optional[Path] = None, source: Optional[str] = None):
+    """The sinks factory of `--rerun PATH` and `--mcap PATH` for `execute` (None without either); an
+    `--mcap` that names the input `source` is refused."""
+    if rerun is None and mcap is None:
         return None
     if mcap is not None:
         from ..io.safe_files import refuse_input_as_output
@@ -88,10 +89,10 @@ def rerun_sinks(path: Optional[Path], mcap: Optional[Path] = None, source: Optio
 
     def factory(src, out_dir, cfg):
         sinks = []
-        if path is not None:
+        if rerun is not None:
             from ..pipeline.rerun_sink import RerunSink
 
-            sinks.append(RerunSink(path, cfg.assumed_fov_deg))
+            sinks.append(RerunSink(rerun, cfg.assumed_fov_deg))
         if mcap is not None:
             from ..pipeline.mcap_sink import McapSink
 
@@ -210,7 +211,7 @@ def run_command(
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
                      imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record,
-            extra_sinks_factory=rerun_sinks(rerun, mcap, source), force=force,
+            extra_sinks_factory=viewer_sinks(rerun, mcap, source), force=force,
             topics=bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic))
 
 
@@ -238,6 +239,7 @@ def eval_command(
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
                      imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues)
-    execute(source, out, cfg, imu, fps, evaluate=True, command="eval", extra_sinks_factory=rerun_sinks(rerun, mcap, source),
+    execute(source, out, cfg, imu, fps, evaluate=True, command="eval",
+            extra_sinks_factory=viewer_sinks(rerun, mcap, source),
             gt=gt, gt_time_offset_s=gt_time_offset_s, force=force,
             topics=bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic, gt_topic))

@@ -124,7 +124,8 @@ class RosbagSource(Source):
             raise InputError(f"{self.where}: no sensor_msgs/Image, CompressedImage or Imu topic (topics: {found})")
         self._index(max_dt_s)
         if self.n_frames == 0 and self.imu is None:
-            raise InputError(f"{self.where}: {self.topics.image or self.topics.imu} holds no messages (nothing to run on)")
+            empty = self.topics.image or self.topics.imu
+            raise InputError(f"{self.where}: {empty} holds no messages (nothing to run on)")
         R_ci = self._imu_rotation()
         self._note_unused()
         has_frames = self.n_frames > 0

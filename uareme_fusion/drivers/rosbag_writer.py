@@ -135,7 +135,8 @@ def write_bag(source: Source, path: str | Path, storage: str = "ros1", image_enc
             if isinstance(event, ImuBatch):
                 for t_s, gyro, accel in zip(event.t_s, event.gyro_rad_s, event.accel_m_s2):
                     t_ns = _ns(t_s + imu_offset_s)
-                    out.write(topics["imu"], ros.imu_message(out.types, out.header(t_ns, IMU_FRAME_ID), gyro, accel), t_ns)
+                    msg = ros.imu_message(out.types, out.header(t_ns, IMU_FRAME_ID), gyro, accel)
+                    out.write(topics["imu"], msg, t_ns)
             elif isinstance(event, Frame):
                 _write_frame(out, event, topics, _ns(event.t_s + camera_offset_s),
                              _ns(event.t_s + stamp_offset_s + image_receive_delay_s), image_encoding, depth_encoding)
@@ -155,8 +156,9 @@ def _static_transform(out: _BagOut, t_ns: int, R_ci: np.ndarray):
     """A TFMessage of the IMU frame's attitude in the camera frame (`R_ci`, no translation)."""
     types = out.types
     x, y, z, w = map(float, quat_xyzw(np.asarray(R_ci, float)))
-    transform = types["geometry_msgs/msg/Transform"](translation=types["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
-                                                     rotation=types["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w))
+    transform = types["geometry_msgs/msg/Transform"](
+        translation=types["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+        rotation=types["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w))
     stamped = types["geometry_msgs/msg/TransformStamped"](header=out.header(t_ns, CAMERA_FRAME_ID),
                                                           child_frame_id=IMU_FRAME_ID, transform=transform)
     return types["tf2_msgs/msg/TFMessage"](transforms=[stamped])

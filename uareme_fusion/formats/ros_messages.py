@@ -159,8 +159,8 @@ def header(types, t_ns: int, frame_id: str, seq: int = 0):
     """A std_msgs/Header for ROS 1 (with `seq`) or ROS 2, from a typestore's `types`."""
     Time, Header = types["builtin_interfaces/msg/Time"], types["std_msgs/msg/Header"]
     stamp = Time(sec=int(t_ns // 1_000_000_000), nanosec=int(t_ns % 1_000_000_000))
-    fields = Header.__dataclass_fields__
-    return Header(seq=seq, stamp=stamp, frame_id=frame_id) if "seq" in fields else Header(stamp=stamp, frame_id=frame_id)
+    ros1 = "seq" in Header.__dataclass_fields__
+    return Header(seq=seq, stamp=stamp, frame_id=frame_id) if ros1 else Header(stamp=stamp, frame_id=frame_id)
 
 
 def image_message(types, head, array: np.ndarray, encoding: str):

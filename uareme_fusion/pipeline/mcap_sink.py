@@ -102,7 +102,8 @@ def up_arrow_px(up_c: np.ndarray, K: np.ndarray, height: int, width: int) -> lis
     if size < 1e-6:  # up along the optical axis: a dot
         return [(tuple(centre), tuple(centre))]
     back = -shaft / size * min(0.3 * size, 0.05 * min(height, width))
-    heads = [tip + np.array([[c, -s], [s, c]]) @ back for c, s in ((np.cos(0.5), np.sin(0.5)), (np.cos(0.5), -np.sin(0.5)))]
+    c, s = np.cos(0.5), np.sin(0.5)  # the head's two strokes, 0.5 rad either side of the shaft
+    heads = [tip + np.array([[c, -s], [s, c]]) @ back, tip + np.array([[c, s], [-s, c]]) @ back]
     return [(tuple(centre), tuple(tip)), (tuple(tip), tuple(heads[0])), (tuple(tip), tuple(heads[1]))]
 
 
@@ -121,7 +122,8 @@ class McapSink:
         try:
             self.writer = Writer(self._file, compression=CompressionType.ZSTD)
             self.writer.start(profile="", library="uareme-fusion")
-            schemas = {name: self.writer.register_schema(name, "jsonschema", data) for name, data in fox.SCHEMAS.items()}
+            schemas = {name: self.writer.register_schema(name, "jsonschema", data)
+                       for name, data in fox.SCHEMAS.items()}
             schemas["uareme.Estimate"] = self.writer.register_schema(
                 "uareme.Estimate", "jsonschema", json.dumps(ESTIMATE_SCHEMA).encode())
             self.channels = {topic: self.writer.register_channel(topic, "json", schemas[name])
@@ -191,7 +193,8 @@ class McapSink:
             return
         height, width = frame.rgb.shape[:2]
         K, assumed = intrinsics_or_assumed(result.K, height, width, self.fov_deg)
-        ok, jpeg = cv2.imencode(".jpg", cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+        bgr = cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR)
+        ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
         if not ok:
             raise OutputError(f"{self.path}: OpenCV cannot encode frame {frame.index} as JPEG")
         self._message("/camera/image", t_ns, fox.compressed_image(t_ns, CAMERA_FRAME_ID, jpeg.tobytes()))
