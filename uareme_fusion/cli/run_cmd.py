@@ -15,7 +15,8 @@ from .app import StdoutConsole, app, err_console, fail
 from .progress import frame_progress
 
 SOURCE_HELP = ("A video file, webcam:N, an image, folder or glob of images, a dataset folder (TUM RGB-D, "
-               "ICL-NUIM, EuRoC, one written by 'simulate'), a BROAD .hdf5 or IMU .csv, sim:SCENARIO, or oak[:ID].")
+               "ICL-NUIM, EuRoC, one written by 'simulate'), a ROS bag (.bag, a ROS 2 bag folder, .mcap), a BROAD "
+               ".hdf5 or IMU .csv, sim:SCENARIO, or oak[:ID].")
 EKF_PRESETS = [name for name in preset_names() if name != "paper"]
 """The EKF presets shipped in configs/ (paper.yaml holds the smoother's settings)."""
 STOP_EXIT_CODES = {"end": 0, "max_frames": 0, "source_error": 1, "input_error": 2, "interrupted": 130,
@@ -31,16 +32,18 @@ def run_config(config: Optional[Path], **overrides) -> RunConfig:
 
 def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Optional[float], evaluate: bool,
             command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None,
-            gt: Optional[Path] = None, gt_time_offset_s: float = 0.0, force: bool = False) -> dict:
+            gt: Optional[Path] = None, gt_time_offset_s: float = 0.0, force: bool = False,
+            topics: Optional[dict] = None) -> dict:
     """Open the source, run it with a progress bar, report how it ended; exits non-zero when it failed.
 
     With `record_dir` the source's frames and IMU are also written there as they pass (our dataset
-    layout: a live session replays exactly with `run RECORD_DIR`)."""
+    layout: a live session replays exactly with `run RECORD_DIR`). `topics` chooses a ROS bag's topics
+    (`image_topic`, ... as `open_source` takes them; None values are left to the bag)."""
     from ..drivers import open_source, record
 
     out_dir = prepare_output_folder(out, force)
     opened = configure_imu(open_source(source, imu=None if imu is None else str(imu), fps=fps,
-                                       intrinsics=cfg.intrinsics), cfg)
+                                       intrinsics=cfg.intrinsics, **(topics or {})), cfg)
     if gt is not None:
         from ..drivers.ground_truth_file import with_ground_truth_file
 
@@ -74,17 +77,35 @@ def print_notes(notes: list[str], fixes: list[str]) -> None:
         err_console.print(f"note: {note}", markup=False, emoji=False)
 
 
-def rerun_sinks(path: Optional[Path]):
-    """The sinks factory of `--rerun PATH` for `execute` (None without it)."""
-    if path is None:
+def viewer_sinks(rerun: Optional[Path], mcap: Optional[Path] = None, source: Optional[str] = None):
+    """The sinks factory of `--rerun PATH` and `--mcap PATH` for `execute` (None without either); an
+    `--mcap` that names the input `source` is refused."""
+    if rerun is None and mcap is None:
         return None
+    if mcap is not None:
+        from ..io.safe_files import refuse_input_as_output
+
+        refuse_input_as_output(mcap, [source])
 
     def factory(src, out_dir, cfg):
-        from ..pipeline.rerun_sink import RerunSink
+        sinks = []
+        if rerun is not None:
+            from ..pipeline.rerun_sink import RerunSink
 
-        return [RerunSink(path, cfg.assumed_fov_deg)]
+            sinks.append(RerunSink(rerun, cfg.assumed_fov_deg))
+        if mcap is not None:
+            from ..pipeline.mcap_sink import McapSink
+
+            sinks.append(McapSink(mcap, cfg.assumed_fov_deg))
+        return sinks
 
     return factory
+
+
+def bag_topics(image_topic=None, imu_topic=None, depth_topic=None, camera_info_topic=None, gt_topic=None) -> dict:
+    """The ROS bag topic options as `open_source` takes them."""
+    return dict(image_topic=image_topic, imu_topic=imu_topic, depth_topic=depth_topic,
+                camera_info_topic=camera_info_topic, gt_topic=gt_topic)
 
 
 def print_summary(summary: dict) -> None:
@@ -161,6 +182,17 @@ def _options():
                                        help="Seconds added to IMU stamps to put them on the camera clock "
                                             "(default: the source's own, 0)."),
         force=typer.Option(False, "--force", help="Replace the results of an earlier run in a non-empty --out."),
+        image_topic=typer.Option(None, "--image-topic", help="ROS bag: the sensor_msgs/Image or CompressedImage "
+                                 "topic (default: the only one)."),
+        imu_topic=typer.Option(None, "--imu-topic", help="ROS bag: the sensor_msgs/Imu topic (default: the only one)."),
+        depth_topic=typer.Option(None, "--depth-topic", help="ROS bag: the depth topic, 16UC1 mm or 32FC1 m "
+                                 "(default: the only one)."),
+        camera_info_topic=typer.Option(None, "--camera-info-topic", help="ROS bag: the sensor_msgs/CameraInfo topic "
+                                       "(default: the only one, or the image topic's)."),
+        gt_topic=typer.Option(None, "--gt-topic", help="ROS bag: the ground-truth PoseStamped, "
+                              "PoseWithCovarianceStamped or Odometry topic (default: the only one)."),
+        mcap=typer.Option(None, "--mcap", help="Also write the run as an MCAP file for Foxglove: frames, camera "
+                          "attitude (/tf), horizon and up annotations, covariance and status (needs the 'ros' extra)."),
     )
 
 
@@ -178,14 +210,17 @@ def run_command(
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
     record: Optional[Path] = _o["record"], rerun: Optional[Path] = _o["rerun"], force: bool = _o["force"],
     intrinsics: Optional[str] = _o["intrinsics"], offline: Optional[bool] = _o["offline"],
-    cues: Optional[str] = _o["cues"],
+    cues: Optional[str] = _o["cues"], mcap: Optional[Path] = _o["mcap"],
+    image_topic: Optional[str] = _o["image_topic"], imu_topic: Optional[str] = _o["imu_topic"],
+    depth_topic: Optional[str] = _o["depth_topic"], camera_info_topic: Optional[str] = _o["camera_info_topic"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
                      imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record,
-            extra_sinks_factory=rerun_sinks(rerun), force=force)
+            extra_sinks_factory=viewer_sinks(rerun, mcap, source), force=force,
+            topics=bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic))
 
 
 @app.command("eval")
@@ -203,10 +238,16 @@ def eval_command(
                                                          "qw', or EuRoC gt0/data.csv) in place of the source's own."),
     gt_time_offset_s: float = typer.Option(0.0, "--gt-time-offset-s",
                                            help="Seconds added to the --gt stamps to put them on the source's clock."),
+    mcap: Optional[Path] = _o["mcap"],
+    image_topic: Optional[str] = _o["image_topic"], imu_topic: Optional[str] = _o["imu_topic"],
+    depth_topic: Optional[str] = _o["depth_topic"], camera_info_topic: Optional[str] = _o["camera_info_topic"],
+    gt_topic: Optional[str] = _o["gt_topic"],
 ) -> None:
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
                      imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues)
-    execute(source, out, cfg, imu, fps, evaluate=True, command="eval", extra_sinks_factory=rerun_sinks(rerun),
-            gt=gt, gt_time_offset_s=gt_time_offset_s, force=force)
+    execute(source, out, cfg, imu, fps, evaluate=True, command="eval",
+            extra_sinks_factory=viewer_sinks(rerun, mcap, source),
+            gt=gt, gt_time_offset_s=gt_time_offset_s, force=force,
+            topics=bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic, gt_topic))
