@@ -72,9 +72,20 @@ def both(config: MekfConfig):
 
 
 @needs_numba
-def test_orthonormalisation_period_is_the_reference_one():
-    p = mekf_compiled.parameter_vector(Mekf(MekfConfig()), defer=False)
-    assert p[kernels.P_ORTHO_EVERY] == state.ORTHONORMALISE_EVERY
+def test_both_paths_re_orthonormalise_after_the_same_products():
+    """After every call both paths count the same products since their last re-orthonormalisation,
+    the count wraps before `ORTHONORMALISE_EVERY` (it has wrapped many times here) and R_wc stays
+    orthonormal to rounding."""
+    _, t, gyro, accel = stream(0, duration_s=5.0)
+    compiled, reference = (Mekf(c) for c in both(load_config("imu_only", MekfConfig)))
+    counts = []
+    for i in range(0, t.size, 7):
+        for filt in (compiled, reference):
+            filt.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
+        assert compiled.products_unnormalised == reference.products_unnormalised, i
+        counts.append(compiled.products_unnormalised)
+    assert max(counts) == state.ORTHONORMALISE_EVERY - 1 and counts.count(0) > 5
+    assert np.abs(compiled.R_wc.T @ compiled.R_wc - np.eye(3)).max() < 1e-12
 
 
 @needs_numba
