@@ -86,9 +86,9 @@ def load_sequence(source: str | Path) -> VisualSequence:
     with the rotation and time offset of `scene.json`. Missing ground truth or IMU is allowed and
     noted; a missing folder or missing normals is an `InputError`.
     """
-    from ..drivers.euroc_imu import read_euroc_imu
+    from ..formats.euroc import read_euroc_imu
     from ..drivers.tum import ground_truth_from_tum, read_metadata
-    from ..drivers.tum_rgbd import read_tum_list, read_tum_trajectory
+    from ..formats.tum import read_tum_list, read_tum_trajectory
 
     root = Path(source)
     if not root.exists():

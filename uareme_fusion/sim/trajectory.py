@@ -126,10 +126,6 @@ class Trajectory:
         p_w, _, a_w = self.position(t)
         return TrajectorySample(R_wb @ self.R_bc, p_w, omega_b @ self.R_bc, a_w)
 
-    def velocity_w(self, t_s: np.ndarray) -> np.ndarray:
-        """(N, 3) velocity of the camera centre in the world, m/s."""
-        return self.position(np.atleast_1d(np.asarray(t_s, float)))[1]
-
     def R_wm(self, t_s: np.ndarray) -> np.ndarray:
         """(N, 3, 3) Manhattan frame to world: the bus attitude in a vehicle, else a constant."""
         t = np.atleast_1d(np.asarray(t_s, float))
