@@ -121,7 +121,7 @@ def align_constant(R_est: np.ndarray, R_gt: np.ndarray) -> np.ndarray:
 
 
 def are_deg(R_est: np.ndarray, R_gt: np.ndarray, align: bool = True) -> np.ndarray:
-    """Absolute rotation error per frame in degrees, after one constant alignment (paper's ARE).
+    """Absolute rotation error per frame in degrees, after one constant alignment (paper eq. 10, ARE).
 
     `R_est`, `R_gt`: (N, 3, 3) camera-to-world rotations `R_wc`. With `align=False` the frames are
     compared as they are.
