@@ -1,6 +1,6 @@
 """Rotation helpers on top of scipy's `Rotation`.
 
-Conventions (see DESIGN.md):
+Conventions (see docs/design.md):
 - `R_ab` maps coordinates in frame b to frame a: `v_a = R_ab @ v_b`.
 - Perturbations are on the right: `R = R_hat @ Exp(delta)`; a covariance is that of `delta` (rad^2).
 - Every function accepts a single (3, 3) matrix or a stack (..., 3, 3) where it says so.

@@ -10,7 +10,7 @@ gravity factor (`AttitudeFactorRot3`) are written for a body-to-navigation rotat
 GTSAM's `Rot3` tangent convention is the project's: `retract(R, xi) = R @ Exp(xi)` (right
 perturbation; checked in tests/test_smoother.py), and `Marginals.marginalCovariance(X(k))` is the
 covariance of that `xi` in rad^2. So the `Estimate.cov` returned here is the right-perturbation
-covariance of `R_wc`, as DESIGN.md requires.
+covariance of `R_wc`, as docs/design.md requires.
 
 Paper mode (`mode: paper`), exactly the paper's graph: `BatchFixedLagSmoother` over the last
 `window_frames` frames; per frame a `PriorFactorRot3` on `X(k)` at `R_cm^T` with the visual

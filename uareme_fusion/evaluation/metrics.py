@@ -1,4 +1,4 @@
-"""Attitude error metrics against ground truth (DESIGN.md "Evaluation protocol"), on plain arrays.
+"""Attitude error metrics against ground truth (docs/design.md "Evaluation protocol"), on plain arrays.
 
 ARE (degrees, paper eq. 10) after one constant chordal alignment of the estimated `R_wc` to the true `R_wc`
 (the paper's protocol); tilt error (degrees) between estimated and true up in the camera frame, with no

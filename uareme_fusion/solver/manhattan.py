@@ -57,7 +57,7 @@ def _cell_candidates(count: int) -> np.ndarray:
 
 
 class ManhattanSolver:
-    """Solves paper eq. 1 by Levenberg-Marquardt over the moment form; see DESIGN.md."""
+    """Solves paper eq. 1 by Levenberg-Marquardt over the moment form; see docs/design.md."""
 
     def __init__(self, config: SolverConfig | None = None):
         self.config = config or SolverConfig()
