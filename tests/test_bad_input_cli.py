@@ -231,6 +231,7 @@ def test_usage_errors_are_one_line(args, message):
     assert_one_error_line(runner.invoke(app, args), message)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "args, message",
     [(["solve", "missing.npy"], "missing.npy: no such file"), (["simulate", "room", "--frames", "x", "--out", "o"],

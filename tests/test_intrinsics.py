@@ -129,6 +129,7 @@ BAD_FILES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, text, message", BAD_FILES, ids=[c[0] for c in BAD_FILES])
 def test_bad_camera_files_name_the_file_and_key_on_the_command_line(tmp_path, tum_fr3, name, text, message):
     (tmp_path / name).write_text(text)

@@ -265,7 +265,7 @@ def test_update_due_at_a_frame_same_as_reference_with_or_without_a_rotation():
         if filt.accel.due:
             waiting += 1
             if waiting % 2:
-                filt.counters  # read (and moved out of the state buffer) before the frame takes the update
+                _ = filt.counters  # read (and moved out of the state buffer) before the frame takes the update
         for f, out in zip((filt, ref), ests):
             out.append(f.process_frame(t_f, None if k % 4 == 1 else visual))
         assert filt.counters == ref.counters
@@ -381,6 +381,7 @@ def test_kernels_see_the_fields_that_python_sees():
         assert np.array_equal(view, python_views[name])
 
 
+@pytest.mark.slow
 @needs_numba
 def test_warm_up_loads_every_kernel_a_filter_with_an_imu_calls():
     """In a fresh process (numba loads a kernel at its first call), `warm_up` leaves no kernel of the
@@ -393,4 +394,5 @@ def test_warm_up_loads_every_kernel_a_filter_with_an_imu_calls():
             "Mekf('handheld').warm_up(False, True); Mekf(MekfConfig(mode='visual_only')).warm_up(True, True)\n"
             "print(loaded()); Mekf('imu_only').warm_up(True, False); print(loaded())\n"
             "Mekf('handheld').warm_up(True, True); print(loaded(), len(imu_stream._ROWS_IF_CLEAN.signatures))\n")
-    assert fresh_python(code, timeout_s=300).stdout.split() == ["000000", "101000", "111111", "1"]  # IMU-only: integrate, segments
+    # IMU-only: integrate, segments
+    assert fresh_python(code, timeout_s=300).stdout.split() == ["000000", "101000", "111111", "1"]

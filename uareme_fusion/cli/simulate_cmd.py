@@ -33,7 +33,8 @@ def simulate(
     seed: int = typer.Option(0, "--seed", help="Seed of the scene, trajectory, noise: same seed, same files."),
     imu_rate: float = typer.Option(200.0, "--imu-rate", help="IMU rate in Hz (100-1000)."),
     fps: float = typer.Option(30.0, "--fps", help="Camera frame rate in Hz."),
-    fov_deg: float = typer.Option(None, "--fov-deg", help="Horizontal field of view in degrees (45-95); default: the scenario's."),
+    fov_deg: float = typer.Option(None, "--fov-deg",
+                                  help="Horizontal field of view in degrees (45-95); default: the scenario's."),
     force: bool = typer.Option(False, "--force", help="Overwrite a non-empty output folder."),
 ) -> None:
     """Render a synthetic Manhattan-world sequence with ground-truth pose, normals and IMU."""

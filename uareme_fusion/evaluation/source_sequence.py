@@ -2,9 +2,9 @@
 from a dataset folder with its normals saved (`load_sequence`).
 
 The source is read once: each frame's cues (`--cues`: normals as `--normals` says, and/or line
-segments, as in `run`) are solved into a visual rotation (each solve initialised from the previous one, `sequence.ChainedSolver`), the IMU samples
-are put on the camera clock and axes, and the source's ground truth (or none) is taken at the frame
-times. Every backend then runs on these same rotations (`compare.compare`).
+segments, as in `run`) are solved into a visual rotation (each solve initialised from the previous one,
+`sequence.ChainedSolver`), the IMU samples are put on the camera clock and axes, and the source's ground
+truth (or none) is taken at the frame times. Every backend then runs on these same rotations (`compare.compare`).
 """
 
 from __future__ import annotations
