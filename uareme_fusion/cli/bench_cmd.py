@@ -78,7 +78,7 @@ def bench(
 
         data = data or Path("../shared/data")
         if not (data / "eurasian_cities").is_dir():
-            raise fail(f"--data {data}: no eurasian_cities/ folder there (see shared/data/README.md)")
+            raise fail(f"--data {data}: no eurasian_cities/ folder there (the development data folder)")
         results = horizon.run(data, cues, ecd_limit, ecd_only=ecd_only)
     elif what == "mekf":
         from ..benchmarks import mekf
