@@ -4,6 +4,7 @@ rest of the document kept, the command and date written with the figures."""
 from __future__ import annotations
 
 import datetime
+import os
 import sys
 
 import pytest
@@ -47,11 +48,13 @@ def test_unpaired_markers_and_unwritable_paths_are_refused(tmp_path):
         capture_stdout(tmp_path / "no_such_folder" / "results.md")
 
 
-def test_the_tee_keeps_what_was_printed_and_restores_stdout(tmp_path, capsys):
+def test_the_tee_keeps_what_was_printed_and_restores_stdout(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv("COLUMNS", raising=False)
     before = sys.stdout
     tee = capture_stdout(tmp_path / "results.md")
     print("figure 1.5 ms")
-    assert tee.stop() == "figure 1.5 ms\n" and sys.stdout is before
+    assert os.environ["COLUMNS"] == "120"  # rich tables as wide as a results page, not a terminal's 80
+    assert tee.stop() == "figure 1.5 ms\n" and sys.stdout is before and "COLUMNS" not in os.environ
     assert capsys.readouterr().out == "figure 1.5 ms\n"  # still printed
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import datetime
 import io
+import os
 import re
 import sys
 from pathlib import Path
@@ -27,8 +28,10 @@ ANSI_ESCAPE = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
 class StdoutTee(io.TextIOBase):
     """Everything written to stdout while installed, also kept; `stop()` restores stdout and returns it."""
 
-    def __init__(self):
+    def __init__(self, columns: int = 120):
         self._out, self._kept = sys.stdout, io.StringIO()
+        self._columns = os.environ.get("COLUMNS")
+        os.environ["COLUMNS"] = self._columns or str(columns)  # rich's width when stdout is no terminal
         sys.stdout = self
 
     def write(self, text: str) -> int:
@@ -44,6 +47,8 @@ class StdoutTee(io.TextIOBase):
     def stop(self) -> str:
         if sys.stdout is self:
             sys.stdout = self._out
+            if self._columns is None:
+                os.environ.pop("COLUMNS", None)
         return self._kept.getvalue()
 
 
@@ -61,7 +66,7 @@ def _check_writable(path: Path) -> None:
 def invoked_command(ctx, leave_out: tuple[str, ...] = ("--results", "--json")) -> str:
     """The command of click/typer context `ctx` as a user would type it: its name, arguments and the
     options that differ from their defaults (those in `leave_out` left out)."""
-    words = [ctx.find_root().info_name or "uareme-fusion", ctx.info_name or ""]
+    words = ["uareme-fusion", ctx.info_name or ""]  # as installed, however it was started (python -m ...)
     for param in ctx.command.params:
         value = ctx.params.get(param.name)
         if param.param_type_name == "argument":
