@@ -107,6 +107,7 @@ def camera_run(phone_sequence):
     return _eval(phone_sequence, "camera.csv")
 
 
+@pytest.mark.slow
 def test_phone_imu_axes_with_imu_rotation_match_the_camera_axes_case(phone_sequence, camera_run, tmp_path):
     camera, camera_out = camera_run
     phone, phone_out = _eval(phone_sequence, "phone.csv", exit_code=2)  # refused: vision and gyro disagree
@@ -133,6 +134,7 @@ def test_phone_imu_axes_with_imu_rotation_match_the_camera_axes_case(phone_seque
     assert fixed["imu_rotation_estimate"]["angle_to_used_deg"] < 5.0
 
 
+@pytest.mark.slow
 def test_imu_time_offset_moves_imu_stamps_onto_the_camera_clock(phone_sequence, camera_run):
     """The offset is added to IMU stamps: a log shifted by -0.05 s is put back by +0.05 s."""
     shifted = phone_sequence / "camera_late.csv"

@@ -127,7 +127,7 @@ def test_mcap_path_is_checked(tmp_path, recorded):
 def test_messages_follow_the_schemas_their_channels_declare(recorded):
     jsonschema = pytest.importorskip("jsonschema")
     with open(recorded / "run.mcap", "rb") as fh:
-        for schema, channel, message in make_reader(fh).iter_messages():
+        for schema, _channel, message in make_reader(fh).iter_messages():
             declared = json.loads(schema.data)
             assert declared["title"] == schema.name
             jsonschema.validate(json.loads(message.data), declared)

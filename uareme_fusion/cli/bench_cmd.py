@@ -19,6 +19,7 @@ from pathlib import Path
 
 import typer
 
+from ..benchmarks import results_doc
 from .app import app, fail
 
 BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon", "mekf", "smoother", "realdata")
@@ -26,6 +27,7 @@ BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon", "mekf", "smoothe
 
 @app.command()
 def bench(
+    ctx: typer.Context,
     what: str = typer.Argument("solver", help=f"Which benchmark: {', '.join(BENCHMARKS)}."),
     repeats: int = typer.Option(100, min=5, help="solver: timed runs per figure."),
     seconds: float = typer.Option(10.0, "--seconds", min=1.0, max=600.0,
@@ -56,6 +58,8 @@ def bench(
     ecd_limit: int = typer.Option(None, "--ecd-limit", min=1, help="horizon: score only the first N ECD images."),
     ecd_only: bool = typer.Option(False, "--ecd-only", help="horizon: only the ECD figures (a third of the time)."),
     json_out: Path = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
+    results_md: Path = typer.Option(None, "--results", help="Also write what it prints into this markdown file's "
+                                    "section for this benchmark (docs/results.md)."),
 ) -> None:
     """Time a benchmark on this machine and print its figures against the goals."""
     if what not in BENCHMARKS:
@@ -63,6 +67,7 @@ def bench(
     for option, path in (("--json", json_out), ("--markdown", markdown_out)):
         if path is not None and (path.is_dir() or not path.parent.is_dir()):
             raise fail(f"{option} {path}: cannot write a file there (a folder, or its folder does not exist)")
+    printed = results_doc.capture_stdout(results_md) if results_md is not None else None
     if what == "solver":
         from ..benchmarks import solver
 
@@ -80,7 +85,7 @@ def bench(
 
         data = data or Path("../shared/data")
         if not (data / "eurasian_cities").is_dir():
-            raise fail(f"--data {data}: no eurasian_cities/ folder there (see shared/data/README.md)")
+            raise fail(f"--data {data}: no eurasian_cities/ folder there (the development data folder)")
         results = horizon.run(data, cues, ecd_limit, ecd_only=ecd_only)
     elif what == "mekf":
         from ..benchmarks import mekf
@@ -111,3 +116,5 @@ def bench(
         from ..io.safe_files import write_text_atomic
 
         write_text_atomic(json_out, json.dumps(results, indent=2, default=float) + "\n")
+    if printed is not None:
+        results_doc.write_section(results_md, what, printed.stop(), results_doc.invoked_command(ctx))

@@ -33,7 +33,8 @@ def simulate(
     seed: int = typer.Option(0, "--seed", help="Seed of the scene, trajectory, noise: same seed, same files."),
     imu_rate: float = typer.Option(200.0, "--imu-rate", help="IMU rate in Hz (100-1000)."),
     fps: float = typer.Option(30.0, "--fps", help="Camera frame rate in Hz."),
-    fov: float = typer.Option(None, "--fov", help="Horizontal field of view in degrees (45-95); default: the scenario's."),
+    fov_deg: float = typer.Option(None, "--fov-deg",
+                                  help="Horizontal field of view in degrees (45-95); default: the scenario's."),
     force: bool = typer.Option(False, "--force", help="Overwrite a non-empty output folder."),
 ) -> None:
     """Render a synthetic Manhattan-world sequence with ground-truth pose, normals and IMU."""
@@ -42,7 +43,7 @@ def simulate(
             raise InputError(f"unknown scenario {scenario!r}; valid: {', '.join(SCENARIO_NAMES)}")
         width, height = parse_size(size)
         options = SequenceOptions(frames=frames, width=width, height=height, fps=fps, seed=seed,
-                                  imu_rate_hz=imu_rate, hfov_deg=fov)
+                                  imu_rate_hz=imu_rate, hfov_deg=fov_deg)
         options.validate()
         prepare_out_dir(out, force)
         columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())

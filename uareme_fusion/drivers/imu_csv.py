@@ -3,9 +3,10 @@
     with ImuCsvSource("imu.csv") as src: ...                  # IMU-only: batches of 1/30 s
     with merge_imu(VideoSource("clip.mp4"), ImuCsvSource("imu.csv"), time_offset_s=0.12) as src: ...
 
-Format (`euroc_imu.read_euroc_imu`): `timestamp [ns], w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2]`,
+Format (`formats.euroc.read_euroc_imu`): `timestamp [ns], w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2]`,
 comma- or whitespace-separated (any file extension), `#` header (or a line of column names), timestamps
-as integer ns (or seconds with decimals, see `imu_checks`); gyro and specific force in the IMU frame. A file with other columns is refused with an `InputError` naming the file, line and column.
+as integer ns (or seconds with decimals, see `imu_checks`); gyro and specific force in the IMU frame. A file with
+other columns is refused with an `InputError` naming the file, line and column.
 `read_imu_log` then checks the data for wrong units, column order and time running backwards
 (`imu_checks.check_imu_log`): the source's `fixes` list what it repaired.
 

@@ -69,8 +69,8 @@ class LearnedNormalsConfig:
     threads: int | None = DEFAULT_THREADS
     """torch CPU threads (None: leave torch's setting). One by default: beside another CPU-bound
     process, torch's default of one thread per core makes its threads wait on each other and a
-    frame takes 10-20x longer; one thread loses little on a quiet machine (README, "Speed on a busy
-    machine"; `uareme-fusion bench pipeline` measures both)."""
+    frame takes 10-20x longer; one thread loses little on a quiet machine (README, "Troubleshooting";
+    `uareme-fusion bench pipeline` measures both)."""
     device: str = "cpu"
 
     def __post_init__(self):

@@ -47,7 +47,7 @@ class RunConfig(BaseModel):
     """Stop after this many frames (None: the whole source)."""
     threads: int = Field(1, ge=1, le=256)
     """torch CPU threads of the learned normals. 1 by default: beside another busy process, two
-    threads wait on each other and a frame can take 10x longer (README, "Speed on a busy machine")."""
+    threads wait on each other and a frame can take 10x longer (README, "Troubleshooting")."""
     imu_rotation: str | None = None
     """Camera-from-IMU rotation `R_ci` (`v_c = R_ci v_i`): a named convention (android, ios), axis
     letters (rub, flu, ...), 9 numbers of a 3x3, a quaternion x,y,z,w or a Kalibr camchain .yaml

@@ -78,7 +78,8 @@ class ImageAnalysis:
                 "conventions": "camera OpenCV (x right, y down, z forward); R_cm maps Manhattan to camera "
                                "coordinates; cov of the right perturbation; up_c = up from the "
                                "segments' horizon (horizon_source atlanta; horizon_std_px its std along its normal) or "
-                               "the Manhattan axis nearest image up (manhattan); horizon [a, b, c]: a x + b y + c = 0 in pixels, [a, b] unit, "
+                               "the Manhattan axis nearest image up (manhattan); "
+                               "horizon [a, b, c]: a x + b y + c = 0 in pixels, [a, b] unit, "
                                "positive on the sky side"}
 
     def _horizon_source(self) -> dict:

@@ -45,7 +45,7 @@ class SequenceOptions:
         if not 100.0 <= self.imu_rate_hz <= 1000.0:
             raise InputError(f"--imu-rate must be between 100 and 1000 Hz, got {self.imu_rate_hz}")
         if self.hfov_deg is not None and not 45.0 <= self.hfov_deg <= 95.0:
-            raise InputError(f"--fov must be between 45 and 95 degrees, got {self.hfov_deg}")
+            raise InputError(f"--fov-deg must be between 45 and 95 degrees, got {self.hfov_deg}")
         if not 0 <= self.seed < 2**63:
             raise InputError(f"--seed must be an integer >= 0, got {self.seed}")
         if not abs(self.imu_time_offset_s) <= MAX_TIME_OFFSET_S:
