@@ -60,7 +60,7 @@ def shared_data() -> Path:
     return shared_data_or_skip()
 
 
-LONGEST_FIRST = ("test_safe_outputs.py", "test_lines.py", "test_self_calibration.py", "test_visual_noise_share.py", "test_faults.py", "test_demo.py",
+LONGEST_FIRST = ("test_batch.py", "test_safe_outputs.py", "test_lines.py", "test_self_calibration.py", "test_visual_noise_share.py", "test_faults.py", "test_demo.py",
                  "test_mekf_scenarios.py", "test_imu_extrinsics.py", "test_intrinsics.py", "test_bad_input_cli.py", "test_smoother.py",
                  "test_solver.py", "test_bad_input_limits.py", "test_mekf_compiled.py")
 """The test files that take longest (3-17 s of one core each, measured), in that order, before all others.
