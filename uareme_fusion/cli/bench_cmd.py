@@ -8,6 +8,7 @@
   lengths) beside goals and baselines (issue 12);
 - `mekf`: the EKF on simulated bus and room scenarios, BROAD and EuRoC, beside IMU-only peers (issues 5, 17);
 - `smoother`: the GTSAM smoother (paper and gyro-aided) against `single` on walk and shake (issue 6);
+- `normals`: the shipped network on torch and on ONNX Runtime, ms per pass and their difference (issue 28);
 - `batch`: `batch` throughput on real IMU-only recordings with 1, 2 and N workers, and the scaling (issue 28).
 """
 
@@ -20,7 +21,7 @@ import typer
 
 from .app import app, fail
 
-BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon", "mekf", "smoother", "batch")
+BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon", "mekf", "smoother", "batch", "normals")
 
 
 @app.command()
@@ -39,7 +40,7 @@ def bench(
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
     data: Path = typer.Option(None, "--data", help="broad, mekf: folder of BROAD .hdf5 trials (default "
                               "../shared/data/broad_subset; needs the bench extra for vqf; mekf reads EuRoC "
-                              "V1_02 from euroc_v1_02_first40s/ beside it); horizon, batch: the development "
+                              "V1_02 from euroc_v1_02_first40s/ beside it); horizon, batch, normals: the development "
                               "data folder (default ../shared/data)."),
     seeds: int = typer.Option(5, "--seeds", min=1, max=100, help="mekf, smoother: seeds per scenario."),
     quick: bool = typer.Option(False, "--quick", help="mekf: shorter simulated runs (not the reported figures)."),
@@ -81,6 +82,10 @@ def bench(
 
         results = mekf.run(seeds=seeds, quick=quick, broad_dir=data or Path("../shared/data/broad_subset"),
                            run_cost=run_cost)
+    elif what == "normals":
+        from ..benchmarks import normals
+
+        results = normals.run(data or Path("../shared/data"), threads)
     elif what == "batch":
         from ..benchmarks import batch
 
