@@ -81,7 +81,8 @@ def test_image_of_one_pixel_and_a_map_of_nan_normals_name_their_file(tmp_path):
     proc = cli("image", tmp_path / "one.png")
     assert proc.returncode == 2
     assert error_lines(proc) == [f"error: {tmp_path / 'one.png'}: image of 1x1 pixels is too small (at least 8x8)"]
-    np.savez(tmp_path / "nan.npz", normals=np.full((20, 20, 3), np.nan, np.float32), kappa=np.ones((20, 20), np.float32))
+    np.savez(tmp_path / "nan.npz", normals=np.full((20, 20, 3), np.nan, np.float32),
+             kappa=np.ones((20, 20), np.float32))
     proc = cli("solve", tmp_path / "nan.npz")
     assert proc.returncode == 2
     assert error_lines(proc) == [f"error: {tmp_path / 'nan.npz'}: No valid normals in a map of shape (20, 20, 3): "

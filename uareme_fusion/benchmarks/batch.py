@@ -46,7 +46,8 @@ def run(data_dir: Path, copies: int = COPIES) -> dict:
                "workers": {}}
     print(f"batch of {figures['sources']} IMU-only sources ({len(recordings)} real recordings x {copies}), "
           f"{cores} cores")
-    print(f"{'workers':>7s} {'wall s':>8s} {'sources/s':>10s} {'scaling':>8s} {'failed':>6s}  load (1 min) before/after")
+    print(f"{'workers':>7s} {'wall s':>8s} {'sources/s':>10s} {'scaling':>8s} {'failed':>6s}  "
+          "load (1 min) before/after")
     with tempfile.TemporaryDirectory() as tmp:
         links = []
         for copy in range(copies):

@@ -32,7 +32,7 @@ def bench(
                                   help="pipeline: length of the timed 640x480 room walk, s."),
     memory_minutes: float = typer.Option(10.0, "--memory-minutes", min=0.0, max=600.0,
                                          help="pipeline: length of the memory stream, min (0: skip)."),
-    normals: str = typer.Option("learned", "--normals", help="pipeline: learned or a model file (.pt)."),
+    normals: str = typer.Option("learned", "--normals", help="pipeline: learned or a model file (.pt, .onnx)."),
     minutes: float = typer.Option(60.0, "--minutes", min=0.1, max=1440.0,
                                   help="soak: simulated stream length (30 fps, 400 Hz IMU), min."),
     normals_noise_deg: float = typer.Option(2.0, "--normals-noise-deg", min=0.0, max=90.0,

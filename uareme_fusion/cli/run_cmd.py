@@ -121,7 +121,8 @@ def _options():
         imu=typer.Option(None, "--imu", help="IMU CSV in EuRoC format (t ns, gyro rad/s, accel m/s^2) merged by time."),
         backend=typer.Option(None, "--backend", help="mekf (default), smoother or single."),
         normals=typer.Option(None, "--normals",
-                             help="auto (default), learned, depth, source, a model file (.pt) or a folder of normal maps."),
+                             help="auto (default), learned, depth, source, a model file (.pt, .onnx) or a folder "
+                                  "of normal maps."),
         config=typer.Option(None, "--config", help="YAML run configuration (keys of RunConfig)."),
         preset=typer.Option(None, "--preset", help=f"EKF preset: {', '.join(EKF_PRESETS)} or a YAML path "
                                                     "(default: handheld with a camera, imu_only for an IMU log)."),

@@ -140,11 +140,14 @@ def failed_row(source: str, error: str, wall_s: float = 0.0) -> dict:
 
 def run_task(task: BatchTask, cfg_data: dict) -> dict:
     """Run one source as `run` does (in a worker); its row, whatever happened."""
+    from . import stop_signals
     from .session import run_into_folder
 
     t0 = time.perf_counter()
-    try:
-        summary = run_into_folder(task.source, Path(task.out_dir), RunConfig.model_validate(cfg_data), task.force)
+    try:  # Ctrl-C or SIGTERM stop the run as they stop `run`: summary.json written, a second one waits
+        with stop_signals.handle_stop_signals():
+            summary = run_into_folder(task.source, Path(task.out_dir), RunConfig.model_validate(cfg_data),
+                                      task.force)
     except (UaremeError, OSError) as exc:
         return failed_row(task.source, str(exc), time.perf_counter() - t0)
     except Exception as exc:  # a bug met on one source: reported in its row, the others go on
@@ -177,6 +180,7 @@ def run_batch(sources: list[str], out_dir: Path, cfg: RunConfig, workers: int | 
     `on_row(row)` is called as each source finishes (and for each source `resume` skips)."""
     from .session import make_output_folder
 
+    sources = list(dict.fromkeys(sources))  # a source given twice runs once
     workers = workers or os.cpu_count() or 1
     if workers < 1:
         raise InputError(f"--workers must be at least 1, got {workers}")
