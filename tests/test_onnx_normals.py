@@ -94,3 +94,21 @@ def test_a_model_of_another_contract_is_refused_naming_file_and_shapes(tmp_path)
     cv2.imwrite(str(tmp_path / "room.png"), np.full((48, 64, 3), 128, np.uint8))
     proc = cli("image", tmp_path / "room.png", "--normals", path)
     assert proc.returncode == 2 and error_lines(proc)[0].startswith(f"error: {path}: an ONNX normal model must map")
+
+
+def test_auto_falls_back_to_torch_where_the_export_cannot_be_made(tmp_path, monkeypatch):
+    from uareme_fusion.errors import OutputError
+    from uareme_fusion.normals import learned, onnx_model
+
+    def no_export(weights, target, size_hw=(120, 160)):
+        raise OutputError(f"{target}: could not be written (Read-only file system)")
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setattr(onnx_model, "export_onnx", no_export)
+    learned.shipped_onnx.cache_clear()
+    try:
+        assert LearnedNormals().engine == "torch"
+        with pytest.raises(OutputError, match="Read-only file system"):
+            LearnedNormals(config=LearnedNormalsConfig(engine="onnx"))  # asked for by name: the error is shown
+    finally:
+        learned.shipped_onnx.cache_clear()

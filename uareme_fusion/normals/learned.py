@@ -246,9 +246,14 @@ class LearnedNormals:
         if self.engine == "onnx":
             from .onnx_model import OnnxNormalModel
 
-            self.model = (shipped_onnx(self.model_path, self.config.threads) if model is None
-                          else OnnxNormalModel(self.model_path, self.config.threads))
-        else:
+            try:
+                self.model = (shipped_onnx(self.model_path, self.config.threads) if model is None
+                              else OnnxNormalModel(self.model_path, self.config.threads))
+            except Exception:  # auto: an export that cannot be made or cached here falls back to torch
+                if model is not None or self.config.engine != "auto":
+                    raise
+                self.engine = "torch"
+        if self.engine == "torch":
             self.model = (shipped_model(self.model_path, self.config.device) if model is None
                           else load_model(self.model_path, self.config.device))
 
