@@ -20,7 +20,7 @@ from ..errors import InputError
 from ..pipeline import RunConfig
 from ..pipeline.batch import run_batch
 
-COPIES = 4
+COPIES = 12
 """How many times each real IMU-only recording is given to the batch."""
 SCALING_GOAL = 1.6
 """2 workers' throughput over one worker's, on a 2-core machine."""
