@@ -9,7 +9,9 @@
 - `mekf`: the EKF on simulated bus and room scenarios, BROAD and EuRoC, beside IMU-only peers (issues 5, 17);
 - `smoother`: the GTSAM smoother (paper and gyro-aided) against `single` on walk and shake (issue 6);
 - `realdata`: every real development sequence, each cue set and backend beside its goal and its best
-  single input, with paired 95 % intervals (issues 29, 30).
+  single input, with paired 95 % intervals (issues 29, 30);
+- `normals`: the shipped network on torch and on ONNX Runtime, ms per pass and their difference (issue 28);
+- `batch`: `batch` throughput on real IMU-only recordings with 1, 2 and N workers, and the scaling (issue 28).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import typer
 from ..benchmarks import results_doc
 from .app import app, fail
 
-BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon", "mekf", "smoother", "realdata")
+BENCHMARKS = ("solver", "pipeline", "soak", "broad", "horizon", "mekf", "smoother", "realdata", "batch", "normals")
 
 
 @app.command()
@@ -34,7 +36,7 @@ def bench(
                                   help="pipeline: length of the timed 640x480 room walk, s."),
     memory_minutes: float = typer.Option(10.0, "--memory-minutes", min=0.0, max=600.0,
                                          help="pipeline: length of the memory stream, min (0: skip)."),
-    normals: str = typer.Option("learned", "--normals", help="pipeline: learned or a model file (.pt)."),
+    normals: str = typer.Option("learned", "--normals", help="pipeline: learned or a model file (.pt, .onnx)."),
     minutes: float = typer.Option(60.0, "--minutes", min=0.1, max=1440.0,
                                   help="soak: simulated stream length (30 fps, 400 Hz IMU), min."),
     normals_noise_deg: float = typer.Option(2.0, "--normals-noise-deg", min=0.0, max=90.0,
@@ -42,7 +44,7 @@ def bench(
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
     data: Path = typer.Option(None, "--data", help="broad, mekf: folder of BROAD .hdf5 trials (default "
                               "../shared/data/broad_subset; needs the bench extra for vqf; mekf reads EuRoC "
-                              "V1_02 from euroc_v1_02_first40s/ beside it); horizon, realdata: the development "
+                              "V1_02 from euroc_v1_02_first40s/ beside it); horizon, realdata, batch, normals: the development "
                               "data folder (default ../shared/data)."),
     seeds: int = typer.Option(5, "--seeds", min=1, max=100, help="mekf, smoother: seeds per scenario."),
     quick: bool = typer.Option(False, "--quick", help="mekf: shorter simulated runs; realdata: the first 20 frames "
@@ -104,6 +106,14 @@ def bench(
             from ..io.safe_files import write_text_atomic
 
             write_text_atomic(markdown_out, realdata.markdown(results))
+    elif what == "normals":
+        from ..benchmarks import normals
+
+        results = normals.run(data or Path("../shared/data"), threads)
+    elif what == "batch":
+        from ..benchmarks import batch
+
+        results = batch.run(data or Path("../shared/data"))
     elif what == "smoother":
         from ..benchmarks import smoother
 

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Optional
 
 import typer
@@ -73,11 +73,17 @@ def _source_sequence(spec: str, imu: Optional[Path], fps: Optional[float], cfg, 
     from ..evaluation.source_sequence import source_sequence
     from ..drivers import open_source
     from ..pipeline.session import configure_imu
+    from ..pipeline.runner import RunStats
     from .progress import frame_progress
 
     with configure_imu(open_source(spec, imu=None if imu is None else str(imu), fps=fps, **(topics or {})),
                        cfg) as src:
         total = min(filter(None, [src.info.n_frames, cfg.max_frames]), default=None)
         with frame_progress("compare: visual rotations", total) as on_result:
-            # frame_progress reads only `stats.estimates`
-            return source_sequence(src, cfg, progress=lambda done, _: on_result(None, SimpleNamespace(estimates=done)))
+            stats = RunStats(started_s=time.perf_counter())  # frame_progress reads its estimates and fps
+
+            def progress(done, _):
+                stats.estimates = done
+                on_result(None, stats)
+
+            return source_sequence(src, cfg, progress=progress)

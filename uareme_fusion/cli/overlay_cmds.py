@@ -53,10 +53,12 @@ def horizon_command(
         needs_frames(src, "horizon")
         return [HorizonVideoSink(out, src.info.fps or 30.0, cfg.assumed_fov_deg, panes)]
 
-    summary = execute(source, out.parent / f"{out.stem}.run", cfg, imu, fps, evaluate=False, command="horizon",
+    run_dir = out.parent / f"{out.stem}.run"
+    summary = execute(source, run_dir, cfg, imu, fps, evaluate=False, command="horizon",
                       extra_sinks_factory=sinks, force=force,
                       topics=bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic))
-    typer.echo(f"wrote {out} ({summary.get('videos', {}).get(out.name, 'no frames')})")
+    typer.echo(f"wrote {out} ({summary.get('videos', {}).get(out.name, 'no frames')}); the estimates "
+               f"(trajectory.tum, estimates.csv, summary.json) are in {run_dir}/")
 
 
 @app.command("ground")

@@ -10,7 +10,7 @@ from rich.table import Table
 
 from ..config import load_config, preset_names, validate_config
 from ..pipeline import RunConfig
-from ..pipeline.session import configure_imu, prepare_output_folder, run_notes, run_source
+from ..pipeline.session import open_for_run, output_folder, run_notes, run_source
 from .app import StdoutConsole, app, err_console, fail
 from .progress import frame_progress
 
@@ -39,24 +39,19 @@ def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Op
     With `record_dir` the source's frames and IMU are also written there as they pass (our dataset
     layout: a live session replays exactly with `run RECORD_DIR`). `topics` chooses a ROS bag's topics
     (`image_topic`, ... as `open_source` takes them; None values are left to the bag)."""
-    from ..drivers import open_source, record
+    from ..drivers import record
 
-    out_dir = prepare_output_folder(out, force)
-    opened = configure_imu(open_source(source, imu=None if imu is None else str(imu), fps=fps,
-                                       intrinsics=cfg.intrinsics, **(topics or {})), cfg)
-    if gt is not None:
-        from ..drivers.ground_truth_file import with_ground_truth_file
-
-        with_ground_truth_file(opened, gt, gt_time_offset_s)
-    with (opened if record_dir is None else record(opened, record_dir)) as src:
-        print_notes(*run_notes(src, cfg))
-        sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
-        total = src.info.n_frames if src.info.has_frames else getattr(src, "n_batches", None)
-        if cfg.max_frames and total:
-            total = min(total, cfg.max_frames)
-        with frame_progress(command, total) as on_result:
-            summary = run_source(src, out_dir, cfg, evaluate=evaluate, extra_sinks=sinks, on_result=on_result,
-                                 command=command)
+    with output_folder(out, force) as out_dir:  # removed again when the run fails before writing into it
+        opened = open_for_run(source, cfg, imu, fps, gt, gt_time_offset_s, topics)
+        with (opened if record_dir is None else record(opened, record_dir)) as src:
+            print_notes(*run_notes(src, cfg))
+            sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
+            total = src.info.n_frames if src.info.has_frames else getattr(src, "n_batches", None)
+            if cfg.max_frames and total:
+                total = min(total, cfg.max_frames)
+            with frame_progress(command, total) as on_result:
+                summary = run_source(src, out_dir, cfg, evaluate=evaluate, extra_sinks=sinks, on_result=on_result,
+                                     command=command)
     print_summary(summary)
     code = STOP_EXIT_CODES.get(summary["stopped"], 1)
     if summary["stopped"] == "interrupted":
@@ -118,7 +113,8 @@ def print_summary(summary: dict) -> None:
     if summary["source_info"].get("intrinsics_from"):
         table.add_row("intrinsics from", summary["source_info"]["intrinsics_from"])
     table.add_row("normals / backend", f"{summary['normals']} / {summary['backend']}")
-    table.add_row("speed", f"{summary['fps']:.1f} fps")
+    table.add_row("speed", f"{summary['fps']:.1f} fps ({summary['estimates']} estimates in {summary['wall_s']:.2f} s, "
+                  f"warm-up {summary['warm_up_s']:.2f} s included)")
     table.add_row("ms per frame", ", ".join(f"{k} {v:.1f}" for k, v in summary["timing_ms"].items()))
     if summary["status_counts"]:
         table.add_row("status flags", ", ".join(f"{k} {v}" for k, v in summary["status_counts"].items()))
@@ -154,7 +150,8 @@ def _options():
         imu=typer.Option(None, "--imu", help="IMU CSV in EuRoC format (t ns, gyro rad/s, accel m/s^2) merged by time."),
         backend=typer.Option(None, "--backend", help="mekf (default), smoother or single."),
         normals=typer.Option(None, "--normals",
-                             help="auto (default), learned, depth, source, a model file (.pt) or a folder of normal maps."),
+                             help="auto (default), learned, depth, source, a model file (.pt, .onnx) or a folder "
+                                  "of normal maps."),
         config=typer.Option(None, "--config", help="YAML run configuration (keys of RunConfig)."),
         preset=typer.Option(None, "--preset", help=f"EKF preset: {', '.join(EKF_PRESETS)} or a YAML path "
                                                     "(default: handheld with a camera, imu_only for an IMU log)."),

@@ -9,9 +9,9 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from ..errors import InputError
-from ..sim.dataset import SequenceOptions, prepare_out_dir, write_sequence
+from ..sim.dataset import INCOMPLETE_MARKER, SequenceOptions, prepare_out_dir, write_sequence
 from ..sim.scenarios import SCENARIO_NAMES, SCENARIOS
-from .app import app, fail
+from .app import app, err_console, fail
 
 _SCENARIO_HELP = "Scenario, one of: " + "; ".join(f"{n} ({SCENARIOS[n].description})" for n in SCENARIO_NAMES)
 
@@ -49,7 +49,12 @@ def simulate(
         columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with Progress(*columns, transient=False) as bar:
             task = bar.add_task(f"simulate {scenario}", total=frames)
-            write_sequence(scenario, out, options, progress=lambda done, total: bar.update(task, completed=done))
+            try:
+                write_sequence(scenario, out, options, progress=lambda done, total: bar.update(task, completed=done))
+            except KeyboardInterrupt:
+                err_console.print(f"{out} is incomplete ({out / INCOMPLETE_MARKER} says so; 'run' refuses it)",
+                                  markup=False, emoji=False, style="yellow")
+                raise
     except InputError as exc:
         raise fail(str(exc)) from None
     typer.echo(f"wrote {frames} frames of {scenario} (seed {seed}) to {out}")

@@ -38,6 +38,7 @@ from uareme_fusion.io.paths import is_pipe, path_kind
 from uareme_fusion.io.text_tables import is_text_file
 
 from ..formats.tum import read_associations
+from ..sim.dataset import incomplete_simulation
 from .base import Source
 from .broad_source import BroadSource
 from .calibrated import with_intrinsics
@@ -82,6 +83,10 @@ def _associations_count_frames(path: Path) -> bool:
 
 def _open_folder(path: Path, fps: float | None, options: dict) -> Source:
     where = str(path)
+    interrupted = incomplete_simulation(path)
+    if interrupted:
+        raise InputError(f"{path}: is {interrupted}; write it again with 'uareme-fusion simulate ... --out {path} "
+                         "--force'")
     if (path / "rgb.txt").is_file():
         _no_fps(fps, where)
         return _construct(TumSource, where, path, **options)

@@ -30,7 +30,8 @@ class RunConfig(BaseModel):
     normals: str = "auto"
     """auto (the source's exact normals when it has them, else depth when it has depth maps and
     intrinsics, else learned: `stages.AutoNormals`), learned, depth, source, a
-    TorchScript/state-dict model file (.pt), or a folder of precomputed normal maps (.npz/.npy/.png)."""
+    TorchScript/state-dict model file (.pt) or ONNX model (.onnx), or a folder of precomputed normal
+    maps (.npz/.npy/.png)."""
     kappa_cap: float = Field(75.0, gt=0)
     """Confidence cap applied before the solver (the paper's released config)."""
     assumed_fov_deg: float = Field(60.0, gt=1.0, lt=179.0)

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import json
 import shutil
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +54,25 @@ def prepare_output_folder(out_dir: str | Path, force: bool) -> Path:
         elif path.exists() or path.is_symlink():
             path.unlink()
     return out
+
+
+@contextmanager
+def output_folder(out_dir: str | Path, force: bool) -> Iterator[Path]:
+    """`prepare_output_folder`, and when the block fails with the folder still empty (a source that
+    does not open, a bad setting), the folders it created are removed again: a failed run leaves no
+    empty --out behind. A folder that existed before, or holds anything, is kept."""
+    out = Path(out_dir)
+    created = [p for p in (out, *out.parents) if not p.exists() and not p.is_symlink()]
+    folder = prepare_output_folder(out, force)
+    try:
+        yield folder
+    except BaseException:
+        for path in created:  # the deepest first; stops at the first that holds something
+            try:
+                path.rmdir()
+            except OSError:
+                break
+        raise
 
 
 def make_output_folder(out_dir: str | Path) -> Path:
@@ -150,6 +170,29 @@ def configure_imu(source: Source, cfg: RunConfig) -> Source:
     of its own (`RunConfig.imu_rotation`, `imu_time_offset_s`); call before the source runs."""
     R_ci = None if cfg.imu_rotation is None else parse_imu_rotation(cfg.imu_rotation)
     return with_imu_geometry(source, R_ci, cfg.imu_time_offset_s)
+
+
+def open_for_run(source_spec: str, cfg: RunConfig, imu: str | Path | None = None, fps: float | None = None,
+                 gt: Path | None = None, gt_time_offset_s: float = 0.0, topics: dict | None = None) -> Source:
+    """The source as `run` opens it: `imu` merged, the configuration's K, camera-IMU rotation and time
+    offset, a ground-truth file `gt` in place of its own, and a ROS bag's `topics` (`image_topic`, ...
+    as `open_source` takes them; None values are left to the bag)."""
+    from ..drivers import open_source
+
+    opened = configure_imu(open_source(str(source_spec), imu=None if imu is None else str(imu), fps=fps,
+                                       intrinsics=cfg.intrinsics, **(topics or {})), cfg)
+    if gt is not None:
+        from ..drivers.ground_truth_file import with_ground_truth_file
+
+        with_ground_truth_file(opened, gt, gt_time_offset_s)
+    return opened
+
+
+def run_into_folder(source_spec: str, out_dir: Path, cfg: RunConfig, force: bool = False) -> dict:
+    """`uareme-fusion run SOURCE --out DIR` without its terminal output (a batch's worker): the same
+    folder rules (`output_folder`), source (`open_for_run`) and run (`run_source`); the summary."""
+    with output_folder(out_dir, force) as out, open_for_run(source_spec, cfg) as source:
+        return run_source(source, out, cfg, command="run")
 
 
 def run_to_folder(source_spec: str, out_dir: str | Path, cfg: RunConfig | None = None, imu: str | None = None,

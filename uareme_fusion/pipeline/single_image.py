@@ -192,7 +192,10 @@ class ImageAnalyser:
             rgb = undistorted_image(camera, rgb)
             given_K = check_K(camera.K)
         t0 = time.perf_counter()
-        normal_map = self._normals(rgb)
+        try:
+            normal_map = self._normals(rgb)
+        except InputError as exc:  # the estimator names a frame ("frame 0 (t = 0 s): ..."); here it is a file
+            raise InputError(f"{path}: {str(exc).split(': ', 1)[-1]}") from None
         t1 = time.perf_counter()
         segments = self.detector.detect(rgb) if self.detector else None
         t2 = time.perf_counter()

@@ -14,7 +14,7 @@ from ..types import Frame, NormalMap
 from .config import RunConfig
 
 NORMAL_FILE_SUFFIXES = (".npz", ".npy", ".png")
-MODEL_FILE_SUFFIXES = (".pt", ".pth", ".ts")
+MODEL_FILE_SUFFIXES = (".pt", ".pth", ".ts", ".onnx")
 
 
 class SourceNormals:
