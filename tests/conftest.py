@@ -60,18 +60,14 @@ def shared_data() -> Path:
     return shared_data_or_skip()
 
 
-LONGEST_FIRST = ("test_safe_outputs.py", "test_lines.py", "test_self_calibration.py", "test_visual_noise_share.py", "test_faults.py", "test_demo.py",
-                 "test_mekf_scenarios.py", "test_imu_extrinsics.py", "test_intrinsics.py", "test_bad_input_cli.py", "test_smoother.py",
-                 "test_solver.py", "test_bad_input_limits.py", "test_mekf_compiled.py")
-"""The test files that take longest (3-17 s of one core each, measured), in that order, before all others.
-xdist (pyproject: `--dist loadfile --no-loadscope-reorder`) hands each worker whole files in collection
-order, so the long files start first and the short ones even out the workers' ends (its default order,
-files with most tests first, left the 5 s demo file to the end of one worker)."""
-
-
 def pytest_collection_modifyitems(items):
-    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: files stay whole and in order
+    """The test files holding a test marked `slow` (seconds of one core each: subprocesses, long
+    statistical checks) run before all others. xdist (pyproject: `--dist loadfile
+    --no-loadscope-reorder`) hands each worker whole files in collection order, so the long files start
+    first and the short ones even out the workers' ends (its default order, files with most tests
+    first, left the 5 s demo file to the end of one worker)."""
+    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow_files)  # stable: files stay whole and in order
 
 
 def pytest_collection_finish(session):

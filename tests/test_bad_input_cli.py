@@ -95,7 +95,7 @@ SIMULATE_CASES = [
     ("fps_zero", ["room", "--fps", "0"], "--fps must be between 1 and 1000"),
     ("fps_nan", ["room", "--fps", "nan"], "--fps must be between"),
     ("imu_rate_low", ["room", "--imu-rate", "5"], "--imu-rate must be between 100 and 1000 Hz"),
-    ("fov_wide", ["room", "--fov", "150"], "--fov must be between 45 and 95"),
+    ("fov_wide", ["room", "--fov-deg", "150"], "--fov-deg must be between 45 and 95"),
     ("seed_negative", ["room", "--seed", "-1"], "--seed must be an integer >= 0, got -1"),
     ("seed_text", ["room", "--seed", "abc"], "Invalid value for '--seed'"),
     ("out_missing", ["room", "--frames", "1", "NO_OUT"], "Missing option '--out'"),
@@ -231,6 +231,7 @@ def test_usage_errors_are_one_line(args, message):
     assert_one_error_line(runner.invoke(app, args), message)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "args, message",
     [(["solve", "missing.npy"], "missing.npy: no such file"), (["simulate", "room", "--frames", "x", "--out", "o"],

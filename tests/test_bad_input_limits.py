@@ -116,6 +116,7 @@ def imu_csv(tmp_path):
     return tmp_path / "seq"
 
 
+@pytest.mark.slow
 def test_a_process_substitution_imu_is_read(tmp_path, imu_csv):
     out = tmp_path / "out"
     proc = subprocess.run(["bash", "-c", f"{sys.executable} -m uareme_fusion run {imu_csv / 'rgb'} --imu "

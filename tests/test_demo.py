@@ -2,6 +2,7 @@
 
 import io
 
+import pytest
 from rich.console import Console
 
 from uareme_fusion.demo import solver_demo
@@ -18,6 +19,7 @@ def test_solver_demo_figures():
     assert "Manhattan solver" in out.getvalue()
 
 
+@pytest.mark.slow
 def test_rendered_fusion_demo_figures(tmp_path):
     """Room and bus rendered and run through the pipeline (the simulator's normals, half the scenes'
     length, half the frame rate and a quarter of the pixels, to stay fast; at 120x90 the line cue has too few

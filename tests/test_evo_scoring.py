@@ -35,6 +35,7 @@ def _origin_aligned_angle_deg(gt_path, traj_path) -> np.ndarray:
     return np.degrees((R_gt.inv() * align * R_est).magnitude())
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(EVO_APE is None, reason="evo is not installed (pip install evo, or the 'bench' extra)")
 def test_readme_evo_command_scores_a_run(tmp_path):
     runner = CliRunner()

@@ -280,6 +280,7 @@ def default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+@pytest.mark.slow
 def test_ctrl_c_on_a_real_run_exits_130_with_complete_outputs(tmp_path):
     """SIGINT to `uareme-fusion run sim:room` (rendered, about 300 frames) once it has written a few
     estimates: exit status 130, and every output complete and parseable."""

@@ -71,9 +71,9 @@ def test_estimate_recovers_rotation_and_gyro_bias_from_noisy_pairs():
     np.testing.assert_allclose(est["gyro_bias_rad_s"], bias, atol=0.01)
 
 
-def _run(args):
+def _run(args, exit_code=0):
     result = CliRunner().invoke(app, args)
-    assert result.exit_code == 0, result.output
+    assert result.exit_code == exit_code, result.output
     return result.output
 
 
@@ -95,8 +95,9 @@ def phone_sequence(tmp_path_factory):
     return root
 
 
-def _eval(root, imu, *extra):
-    output = _run(["eval", str(root / "seq"), "--imu", str(root / imu), "--out", str(root / f"out_{imu}"), "--force", *extra])
+def _eval(root, imu, *extra, exit_code=0):
+    output = _run(["eval", str(root / "seq"), "--imu", str(root / imu), "--out", str(root / f"out_{imu}"), "--force",
+                   *extra], exit_code)
     return json.loads((root / f"out_{imu}" / "summary.json").read_text()), output
 
 
@@ -106,21 +107,25 @@ def camera_run(phone_sequence):
     return _eval(phone_sequence, "camera.csv")
 
 
+@pytest.mark.slow
 def test_phone_imu_axes_with_imu_rotation_match_the_camera_axes_case(phone_sequence, camera_run, tmp_path):
     camera, camera_out = camera_run
-    phone, phone_out = _eval(phone_sequence, "phone.csv")
+    phone, phone_out = _eval(phone_sequence, "phone.csv", exit_code=2)  # refused: vision and gyro disagree
     config = tmp_path / "run.yaml"
     config.write_text("imu_rotation: android\nimu_time_offset_s: 0.0\n")
     fixed, fixed_out = _eval(phone_sequence, "phone.csv", "--config", str(config))
     fixed_cli, _ = _eval(phone_sequence, "phone.csv", "--imu-rotation", "rub")
     assert camera["tilt_deg"]["mean"] < 2.0
-    assert phone["tilt_deg"]["mean"] > 90.0  # upside down without the rotation
     for run in (fixed, fixed_cli):
         assert run["tilt_deg"]["mean"] == pytest.approx(camera["tilt_deg"]["mean"], abs=0.05)
         assert run["tilt_deg"]["max"] == pytest.approx(camera["tilt_deg"]["max"], abs=0.2)
-    # without the rotation: one warning line naming the phone convention; none otherwise
-    warnings = [line for line in phone_out.splitlines() if "warning" in line]
-    assert len(warnings) == 1 and "--imu-rotation rub" in warnings[0] and "android" in warnings[0]
+        assert run["stopped"] == "end" and not run["imu_rotation_estimate"]["refused_to_fuse"]
+    # without the rotation the run is refused once the data shows the disagreement (about a second in),
+    # with one error line naming the phone convention and the option; never fused to the end silently
+    assert phone["stopped"] == "input_error" and phone["estimates"] < camera["estimates"]
+    assert phone["imu_rotation_estimate"]["refused_to_fuse"] and phone["warnings"] == []
+    errors = [line for line in phone_out.splitlines() if "error" in line]
+    assert "--imu-rotation rub" in phone["error"] and "android" in phone["error"] and len(errors) >= 1
     assert "warning" not in camera_out and "warning" not in fixed_out
     # the data's own estimate of R_ci, in summary.json
     est = phone["imu_rotation_estimate"]
@@ -129,6 +134,7 @@ def test_phone_imu_axes_with_imu_rotation_match_the_camera_axes_case(phone_seque
     assert fixed["imu_rotation_estimate"]["angle_to_used_deg"] < 5.0
 
 
+@pytest.mark.slow
 def test_imu_time_offset_moves_imu_stamps_onto_the_camera_clock(phone_sequence, camera_run):
     """The offset is added to IMU stamps: a log shifted by -0.05 s is put back by +0.05 s."""
     shifted = phone_sequence / "camera_late.csv"

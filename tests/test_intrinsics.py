@@ -36,7 +36,7 @@ def tum_fr3(tmp_path_factory):
     root = tmp_path_factory.mktemp("tum")
     sim = root / "sim"
     result = runner.invoke(app, ["simulate", "room", "--out", str(sim), "--frames", "10", "--size", "640x480",
-                                 "--fov", f"{FR3_HFOV_DEG:.3f}"])
+                                 "--fov-deg", f"{FR3_HFOV_DEG:.3f}"])
     assert result.exit_code == 0, result.output
     folder = root / "rgbd_dataset_freiburg3_sim_room"
     folder.mkdir()
@@ -129,6 +129,7 @@ BAD_FILES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, text, message", BAD_FILES, ids=[c[0] for c in BAD_FILES])
 def test_bad_camera_files_name_the_file_and_key_on_the_command_line(tmp_path, tum_fr3, name, text, message):
     (tmp_path / name).write_text(text)

@@ -158,6 +158,7 @@ def test_drop_in_torchscript(tmp_path):
     assert LearnedNormals(model=path).model is not LearnedNormals(model=path).model  # read afresh each time
 
 
+@pytest.mark.slow
 def test_drop_in_state_dict_matches_the_network(tmp_path):
     torch.manual_seed(0)
     net = NormalNet().eval()

@@ -198,7 +198,8 @@ def test_ground_mask_threshold_and_confidence_weighting_numbers():
     kappa = np.array([[3.0, 3.0, 3.0, 0.4, 0.0, 3.0]])
     mask, score = ground_mask(NormalMap(normals, kappa), up_c, threshold_deg=15.0, min_kappa=0.5, kappa_half=1.0)
     assert mask.tolist() == [[True, True, False, False, False, False]]
-    np.testing.assert_allclose(score[0], [0.75, 0.75 * math.cos(angles[1]), 0.75 * math.cos(angles[2]), 0.4 / 1.4, 0, 0], rtol=1e-6)
+    np.testing.assert_allclose(score[0], [0.75, 0.75 * math.cos(angles[1]), 0.75 * math.cos(angles[2]), 0.4 / 1.4, 0, 0],
+                               rtol=1e-6)
 
 
 def test_ground_mask_bad_input():
@@ -262,7 +263,8 @@ def test_draw_overlay_notes_an_assumed_fov_only():
     with_K = draw_overlay(grey_image(), up_c, np.eye(3), K_60)
     assumed = draw_overlay(grey_image(), up_c, np.eye(3), None, fov_deg=60.0)
     assert np.array_equal(with_K, draw_manhattan_axes(draw_horizon(grey_image(), up_c, K_60), np.eye(3), K_60))
-    assert np.array_equal(assumed, draw_manhattan_axes(draw_horizon(grey_image(), up_c, K_60, assumed_fov_note(60.0)), np.eye(3), K_60))
+    with_note = draw_horizon(grey_image(), up_c, K_60, assumed_fov_note(60.0))
+    assert np.array_equal(assumed, draw_manhattan_axes(with_note, np.eye(3), K_60))
     assert np.array_equal(draw_overlay(grey_image(), up_c), draw_horizon(grey_image(), up_c, K_60, assumed_fov_note()))
 
 

@@ -51,6 +51,7 @@ def test_horizon_refuses_to_write_over_its_input(tmp_path):
     assert video.read_bytes() == before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["run", "eval", "ground"])
 def test_a_non_empty_out_needs_force(tmp_path, command):
     out = tmp_path / "out"
@@ -92,6 +93,7 @@ def test_row_files_and_atomic_files_refuse_links(tmp_path):
     assert victim.read_text() == "x"
 
 
+@pytest.mark.slow
 def test_normals_of_images_sharing_a_stem_get_distinct_names(tmp_path):
     folder = tmp_path / "images"
     folder.mkdir()
@@ -140,6 +142,7 @@ def start(args, out_file: Path, rows: int = 6) -> subprocess.Popen:
     return proc
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
 def test_sigterm_and_sighup_stop_like_ctrl_c_with_a_playable_video(tmp_path, sig):
     out_video = tmp_path / "h.mp4"
@@ -154,6 +157,7 @@ def test_sigterm_and_sighup_stop_like_ctrl_c_with_a_playable_video(tmp_path, sig
     assert video_frames(out_video) == summary["estimates"] == summary["video_frames"]  # index written
 
 
+@pytest.mark.slow
 def test_ctrl_c_in_ground_video_counts_what_the_files_hold(tmp_path):
     out = tmp_path / "g"
     proc = start(["ground", "sim:room", "--video", "--out", out], out / "trajectory.tum", rows=4)
@@ -166,6 +170,7 @@ def test_ctrl_c_in_ground_video_counts_what_the_files_hold(tmp_path):
     assert video_frames(out / "ground.mp4") == summary["estimates"]
 
 
+@pytest.mark.slow
 def test_a_closed_stdout_after_a_completed_run_exits_0(tmp_path):
     proc = subprocess.run(["bash", "-c", f"{sys.executable} -m uareme_fusion run sim:room --max-frames 3 --out "
                            f"{tmp_path / 'out'} | head -c 0; exit ${{PIPESTATUS[0]}}"],
@@ -208,6 +213,7 @@ def test_a_full_disk_keeps_every_complete_row_and_exits_1(small_disk):
     assert 20 < summary["estimates"] < 300
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("small_disk", [170_000, 180_000], indirect=True)  # 180,000: the disk fills as the
 def test_a_full_disk_during_horizon_names_the_file_and_leaves_no_broken_video(small_disk):  # mp4 closes (segfaulted)
     proc = cli("horizon", "sim:room", "--max-frames", "100", "--out", small_disk / "h.mp4")

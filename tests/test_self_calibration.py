@@ -98,6 +98,7 @@ def _drawn_folder(folder, n: int, seed: int, views: list[np.ndarray] | None = No
     return paths
 
 
+@pytest.mark.slow
 def test_a_folder_from_one_camera_reports_the_pooled_K(tmp_path):
     paths = _drawn_folder(tmp_path, 10, 5)
     analyser = ImageAnalyser(cues="lines")
@@ -114,6 +115,7 @@ def test_a_folder_from_one_camera_reports_the_pooled_K(tmp_path):
     assert doc["intrinsics_origin"] == focal.origin and len(doc["principal_point_std_px"]) == 2
 
 
+@pytest.mark.slow
 def test_image_same_camera_prints_the_pooled_K_and_refuses_mixed_sizes(tmp_path):
     paths = _drawn_folder(tmp_path, 6, 6)
     proc = cli("image", tmp_path, "--same-camera", "--cues", "lines", "--json")
@@ -151,6 +153,7 @@ class _LiveFolder(Source):
         return self.images.events()
 
 
+@pytest.mark.slow
 def test_a_stream_without_intrinsics_runs_on_the_K_pooled_over_its_first_frames(tmp_path, monkeypatch):
     """A live stream without K pools one over its first `FOCAL_ATTEMPTS` frames with segments, then
     keeps it (`pooled_from` says from which frame and what it replaced)."""
@@ -174,6 +177,7 @@ def test_a_stream_without_intrinsics_runs_on_the_K_pooled_over_its_first_frames(
     assert 0.8 * 520.0 < switch["f_px_before"] < 1.2 * 520.0
 
 
+@pytest.mark.slow
 def test_a_recording_without_intrinsics_runs_every_frame_on_a_K_pooled_before_the_run(tmp_path, monkeypatch):
     """A recording (an image folder) has its K pooled over `FOCAL_ATTEMPTS` frames spread over it before
     the run: every frame is solved with that K, and it never changes mid-stream (no `pooled_from`)."""

@@ -33,7 +33,7 @@ def test_bad_input_gives_one_line_naming_the_option(tmp_path):
     assert unknown.exit_code == 2 and "room, office, corridor, street, bus" in unknown.output
     for args, option in [(("--size", "3x2"), "--size"), (("--size", "big"), "--size"),
                          (("--frames", "0"), "--frames"), (("--imu-rate", "5"), "--imu-rate"),
-                         (("--fov", "150"), "--fov")]:
+                         (("--fov-deg", "150"), "--fov-deg")]:
         result = _run("room", "--out", out, *args)
         assert result.exit_code == 2, args
         assert option in result.output and "Traceback" not in result.output

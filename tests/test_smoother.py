@@ -226,6 +226,7 @@ def solve_sequence(backend, t, R_true, kinds, seed, imu=None):
     return np.array([e.R_wc for e in ests])
 
 
+@pytest.mark.slow
 def test_paper_window_has_no_jump_where_single_frame_has_them():
     """The issue's claim, both halves: on a sequence with dropped and bad frames the single-frame chain
     jumps (ARE > 10 deg) and the paper's smoother does not."""
@@ -243,6 +244,7 @@ def test_paper_window_has_no_jump_where_single_frame_has_them():
     assert np.mean(are_paper) < 0.5 * np.mean(are_single)
 
 
+@pytest.mark.slow
 def test_gyro_mode_estimates_the_bias_and_beats_paper_mode():
     t = np.arange(90) / 15.0
     R_true = R_wc_at(t)

@@ -77,6 +77,7 @@ def test_kappa_weighting_beats_unweighted_with_30_percent_outliers():
     assert np.mean(weighted) < np.mean(unweighted)
 
 
+@pytest.mark.slow
 def test_covariance_is_calibrated_mean_nees_over_500_correlated_maps():
     values = []
     for R_true, nm in random_noisy_maps(500, seed=2024):  # held out: calibration used seeds 0 and 1

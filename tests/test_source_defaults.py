@@ -45,7 +45,8 @@ def test_preset_follows_the_source(requested, has_frames, chosen, noted):
 
 
 @pytest.mark.parametrize("requested, platform, chosen, noted", [
-    (None, "vehicle", "vehicle", True), ("handheld", "vehicle", "handheld", False), (None, None, "handheld", False), (None, "handheld", "handheld", False),
+    (None, "vehicle", "vehicle", True), ("handheld", "vehicle", "handheld", False), (None, None, "handheld", False),
+    (None, "handheld", "handheld", False),
     (None, "building", "building", True)])
 def test_preset_follows_the_platform_the_source_states(requested, platform, chosen, noted):
     preset, note = mekf_preset_for(requested, SourceInfo(name="src", platform=platform))
@@ -168,6 +169,7 @@ def test_exif_orientation_is_applied(tmp_path):
     assert image[:20].mean() < 30 and image[20:].mean() > 200  # stored left -> upright top
 
 
+@pytest.mark.slow
 def test_exif_orientation_through_the_normals_command(tmp_path):
     portrait_photo(tmp_path / "phone.jpg")
     result = run_cli("normals", tmp_path / "phone.jpg", "--out", tmp_path / "out")

@@ -56,6 +56,7 @@ def _are_nees(name: str, seq: VisualSequence, **overrides) -> tuple[float, float
     return float(err["are_deg"].mean()), float(err["nees"].mean())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["mekf", "smoother"])
 def test_visual_only_filters_fuse_the_independent_share_and_report_the_persistent_one(name):
     """Persistent frame errors: the plain filters lean on their motion model and shrink the covariance

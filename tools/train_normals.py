@@ -267,8 +267,6 @@ class Sampler:
 def loss_fn(out, true_normals, sky_weight: float = 0.1):
     """Paper eq. 2-3 on labelled pixels plus the uniform-error likelihood on sky pixels (see module
     docstring). `out` (B, 4, H, W), `true_normals` (B, 3, H, W) with 0 where unlabelled."""
-    import torch
-
     from uareme_fusion.normals.kappa_loss import kappa_nll, log_normaliser
 
     labelled = true_normals.abs().sum(dim=1) > 0.5

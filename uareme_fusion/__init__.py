@@ -1,6 +1,6 @@
 """uareme-fusion: camera orientation and gravity from video of man-made scenes, fused with an IMU.
 
-Conventions (DESIGN.md): camera frame OpenCV (x right, y down, z forward), world z up, `R_ab` maps
+Conventions (docs/design.md): camera frame OpenCV (x right, y down, z forward), world z up, `R_ab` maps
 b-coordinates to a, perturbations on the right, covariances in rad^2.
 """
 

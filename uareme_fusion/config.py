@@ -19,7 +19,8 @@ from typing import TypeVar
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from .errors import ConfigError
+from .errors import ConfigError, InputError
+from .io.paths import is_pipe, read_pipe_text
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
@@ -82,7 +83,9 @@ def read_yaml(name_or_path: str | Path) -> tuple[dict, str]:
         if path.is_dir():
             raise ConfigError(f"Cannot read config file {path}: it is a folder")
         try:
-            text = path.read_text(encoding="utf-8-sig")
+            text = read_pipe_text(path) if is_pipe(path) else path.read_text(encoding="utf-8-sig")
+        except InputError as exc:  # a pipe nobody wrote to (`--config <(...)` that failed, a silent FIFO)
+            raise ConfigError(f"Cannot read config file {exc}") from None
         except OSError as exc:
             raise ConfigError(f"Cannot read config file {path}: {exc.strerror or exc}") from None
         except UnicodeDecodeError as exc:

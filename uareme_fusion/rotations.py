@@ -1,6 +1,6 @@
 """Rotation helpers on top of scipy's `Rotation`.
 
-Conventions (see DESIGN.md):
+Conventions (see docs/design.md):
 - `R_ab` maps coordinates in frame b to frame a: `v_a = R_ab @ v_b`.
 - Perturbations are on the right: `R = R_hat @ Exp(delta)`; a covariance is that of `delta` (rad^2).
 - Every function accepts a single (3, 3) matrix or a stack (..., 3, 3) where it says so.
@@ -121,7 +121,7 @@ def align_constant(R_est: np.ndarray, R_gt: np.ndarray) -> np.ndarray:
 
 
 def are_deg(R_est: np.ndarray, R_gt: np.ndarray, align: bool = True) -> np.ndarray:
-    """Absolute rotation error per frame in degrees, after one constant alignment (paper's ARE).
+    """Absolute rotation error per frame in degrees, after one constant alignment (paper eq. 10, ARE).
 
     `R_est`, `R_gt`: (N, 3, 3) camera-to-world rotations `R_wc`. With `align=False` the frames are
     compared as they are.

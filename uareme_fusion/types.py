@@ -1,4 +1,4 @@
-"""Typed values that cross stage boundaries (see DESIGN.md "Data flow").
+"""Typed values that cross stage boundaries (see docs/design.md "Data flow").
 
 Conventions: camera frame `c` is OpenCV (x right, y down, z forward); world `w` is z up; `m` is the
 Manhattan frame. `R_ab` maps b-coordinates to a-coordinates. Covariances are of the right

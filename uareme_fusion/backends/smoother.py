@@ -10,11 +10,11 @@ gravity factor (`AttitudeFactorRot3`) are written for a body-to-navigation rotat
 GTSAM's `Rot3` tangent convention is the project's: `retract(R, xi) = R @ Exp(xi)` (right
 perturbation; checked in tests/test_smoother.py), and `Marginals.marginalCovariance(X(k))` is the
 covariance of that `xi` in rad^2. So the `Estimate.cov` returned here is the right-perturbation
-covariance of `R_wc`, as DESIGN.md requires.
+covariance of `R_wc`, as docs/design.md requires.
 
 Paper mode (`mode: paper`), exactly the paper's graph: `BatchFixedLagSmoother` over the last
 `window_frames` frames; per frame a `PriorFactorRot3` on `X(k)` at `R_cm^T` with the visual
-covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`visual_huber_sigma`) kernel (paper eq. 7, f^z); an
+covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`visual_huber_sigma`) kernel (paper eq. 9, f^z); an
 identity `BetweenFactorRot3` with isotropic `between_sigma_rad` between consecutive frames (f^s); the
 oldest frame's marginal prior (f^p) is what the fixed-lag smoother leaves when it marginalises.
 The world is the Manhattan frame as labelled on the first frame: `R_wm = I`.
@@ -189,11 +189,11 @@ class Smoother(Backend):
         return self._last.R_wc
 
     def _visual_factor(self, k: int, visual: VisualRotation, noise) -> gtsam.NonlinearFactor:
-        """f^z of paper eq. 7: the single-frame rotation as a robust prior on X(k) (`noise`: `_add_visual`)."""
+        """f^z of paper eq. 9: the single-frame rotation as a robust prior on X(k) (`noise`: `_add_visual`)."""
         return gtsam.PriorFactorRot3(X(k), gtsam.Rot3(visual.R_cm.T), noise)
 
     def _add_motion_factors(self, graph, values, stamps, k: int, t_s: float) -> None:
-        """f^s of paper eq. 7: identity between consecutive frames, isotropic sigma."""
+        """f^s of paper eq. 9: identity between consecutive frames, isotropic sigma."""
         graph.add(self._smoothness_factor(k))
 
     def _window_stamps(self, stamps, k: int) -> None:

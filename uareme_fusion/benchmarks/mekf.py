@@ -140,7 +140,7 @@ def broad_inclination(trial, config: MekfConfig, retimed: bool = False) -> tuple
 def euroc_tilt(config: MekfConfig, euroc_dir: Path) -> tuple[float, float, float]:
     """(mekf online, mekf offline, vqf 6D) tilt RMSE deg on EuRoC V1_02's first 40 s, at the ground
     truth's times (its body frame is the IMU frame)."""
-    from ..drivers.euroc_imu import read_euroc_imu
+    from ..formats.euroc import read_euroc_imu
 
     imu = read_euroc_imu(euroc_dir / "imu0" / "data.csv")
     gt = np.loadtxt(euroc_dir / "gt0" / "data.csv", delimiter=",", comments="#")
@@ -204,7 +204,7 @@ def imu_file_arrays(path: Path) -> tuple[np.ndarray, np.ndarray, float]:
     if path.suffix == ".hdf5":
         trial = read_broad(path)
         return trial.gyro_rad_s, trial.accel_m_s2, trial.sampling_rate_hz
-    from ..drivers.euroc_imu import read_euroc_imu
+    from ..formats.euroc import read_euroc_imu
 
     imu = read_euroc_imu(path)
     return imu.gyro_rad_s, imu.accel_m_s2, 1.0 / float(np.median(np.diff(imu.t_s)))

@@ -2,7 +2,7 @@
 and the fused moment pass >= 4x faster than the numpy reference measured in the same run).
 
 The authors' released solver is not run here: its figure (about 55 ms for one 640x480 map on one CPU
-thread, `shared/README.md`) is a constant. The numpy reference moments and the compiled pass are
+thread, docs/design.md "Reference figures") is a constant. The numpy reference moments and the compiled pass are
 timed in alternation, so that both see the same load on a shared machine.
 """
 
@@ -19,7 +19,7 @@ from ..solver.moments import normal_moments, normal_moments_reference
 from .common import pin_to_one_core, summary, time_ms, time_ms_interleaved
 
 AUTHORS_SOLVER_MS = 55.0
-"""The authors' released solver, 640x480, one CPU thread (shared/README.md; not run by this benchmark)."""
+"""The authors' released solver, 640x480, one CPU thread (docs/design.md "Reference figures"; not run by this benchmark)."""
 SOLVE_GOAL_MS = 2.0
 """Issue 17: 640x480 solve with a prior, median, one thread."""
 FUSED_SPEEDUP_GOAL = 4.0
@@ -36,7 +36,8 @@ def _with_holes(normals: np.ndarray, kappa: np.ndarray, rng: np.random.Generator
     return normals, kappa
 
 
-def run(repeats: int = 100, sizes: tuple[tuple[int, int], ...] = ((640, 480), (320, 240)), console: Console | None = None) -> dict:
+def run(repeats: int = 100, sizes: tuple[tuple[int, int], ...] = ((640, 480), (320, 240)),
+        console: Console | None = None) -> dict:
     """Time moments and optimisation per map size; returns the figures and prints a table."""
     console = console or Console()
     note = pin_to_one_core()

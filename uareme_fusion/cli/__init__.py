@@ -10,5 +10,6 @@ from . import run_cmd  # noqa: E402,F401
 from . import overlay_cmds  # noqa: E402,F401
 from . import image_cmd  # noqa: E402,F401
 from . import normals_cmd  # noqa: E402,F401
+from . import batch_cmd  # noqa: E402,F401
 
 __all__ = ["app", "main"]

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Optional
 
 import typer
@@ -12,7 +12,7 @@ from ..evaluation.compare import compare
 from ..evaluation.sequence import synthetic_sequence
 from ..evaluation.source_sequence import load_sequence
 from .app import app, fail
-from .run_cmd import _o, run_config
+from .run_cmd import _o, bag_topics, run_config
 
 MAX_SYNTHETIC_DURATION_S = 3600.0
 """The synthetic sequence is held in memory: an hour at 15 fps is about 54000 frames."""
@@ -37,6 +37,9 @@ def compare_command(
     imu: Optional[Path] = _o["imu"], max_frames: Optional[int] = _o["max_frames"], fps: Optional[float] = _o["fps"],
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
+    image_topic: Optional[str] = _o["image_topic"], imu_topic: Optional[str] = _o["imu_topic"],
+    depth_topic: Optional[str] = _o["depth_topic"], camera_info_topic: Optional[str] = _o["camera_info_topic"],
+    gt_topic: Optional[str] = _o["gt_topic"],
 ) -> None:
     """Run every backend on the same visual rotations and IMU; write a table and an error plot."""
     if (source is None) == (synthetic is None):
@@ -52,7 +55,8 @@ def compare_command(
     else:
         seq = _source_sequence(source, imu, fps, run_config(None, normals=normals, cues=cues, max_frames=max_frames,
                                                             threads=threads, imu_rotation=imu_rotation,
-                                                            imu_time_offset_s=imu_time_offset_s))
+                                                            imu_time_offset_s=imu_time_offset_s),
+                               bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic, gt_topic))
     doc = compare(seq, out)
     typer.echo((out / "compare.md").read_text())
     typer.echo(f"wrote {out / 'compare.md'}, {out / 'compare.json'}, {out / 'compare.png'} "
@@ -64,15 +68,22 @@ def _has_saved_normals(folder: Path) -> bool:
     return folder.is_dir() and ((folder / "normals.npz").is_file() or (folder / "normals").is_dir())
 
 
-def _source_sequence(spec: str, imu: Optional[Path], fps: Optional[float], cfg):
+def _source_sequence(spec: str, imu: Optional[Path], fps: Optional[float], cfg, topics: Optional[dict] = None):
     """The visual rotations of any source, computed once (`evaluation.source_sequence`)."""
     from ..evaluation.source_sequence import source_sequence
     from ..drivers import open_source
     from ..pipeline.session import configure_imu
+    from ..pipeline.runner import RunStats
     from .progress import frame_progress
 
-    with configure_imu(open_source(spec, imu=None if imu is None else str(imu), fps=fps), cfg) as src:
+    with configure_imu(open_source(spec, imu=None if imu is None else str(imu), fps=fps, **(topics or {})),
+                       cfg) as src:
         total = min(filter(None, [src.info.n_frames, cfg.max_frames]), default=None)
         with frame_progress("compare: visual rotations", total) as on_result:
-            # frame_progress reads only `stats.estimates`
-            return source_sequence(src, cfg, progress=lambda done, _: on_result(None, SimpleNamespace(estimates=done)))
+            stats = RunStats(started_s=time.perf_counter())  # frame_progress reads its estimates and fps
+
+            def progress(done, _):
+                stats.estimates = done
+                on_result(None, stats)
+
+            return source_sequence(src, cfg, progress=progress)

@@ -14,13 +14,14 @@ from .progress import frame_progress
 
 @app.command()
 def demo(
-    out: Path = typer.Option(Path("uareme-demo"), help="Folder for the demo's plot and overlay video."),
+    out: Optional[Path] = typer.Option(None, help="Folder for the demo's plot and overlay video (default: "
+                                       "uareme-demo in the system's temporary folder, printed first)."),
     normals: str = typer.Option("learned", help="learned (the shipped network) or source (the simulator's exact normals)."),
     threads: Optional[int] = typer.Option(None, "--threads", min=1, max=256,
                                           help="torch CPU threads of the learned normals (default 1)."),
 ) -> None:
     """Run the method on built-in synthetic data and print what it gets right (about a minute)."""
-    if out.exists() and not out.is_dir():
+    if out is not None and out.exists() and not out.is_dir():
         raise fail(f"--out {out} exists and is not a folder")
     if normals not in ("learned", "source"):
         raise fail(f"--normals {normals!r}: use learned or source")

@@ -31,7 +31,7 @@ def image_command(
     image: List[Path] = typer.Argument(..., help="PNG/JPEG images of man-made scenes, or folders of them."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON object per image, one per line."),
     out: Optional[Path] = typer.Option(None, "--out", help="Overlay image (one input) or folder (several)."),
-    normals: str = typer.Option("learned", "--normals", help="learned or a model file (.pt)."),
+    normals: str = typer.Option("learned", "--normals", help="learned or a model file (.pt, .onnx)."),
     cues: str = typer.Option(DEFAULT_CUES, "--cues", help="Visual cues: normals, lines, sky (comma-separated; "
                              "sky: the sky/ground boundary of open scenes)."),
     fov_deg: float = typer.Option(60.0, "--fov-deg",

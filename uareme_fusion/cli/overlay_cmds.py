@@ -11,7 +11,7 @@ from ..errors import InputError
 from ..io.safe_files import refuse_input_as_output, refuse_link
 from ..pipeline.drawing_sinks import VIDEO_CODECS, GroundSink, HorizonVideoSink
 from .app import app
-from .run_cmd import _o, execute, run_config
+from .run_cmd import _o, bag_topics, execute, run_config
 
 
 def needs_frames(src, command: str) -> None:
@@ -35,6 +35,8 @@ def horizon_command(
     fov_deg: Optional[float] = typer.Option(None, "--fov-deg",
                                             help="Assumed horizontal field of view when K is unknown (default 60)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out video and its OUT_STEM.run/ results."),
+    image_topic: Optional[str] = _o["image_topic"], imu_topic: Optional[str] = _o["imu_topic"],
+    depth_topic: Optional[str] = _o["depth_topic"], camera_info_topic: Optional[str] = _o["camera_info_topic"],
 ) -> None:
     """Draw the horizon and the Manhattan axes on every frame of a video."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
@@ -51,9 +53,12 @@ def horizon_command(
         needs_frames(src, "horizon")
         return [HorizonVideoSink(out, src.info.fps or 30.0, cfg.assumed_fov_deg, panes)]
 
-    summary = execute(source, out.parent / f"{out.stem}.run", cfg, imu, fps, evaluate=False, command="horizon",
-                      extra_sinks_factory=sinks, force=force)
-    typer.echo(f"wrote {out} ({summary.get('videos', {}).get(out.name, 'no frames')})")
+    run_dir = out.parent / f"{out.stem}.run"
+    summary = execute(source, run_dir, cfg, imu, fps, evaluate=False, command="horizon",
+                      extra_sinks_factory=sinks, force=force,
+                      topics=bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic))
+    typer.echo(f"wrote {out} ({summary.get('videos', {}).get(out.name, 'no frames')}); the estimates "
+               f"(trajectory.tum, estimates.csv, summary.json) are in {run_dir}/")
 
 
 @app.command("ground")
@@ -71,6 +76,8 @@ def ground_command(
     threshold_deg: Optional[float] = typer.Option(None, "--threshold-deg",
                                                   help="Ground when the normal is within this angle of up (15)."),
     force: bool = _o["force"],
+    image_topic: Optional[str] = _o["image_topic"], imu_topic: Optional[str] = _o["imu_topic"],
+    depth_topic: Optional[str] = _o["depth_topic"], camera_info_topic: Optional[str] = _o["camera_info_topic"],
 ) -> None:
     """Segment the ground: pixels whose normal is within a threshold of the estimated up vector."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
@@ -82,4 +89,5 @@ def ground_command(
         return [GroundSink(out_dir, cfg.ground_threshold_deg, out_dir / "ground.mp4" if video else None,
                            src.info.fps or 30.0)]
 
-    execute(source, out, cfg, imu, fps, evaluate=False, command="ground", extra_sinks_factory=sinks, force=force)
+    execute(source, out, cfg, imu, fps, evaluate=False, command="ground", extra_sinks_factory=sinks, force=force,
+            topics=bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic))

@@ -1,4 +1,6 @@
-"""A rich progress bar fed by the pipeline's per-result callback: frames, fps, ETA when the length is known."""
+"""A rich progress bar fed by the pipeline's per-result callback: frames, fps, ETA when the length is known.
+
+Its fps is the summary's (`RunStats.fps`): estimates per second since the run began, warm-up included."""
 
 from __future__ import annotations
 
@@ -29,8 +31,7 @@ def frame_progress(description: str, total: int | None):
             progress.start()
             progress.start_task(task)
             started = True
-        elapsed = progress.tasks[task].elapsed or 0.0
-        progress.update(task, completed=stats.estimates, fps=stats.estimates / elapsed if elapsed > 0 else 0.0)
+        progress.update(task, completed=stats.estimates, fps=stats.fps)
 
     try:
         yield on_result

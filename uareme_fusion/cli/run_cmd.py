@@ -10,12 +10,13 @@ from rich.table import Table
 
 from ..config import load_config, preset_names, validate_config
 from ..pipeline import RunConfig
-from ..pipeline.session import configure_imu, prepare_output_folder, run_notes, run_source
+from ..pipeline.session import open_for_run, output_folder, run_notes, run_source
 from .app import StdoutConsole, app, err_console, fail
 from .progress import frame_progress
 
 SOURCE_HELP = ("A video file, webcam:N, an image, folder or glob of images, a dataset folder (TUM RGB-D, "
-               "ICL-NUIM, EuRoC, one written by 'simulate'), a BROAD .hdf5 or IMU .csv, sim:SCENARIO, or oak[:ID].")
+               "ICL-NUIM, EuRoC, one written by 'simulate'), a ROS bag (.bag, a ROS 2 bag folder, .mcap), a BROAD "
+               ".hdf5 or IMU .csv, sim:SCENARIO, or oak[:ID].")
 EKF_PRESETS = [name for name in preset_names() if name != "paper"]
 """The EKF presets shipped in configs/ (paper.yaml holds the smoother's settings)."""
 STOP_EXIT_CODES = {"end": 0, "max_frames": 0, "source_error": 1, "input_error": 2, "interrupted": 130,
@@ -31,29 +32,26 @@ def run_config(config: Optional[Path], **overrides) -> RunConfig:
 
 def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Optional[float], evaluate: bool,
             command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None,
-            gt: Optional[Path] = None, gt_time_offset_s: float = 0.0, force: bool = False) -> dict:
+            gt: Optional[Path] = None, gt_time_offset_s: float = 0.0, force: bool = False,
+            topics: Optional[dict] = None) -> dict:
     """Open the source, run it with a progress bar, report how it ended; exits non-zero when it failed.
 
     With `record_dir` the source's frames and IMU are also written there as they pass (our dataset
-    layout: a live session replays exactly with `run RECORD_DIR`)."""
-    from ..drivers import open_source, record
+    layout: a live session replays exactly with `run RECORD_DIR`). `topics` chooses a ROS bag's topics
+    (`image_topic`, ... as `open_source` takes them; None values are left to the bag)."""
+    from ..drivers import record
 
-    out_dir = prepare_output_folder(out, force)
-    opened = configure_imu(open_source(source, imu=None if imu is None else str(imu), fps=fps,
-                                       intrinsics=cfg.intrinsics), cfg)
-    if gt is not None:
-        from ..drivers.ground_truth_file import with_ground_truth_file
-
-        with_ground_truth_file(opened, gt, gt_time_offset_s)
-    with (opened if record_dir is None else record(opened, record_dir)) as src:
-        print_notes(*run_notes(src, cfg))
-        sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
-        total = src.info.n_frames if src.info.has_frames else getattr(src, "n_batches", None)
-        if cfg.max_frames and total:
-            total = min(total, cfg.max_frames)
-        with frame_progress(command, total) as on_result:
-            summary = run_source(src, out_dir, cfg, evaluate=evaluate, extra_sinks=sinks, on_result=on_result,
-                                 command=command)
+    with output_folder(out, force) as out_dir:  # removed again when the run fails before writing into it
+        opened = open_for_run(source, cfg, imu, fps, gt, gt_time_offset_s, topics)
+        with (opened if record_dir is None else record(opened, record_dir)) as src:
+            print_notes(*run_notes(src, cfg))
+            sinks = extra_sinks_factory(src, out_dir, cfg) if extra_sinks_factory else []
+            total = src.info.n_frames if src.info.has_frames else getattr(src, "n_batches", None)
+            if cfg.max_frames and total:
+                total = min(total, cfg.max_frames)
+            with frame_progress(command, total) as on_result:
+                summary = run_source(src, out_dir, cfg, evaluate=evaluate, extra_sinks=sinks, on_result=on_result,
+                                     command=command)
     print_summary(summary)
     code = STOP_EXIT_CODES.get(summary["stopped"], 1)
     if summary["stopped"] == "interrupted":
@@ -74,17 +72,35 @@ def print_notes(notes: list[str], fixes: list[str]) -> None:
         err_console.print(f"note: {note}", markup=False, emoji=False)
 
 
-def rerun_sinks(path: Optional[Path]):
-    """The sinks factory of `--rerun PATH` for `execute` (None without it)."""
-    if path is None:
+def viewer_sinks(rerun: Optional[Path], mcap: Optional[Path] = None, source: Optional[str] = None):
+    """The sinks factory of `--rerun PATH` and `--mcap PATH` for `execute` (None without either); an
+    `--mcap` that names the input `source` is refused."""
+    if rerun is None and mcap is None:
         return None
+    if mcap is not None:
+        from ..io.safe_files import refuse_input_as_output
+
+        refuse_input_as_output(mcap, [source])
 
     def factory(src, out_dir, cfg):
-        from ..pipeline.rerun_sink import RerunSink
+        sinks = []
+        if rerun is not None:
+            from ..pipeline.rerun_sink import RerunSink
 
-        return [RerunSink(path, cfg.assumed_fov_deg)]
+            sinks.append(RerunSink(rerun, cfg.assumed_fov_deg))
+        if mcap is not None:
+            from ..pipeline.mcap_sink import McapSink
+
+            sinks.append(McapSink(mcap, cfg.assumed_fov_deg))
+        return sinks
 
     return factory
+
+
+def bag_topics(image_topic=None, imu_topic=None, depth_topic=None, camera_info_topic=None, gt_topic=None) -> dict:
+    """The ROS bag topic options as `open_source` takes them."""
+    return dict(image_topic=image_topic, imu_topic=imu_topic, depth_topic=depth_topic,
+                camera_info_topic=camera_info_topic, gt_topic=gt_topic)
 
 
 def print_summary(summary: dict) -> None:
@@ -97,14 +113,21 @@ def print_summary(summary: dict) -> None:
     if summary["source_info"].get("intrinsics_from"):
         table.add_row("intrinsics from", summary["source_info"]["intrinsics_from"])
     table.add_row("normals / backend", f"{summary['normals']} / {summary['backend']}")
-    table.add_row("speed", f"{summary['fps']:.1f} fps")
+    table.add_row("speed", f"{summary['fps']:.1f} fps ({summary['estimates']} estimates in {summary['wall_s']:.2f} s, "
+                  f"warm-up {summary['warm_up_s']:.2f} s included)")
     table.add_row("ms per frame", ", ".join(f"{k} {v:.1f}" for k, v in summary["timing_ms"].items()))
     if summary["status_counts"]:
         table.add_row("status flags", ", ".join(f"{k} {v}" for k, v in summary["status_counts"].items()))
     if "are_deg" in summary and summary["are_deg"]:
         a, t = summary["are_deg"], summary["tilt_deg"]
         table.add_row("ARE deg (mean / median / max)", f"{a['mean']:.2f} / {a['median']:.2f} / {a['max']:.2f}")
-        table.add_row("tilt deg (mean / p95 / max)", f"{t['mean']:.2f} / {t['p95']:.2f} / {t['max']:.2f}")
+        table.add_row("tilt deg (mean / p95 / max)" + (", after the constant alignment (the reference is not "
+                      "gravity-aligned)" if "tilt_unaligned_deg" in summary else ""),
+                      f"{t['mean']:.2f} / {t['p95']:.2f} / {t['max']:.2f}")
+        if "tilt_unaligned_deg" in summary:
+            u = summary["tilt_unaligned_deg"]
+            table.add_row("tilt deg without alignment, against the reference's z (mean / p95 / max)",
+                          f"{u['mean']:.2f} / {u['p95']:.2f} / {u['max']:.2f}")
         table.add_row("NEES mean", f"{summary['nees']['mean']:.2f}")
     est = summary.get("imu_rotation_estimate", {})
     if est.get("observable"):
@@ -116,6 +139,8 @@ def print_summary(summary: dict) -> None:
                       "(their size differs from the first frame's)")
     table.add_row("outputs", ", ".join(summary["outputs"]))
     console.print(table)
+    if summary.get("normals_note"):
+        err_console.print(f"note: {summary['normals_note']}", markup=False, emoji=False)
     for line in summary.get("warnings", []):
         err_console.print(f"[bold yellow]warning:[/] {line}", markup=True, emoji=False, highlight=False)
 
@@ -125,7 +150,8 @@ def _options():
         imu=typer.Option(None, "--imu", help="IMU CSV in EuRoC format (t ns, gyro rad/s, accel m/s^2) merged by time."),
         backend=typer.Option(None, "--backend", help="mekf (default), smoother or single."),
         normals=typer.Option(None, "--normals",
-                             help="auto (default), learned, depth, source, a model file (.pt) or a folder of normal maps."),
+                             help="auto (default), learned, depth, source, a model file (.pt, .onnx) or a folder "
+                                  "of normal maps."),
         config=typer.Option(None, "--config", help="YAML run configuration (keys of RunConfig)."),
         preset=typer.Option(None, "--preset", help=f"EKF preset: {', '.join(EKF_PRESETS)} or a YAML path "
                                                     "(default: handheld with a camera, imu_only for an IMU log)."),
@@ -153,6 +179,17 @@ def _options():
                                        help="Seconds added to IMU stamps to put them on the camera clock "
                                             "(default: the source's own, 0)."),
         force=typer.Option(False, "--force", help="Replace the results of an earlier run in a non-empty --out."),
+        image_topic=typer.Option(None, "--image-topic", help="ROS bag: the sensor_msgs/Image or CompressedImage "
+                                 "topic (default: the only one)."),
+        imu_topic=typer.Option(None, "--imu-topic", help="ROS bag: the sensor_msgs/Imu topic (default: the only one)."),
+        depth_topic=typer.Option(None, "--depth-topic", help="ROS bag: the depth topic, 16UC1 mm or 32FC1 m "
+                                 "(default: the only one)."),
+        camera_info_topic=typer.Option(None, "--camera-info-topic", help="ROS bag: the sensor_msgs/CameraInfo topic "
+                                       "(default: the only one, or the image topic's)."),
+        gt_topic=typer.Option(None, "--gt-topic", help="ROS bag: the ground-truth PoseStamped, "
+                              "PoseWithCovarianceStamped or Odometry topic (default: the only one)."),
+        mcap=typer.Option(None, "--mcap", help="Also write the run as an MCAP file for Foxglove: frames, camera "
+                          "attitude (/tf), horizon and up annotations, covariance and status (needs the 'ros' extra)."),
     )
 
 
@@ -170,14 +207,17 @@ def run_command(
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
     record: Optional[Path] = _o["record"], rerun: Optional[Path] = _o["rerun"], force: bool = _o["force"],
     intrinsics: Optional[str] = _o["intrinsics"], offline: Optional[bool] = _o["offline"],
-    cues: Optional[str] = _o["cues"],
+    cues: Optional[str] = _o["cues"], mcap: Optional[Path] = _o["mcap"],
+    image_topic: Optional[str] = _o["image_topic"], imu_topic: Optional[str] = _o["imu_topic"],
+    depth_topic: Optional[str] = _o["depth_topic"], camera_info_topic: Optional[str] = _o["camera_info_topic"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
                      imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record,
-            extra_sinks_factory=rerun_sinks(rerun), force=force)
+            extra_sinks_factory=viewer_sinks(rerun, mcap, source), force=force,
+            topics=bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic))
 
 
 @app.command("eval")
@@ -195,10 +235,16 @@ def eval_command(
                                                          "qw', or EuRoC gt0/data.csv) in place of the source's own."),
     gt_time_offset_s: float = typer.Option(0.0, "--gt-time-offset-s",
                                            help="Seconds added to the --gt stamps to put them on the source's clock."),
+    mcap: Optional[Path] = _o["mcap"],
+    image_topic: Optional[str] = _o["image_topic"], imu_topic: Optional[str] = _o["imu_topic"],
+    depth_topic: Optional[str] = _o["depth_topic"], camera_info_topic: Optional[str] = _o["camera_info_topic"],
+    gt_topic: Optional[str] = _o["gt_topic"],
 ) -> None:
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
                      imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues)
-    execute(source, out, cfg, imu, fps, evaluate=True, command="eval", extra_sinks_factory=rerun_sinks(rerun),
-            gt=gt, gt_time_offset_s=gt_time_offset_s, force=force)
+    execute(source, out, cfg, imu, fps, evaluate=True, command="eval",
+            extra_sinks_factory=viewer_sinks(rerun, mcap, source),
+            gt=gt, gt_time_offset_s=gt_time_offset_s, force=force,
+            topics=bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic, gt_topic))

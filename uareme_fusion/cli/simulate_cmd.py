@@ -9,9 +9,9 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from ..errors import InputError
-from ..sim.dataset import SequenceOptions, prepare_out_dir, write_sequence
+from ..sim.dataset import INCOMPLETE_MARKER, SequenceOptions, prepare_out_dir, write_sequence
 from ..sim.scenarios import SCENARIO_NAMES, SCENARIOS
-from .app import app, fail
+from .app import app, err_console, fail
 
 _SCENARIO_HELP = "Scenario, one of: " + "; ".join(f"{n} ({SCENARIOS[n].description})" for n in SCENARIO_NAMES)
 
@@ -33,7 +33,8 @@ def simulate(
     seed: int = typer.Option(0, "--seed", help="Seed of the scene, trajectory, noise: same seed, same files."),
     imu_rate: float = typer.Option(200.0, "--imu-rate", help="IMU rate in Hz (100-1000)."),
     fps: float = typer.Option(30.0, "--fps", help="Camera frame rate in Hz."),
-    fov: float = typer.Option(None, "--fov", help="Horizontal field of view in degrees (45-95); default: the scenario's."),
+    fov_deg: float = typer.Option(None, "--fov-deg",
+                                  help="Horizontal field of view in degrees (45-95); default: the scenario's."),
     force: bool = typer.Option(False, "--force", help="Overwrite a non-empty output folder."),
 ) -> None:
     """Render a synthetic Manhattan-world sequence with ground-truth pose, normals and IMU."""
@@ -42,13 +43,18 @@ def simulate(
             raise InputError(f"unknown scenario {scenario!r}; valid: {', '.join(SCENARIO_NAMES)}")
         width, height = parse_size(size)
         options = SequenceOptions(frames=frames, width=width, height=height, fps=fps, seed=seed,
-                                  imu_rate_hz=imu_rate, hfov_deg=fov)
+                                  imu_rate_hz=imu_rate, hfov_deg=fov_deg)
         options.validate()
         prepare_out_dir(out, force)
         columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with Progress(*columns, transient=False) as bar:
             task = bar.add_task(f"simulate {scenario}", total=frames)
-            write_sequence(scenario, out, options, progress=lambda done, total: bar.update(task, completed=done))
+            try:
+                write_sequence(scenario, out, options, progress=lambda done, total: bar.update(task, completed=done))
+            except KeyboardInterrupt:
+                err_console.print(f"{out} is incomplete ({out / INCOMPLETE_MARKER} says so; 'run' refuses it)",
+                                  markup=False, emoji=False, style="yellow")
+                raise
     except InputError as exc:
         raise fail(str(exc)) from None
     typer.echo(f"wrote {frames} frames of {scenario} (seed {seed}) to {out}")

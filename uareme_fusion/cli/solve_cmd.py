@@ -10,6 +10,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from ..errors import InputError
 from ..io.normal_maps import NORMAL_FRAMES, load_normal_map
 from ..rotations import quat_xyzw
 from ..solver.manhattan import solve_manhattan, up_candidate
@@ -19,7 +20,10 @@ from .app import app
 def solve_report(path: Path, frame: str) -> dict:
     """Solve one normal-map file and return the JSON-ready report."""
     normal_map = load_normal_map(path, frame=frame)
-    result = solve_manhattan(normal_map.normals, normal_map.kappa)
+    try:
+        result = solve_manhattan(normal_map.normals, normal_map.kappa)
+    except InputError as exc:  # e.g. no valid normals: the message names the map's shape, not the file
+        raise InputError(f"{path}: {exc}") from None
     axis, up_c = up_candidate(result.R_cm)
     std_deg = np.degrees(np.sqrt(np.diag(result.cov)))
     return {

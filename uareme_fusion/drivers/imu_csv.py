@@ -3,9 +3,10 @@
     with ImuCsvSource("imu.csv") as src: ...                  # IMU-only: batches of 1/30 s
     with merge_imu(VideoSource("clip.mp4"), ImuCsvSource("imu.csv"), time_offset_s=0.12) as src: ...
 
-Format (`euroc_imu.read_euroc_imu`): `timestamp [ns], w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2]`,
+Format (`formats.euroc.read_euroc_imu`): `timestamp [ns], w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2]`,
 comma- or whitespace-separated (any file extension), `#` header (or a line of column names), timestamps
-as integer ns (or seconds with decimals, see `imu_checks`); gyro and specific force in the IMU frame. A file with other columns is refused with an `InputError` naming the file, line and column.
+as integer ns (or seconds with decimals, see `imu_checks`); gyro and specific force in the IMU frame. A file with
+other columns is refused with an `InputError` naming the file, line and column.
 `read_imu_log` then checks the data for wrong units, column order and time running backwards
 (`imu_checks.check_imu_log`): the source's `fixes` list what it repaired.
 
@@ -80,6 +81,12 @@ CLOCK_TOLERANCE_S = 1.0
 """IMU samples may end or start this long beyond the frames before the clocks count as different."""
 
 
+def spans_overlap(imu_span_s: tuple[float, float], frame_span_s: tuple[float, float]) -> bool:
+    """Whether IMU samples spanning `imu_span_s` (camera clock) meet frames spanning `frame_span_s`,
+    within `CLOCK_TOLERANCE_S`: False means the two are on different clocks."""
+    return not (imu_span_s[1] < frame_span_s[0] - CLOCK_TOLERANCE_S or imu_span_s[0] > frame_span_s[1] + CLOCK_TOLERANCE_S)
+
+
 class MergedSource(Source):
     """A camera source with the samples of an IMU-only source put between its frames."""
 
@@ -118,7 +125,7 @@ class MergedSource(Source):
         info = self.camera.info
         t_last = t_first_frame_s + (info.n_frames / info.fps if info.n_frames and info.fps else 0.0)
         start, end = span[0] + self.info.imu_time_offset_s, span[1] + self.info.imu_time_offset_s
-        if end < t_first_frame_s - CLOCK_TOLERANCE_S or start > t_last + CLOCK_TOLERANCE_S:
+        if not spans_overlap((start, end), (t_first_frame_s, t_last)):
             raise InputError(f"{self.imu.info.name}: column 1 (timestamp): the IMU samples span {start:.6g} to "
                              f"{end:.6g} s and the frames {t_first_frame_s:.6g} to {t_last:.6g} s, with no overlap: "
                              "the IMU log is on another clock than the video (shift its timestamps to the video's)")

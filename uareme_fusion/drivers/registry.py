@@ -10,6 +10,9 @@ Spec -> driver (first match wins):
 - a folder with `rgb.txt` -> `TumSource` (TUM RGB-D, `simulate` output, `--record` folders);
   with `associations.txt` -> `IclNuimSource` when its timestamps are frame numbers, else `TumSource`;
   with `mav0/` (or `cam0/`/`imu0/`) -> `EurocSource`; holding image files -> `ImageSource`;
+- a ROS 2 bag folder (`metadata.yaml`), a `.bag` (ROS 1), `.mcap` or `.db3` file -> `RosbagSource`
+  (options `image_topic`, `imu_topic`, `depth_topic`, `camera_info_topic`, `gt_topic`; given for
+  another source they are refused);
 - a `.hdf5`/`.h5` file (or any file with the HDF5 signature) -> `BroadSource`; an image file or a
   glob -> `ImageSource`; a text file, whatever its extension, is an IMU table -> `ImuCsvSource`
   (EuRoC columns; one that does not read as one is refused naming the file and line); any other
@@ -35,6 +38,7 @@ from uareme_fusion.io.paths import is_pipe, path_kind
 from uareme_fusion.io.text_tables import is_text_file
 
 from ..formats.tum import read_associations
+from ..sim.dataset import incomplete_simulation
 from .base import Source
 from .broad_source import BroadSource
 from .calibrated import with_intrinsics
@@ -43,12 +47,15 @@ from .icl_nuim import IclNuimSource
 from .images import IMAGE_SUFFIXES, ImageSource
 from .imu_csv import ImuCsvSource, merge_imu
 from .intrinsics import parse_intrinsics
+from .rosbag import is_bag
 from .simulated import SimulatedSource
 from .tum import TumSource
 from .video import VideoSource, parse_webcam
 
 BROAD_SUFFIXES = (".hdf5", ".h5")
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+TOPIC_OPTIONS = ("image_topic", "imu_topic", "depth_topic", "camera_info_topic", "gt_topic")
+"""Options only a ROS bag takes (`--image-topic` ...)."""
 TABLE_SUFFIXES = (".csv", ".txt", ".tsv", ".dat", ".log", "")
 """Names users give IMU tables; a text file under another name is also read as one, with a message
 that says it is not a video when it does not read."""
@@ -76,6 +83,10 @@ def _associations_count_frames(path: Path) -> bool:
 
 def _open_folder(path: Path, fps: float | None, options: dict) -> Source:
     where = str(path)
+    interrupted = incomplete_simulation(path)
+    if interrupted:
+        raise InputError(f"{path}: is {interrupted}; write it again with 'uareme-fusion simulate ... --out {path} "
+                         "--force'")
     if (path / "rgb.txt").is_file():
         _no_fps(fps, where)
         return _construct(TumSource, where, path, **options)
@@ -108,7 +119,13 @@ def open_source(spec: str, imu: str | None = None, fps: float | None = None, int
     if fps is not None and not (np.isfinite(fps) and fps > 0):
         raise InputError(f"--fps must be > 0, got {fps}")
     camera = parse_intrinsics(intrinsics) if intrinsics is not None else None
-    source = _open(str(spec).strip(), fps, options)
+    topics = {name: options.pop(name) for name in TOPIC_OPTIONS if options.get(name) is not None}
+    for name in TOPIC_OPTIONS:
+        options.pop(name, None)
+    if camera is not None and is_bag(Path(str(spec).strip()).expanduser()):
+        options["camera"] = camera  # a bag undistorts its raw frames with the given camera in place of its CameraInfo
+        camera = None
+    source = _open(str(spec).strip(), fps, options, topics)
     if camera is not None:
         source = with_intrinsics(source, camera)
     if imu is None:
@@ -120,7 +137,17 @@ def open_source(spec: str, imu: str | None = None, fps: float | None = None, int
         raise
 
 
-def _open(spec: str, fps: float | None, options: dict) -> Source:
+def _open(spec: str, fps: float | None, options: dict, topics: dict) -> Source:
+    path = Path(spec).expanduser()
+    if is_bag(path):
+        from .rosbag import RosbagSource
+
+        _no_fps(fps, spec)
+        return _construct(RosbagSource, spec, path, **options, **topics)
+    if topics:
+        given = ", ".join("--" + name.replace("_", "-") for name in topics)
+        raise InputError(f"{spec}: {given} applies to ROS bags and MCAP files (.bag, .mcap, .db3 or a folder with "
+                         "metadata.yaml), not to this source")
     if spec.startswith("sim:"):
         if fps is not None:
             options["fps"] = fps
@@ -131,7 +158,6 @@ def _open(spec: str, fps: float | None, options: dict) -> Source:
         from .oak import OakSource
 
         return _construct(OakSource, spec, spec[4:] or None, fps=fps, **options)
-    path = Path(spec).expanduser()
     if path.is_dir():
         return _open_folder(path, fps, options)
     if path.is_file():

@@ -3,7 +3,7 @@
     with TumSource("rgbd_dataset_freiburg1_desk") as src: ...
     with TumSource("sim_out/") as src: ...      # + imu0, normals, scene.json
 
-What is read (built on `tum_rgbd.load_tum_rgbd` and `euroc_imu.read_euroc_imu`):
+What is read (built on `formats.tum.load_tum_rgbd` and `formats.euroc.read_euroc_imu`):
 - `rgb.txt` + `depth.txt` (or `associations.txt`): RGB uint8 frames and depth in metres (0 = none).
 - `imu0/data.csv` (EuRoC format): gyro + accelerometer batches between frames; `has_imu` True.
 - `accelerometer.txt` alone (the TUM Kinect's accelerometer, no gyro): NOT yielded, because the

@@ -6,7 +6,7 @@
 once per sequence, each frame's solver initialised from the previous frame's solution; each backend
 then resolves the Manhattan symmetry against its own prediction.
 
-Metrics (DESIGN.md "Evaluation protocol"), over the frames where a backend is initialised:
+Metrics (docs/design.md "Evaluation protocol"), over the frames where a backend is initialised:
 ARE in degrees after one constant chordal alignment of the estimated `R_wc` to the true `R_wc`
 (mean, median, max, the count of frames above `JUMP_DEG` and of frame-to-frame rotations wrong by
 more than it); tilt error in degrees between the

@@ -1,7 +1,7 @@
-"""Attitude error metrics against ground truth (DESIGN.md "Evaluation protocol"), on plain arrays.
+"""Attitude error metrics against ground truth (docs/design.md "Evaluation protocol"), on plain arrays.
 
-ARE (degrees) after one constant chordal alignment of the estimated `R_wc` to the true `R_wc` (the
-paper's protocol); tilt error (degrees) between estimated and true up in the camera frame, with no
+ARE (degrees, paper eq. 10) after one constant chordal alignment of the estimated `R_wc` to the true `R_wc`
+(the paper's protocol); tilt error (degrees) between estimated and true up in the camera frame, with no
 alignment; NEES of the reported covariance (right perturbation of `R_wc`, rad^2) after the same
 alignment, or after a rotation about up only for backends that know gravity, so that their
 absolute tilt is scored as it is.

@@ -2,9 +2,9 @@
 from a dataset folder with its normals saved (`load_sequence`).
 
 The source is read once: each frame's cues (`--cues`: normals as `--normals` says, and/or line
-segments, as in `run`) are solved into a visual rotation (each solve initialised from the previous one, `sequence.ChainedSolver`), the IMU samples
-are put on the camera clock and axes, and the source's ground truth (or none) is taken at the frame
-times. Every backend then runs on these same rotations (`compare.compare`).
+segments, as in `run`) are solved into a visual rotation (each solve initialised from the previous one,
+`sequence.ChainedSolver`), the IMU samples are put on the camera clock and axes, and the source's ground
+truth (or none) is taken at the frame times. Every backend then runs on these same rotations (`compare.compare`).
 """
 
 from __future__ import annotations
@@ -86,9 +86,9 @@ def load_sequence(source: str | Path) -> VisualSequence:
     with the rotation and time offset of `scene.json`. Missing ground truth or IMU is allowed and
     noted; a missing folder or missing normals is an `InputError`.
     """
-    from ..drivers.euroc_imu import read_euroc_imu
+    from ..formats.euroc import read_euroc_imu
     from ..drivers.tum import ground_truth_from_tum, read_metadata
-    from ..drivers.tum_rgbd import read_tum_list, read_tum_trajectory
+    from ..formats.tum import read_tum_list, read_tum_trajectory
 
     root = Path(source)
     if not root.exists():

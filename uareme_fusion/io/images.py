@@ -104,10 +104,8 @@ def reduction_for(size: tuple[int, int] | None, max_pixels: int | None) -> tuple
     `max_pixels`; (1, None) when no reduction is needed or the size is unknown."""
     if size is None or max_pixels is None or size[0] * size[1] <= max_pixels:
         return 1, None
-    for factor, flag in _REDUCED_COLOR:
-        if (size[0] // factor) * (size[1] // factor) <= max_pixels:
-            break
-    return factor, flag
+    fitting = (pair for pair in _REDUCED_COLOR if (size[0] // pair[0]) * (size[1] // pair[0]) <= max_pixels)
+    return next(fitting, _REDUCED_COLOR[-1])
 
 
 def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED, what: str = "image",

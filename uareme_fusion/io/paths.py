@@ -48,13 +48,14 @@ PIPE_WAIT_S = 10.0
 """How long a pipe may stay silent (no writer, no data) before reading it is given up, s."""
 
 
-def read_pipe_text(path: str | Path, wait_s: float = PIPE_WAIT_S) -> str:
+def read_pipe_text(path: str | Path, wait_s: float | None = None) -> str:
     """All the text a pipe delivers until its writer closes it (UTF-8, a byte-order mark dropped).
 
-    `InputError` when nothing arrives within `wait_s` (a FIFO nobody writes to would otherwise
-    block forever)."""
+    `InputError` when nothing arrives within `wait_s` (default `PIPE_WAIT_S`; a FIFO nobody writes
+    to would otherwise block forever)."""
     from ..errors import InputError
 
+    wait_s = PIPE_WAIT_S if wait_s is None else wait_s
     fd = os.open(os.fspath(path), os.O_RDONLY | os.O_NONBLOCK)
     try:
         ready, _, _ = select.select([fd], [], [], wait_s)

@@ -13,6 +13,7 @@
 - A symbolic link where the tool would create a file is refused (`InputError`), so a link planted
   in an output folder cannot redirect a write onto another file; `O_NOFOLLOW` makes the check race-free
   for streamed files.
+- An existing character device or pipe (`--json /dev/stdout`) is written in place (`write_stream`).
 - A failure to write (disk full, quota, I/O error, read-only file system) is an `OutputError` naming
   the file; the CLI reports it on one line and exits 1 (a failing environment, not a user mistake).
 """
@@ -110,6 +111,8 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
     """Write `data` to `path` all at once: a temporary file beside it, synced, then renamed."""
     path = Path(path)
     refuse_link(path)
+    if is_stream(path):
+        return write_stream(path, data)
     tmp = temporary_sibling(path)
     try:
         with open(tmp, "wb") as fh:
@@ -122,6 +125,26 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
             raise cannot_write(path, exc) from None
         raise
     publish(tmp, path)
+
+
+def is_stream(path: Path) -> bool:
+    """True for an existing character device or pipe (`/dev/stdout`, `/dev/full`, a FIFO): written in
+    place, never replaced by a renamed file (as root that would replace the device node itself)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
+
+
+def write_stream(path: Path, data: bytes) -> None:
+    """Write `data` into a device or pipe; a refused write (`/dev/full`: no space) is an `OutputError`."""
+    try:
+        with open(path, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+    except OSError as exc:
+        raise cannot_write(path, exc) from None
 
 
 def write_text_atomic(path: Path, text: str) -> None:

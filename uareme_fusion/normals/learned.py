@@ -16,7 +16,12 @@ float32 -> (B, 4, H, W): unit normal, kappa >= 0):
 - the shipped format: `torch.save({"format": WEIGHTS_FORMAT, "config": NetworkConfig fields,
   "state_dict": ..., "meta": ...})` (what `tools/train_normals.py export` writes);
 - a bare state dict of `NormalNet` with the default `NetworkConfig`;
-- a TorchScript module (`torch.jit.save`) of any architecture.
+- a TorchScript module (`torch.jit.save`) of any architecture;
+- an ONNX model (`.onnx`, run on ONNX Runtime: the `onnx` extra), any architecture with that contract
+  for a batch of one (`onnx_model.py`).
+The shipped weights run on ONNX Runtime when it is installed (`LearnedNormalsConfig.engine` auto:
+exported once into the user's cache folder, about 1.9x torch's speed on one CPU thread and the same
+normals within 1e-4, `uareme-fusion bench normals`), on torch otherwise.
 Every model is probed once on load with a small image; a file that is not one of these, or whose
 weights or outputs do not fit, raises `InputError` naming the file and the problem. `NormalNet`
 weights are scripted and frozen for inference (BatchNorm folded), torch runs in inference mode.
@@ -41,6 +46,7 @@ WEIGHTS_FORMAT = "uareme-normalnet-v1"
 DEFAULT_WEIGHTS = Path(__file__).resolve().parent / "weights" / "normalnet_lite0.pt"
 DEFAULT_THREADS = 1
 """torch CPU threads unless configured (`LearnedNormalsConfig.threads`, `--threads`)."""
+ENGINES = ("auto", "torch", "onnx")
 PROBE_SIZE_PX = (64, 48)
 """(width, height) of the image every loaded model is checked on."""
 
@@ -69,11 +75,17 @@ class LearnedNormalsConfig:
     threads: int | None = DEFAULT_THREADS
     """torch CPU threads (None: leave torch's setting). One by default: beside another CPU-bound
     process, torch's default of one thread per core makes its threads wait on each other and a
-    frame takes 10-20x longer; one thread loses little on a quiet machine (README, "Speed on a busy
-    machine"; `uareme-fusion bench pipeline` measures both)."""
+    frame takes 10-20x longer; one thread loses little on a quiet machine (README, "Troubleshooting";
+    `uareme-fusion bench pipeline` measures both)."""
     device: str = "cpu"
+    engine: str = "auto"
+    """What runs the shipped network: torch, onnx (ONNX Runtime, the `onnx` extra) or auto: onnx when
+    onnxruntime is installed (faster on CPU: `uareme-fusion bench normals`), torch otherwise. A model
+    file runs on what its format needs (.onnx on ONNX Runtime, torch files on torch)."""
 
     def __post_init__(self):
+        if self.engine not in ENGINES:
+            raise ConfigError(f"engine must be one of {', '.join(ENGINES)}, got {self.engine!r}")
         if self.width_px < 32 or self.height_px < 32 or self.width_px * self.height_px > 4096 * 4096:
             raise ConfigError(f"width_px and height_px must be 32..4096, got {self.width_px}x{self.height_px}")
         if not self.kappa_cap > 0:
@@ -99,8 +111,6 @@ def load_model(path: str | Path, device: str = "cpu"):
     another architecture, or gives outputs that break the (B, 4, H, W) contract."""
     import torch
 
-    from .network import NetworkConfig, NormalNet, config_from_dict
-
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: model file not found")
@@ -112,28 +122,37 @@ def load_model(path: str | Path, device: str = "cpu"):
         except Exception as exc:  # torch raises RuntimeError and others for broken archives
             raise InputError(f"{path}: cannot load this TorchScript module ({_first_line(exc)})") from None
     else:
-        try:
-            payload = torch.load(path, map_location=device, weights_only=True)
-        except Exception as exc:
-            raise InputError(f"{path}: not a TorchScript module or a torch weights file "
-                             f"({_first_line(exc)})") from None
-        if isinstance(payload, dict) and payload.get("format") == WEIGHTS_FORMAT:
-            try:
-                config = config_from_dict(payload["config"])
-                model = NormalNet(config)
-            except (KeyError, TypeError, ValueError) as exc:
-                raise InputError(f"{path}: bad network config in the weights file ({exc})") from None
-            state_dict = payload.get("state_dict")
-        elif isinstance(payload, dict) and payload and all(isinstance(v, torch.Tensor) for v in payload.values()):
-            model, state_dict = NormalNet(NetworkConfig()), payload
-        else:
-            raise InputError(f"{path}: expected a {WEIGHTS_FORMAT} weights file, a NormalNet state dict or a "
-                             f"TorchScript module; found a {type(payload).__name__} of another layout")
-        _load_state_dict(model, state_dict, path)
-        model = _frozen(model.to(device).eval())
+        model = _frozen(load_network(path, device))
     model.eval()
     _probe(model, path, device)
     return model
+
+
+def load_network(path: Path, device: str = "cpu"):
+    """The eager `NormalNet` (eval mode) of a weights file: the shipped format or a bare state dict."""
+    import torch
+
+    from .network import NetworkConfig, NormalNet, config_from_dict
+
+    try:
+        payload = torch.load(path, map_location=device, weights_only=True)
+    except Exception as exc:
+        raise InputError(f"{path}: not a TorchScript module or a torch weights file "
+                         f"({_first_line(exc)})") from None
+    if isinstance(payload, dict) and payload.get("format") == WEIGHTS_FORMAT:
+        try:
+            config = config_from_dict(payload["config"])
+            model = NormalNet(config)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"{path}: bad network config in the weights file ({exc})") from None
+        state_dict = payload.get("state_dict")
+    elif isinstance(payload, dict) and payload and all(isinstance(v, torch.Tensor) for v in payload.values()):
+        model, state_dict = NormalNet(NetworkConfig()), payload
+    else:
+        raise InputError(f"{path}: expected a {WEIGHTS_FORMAT} weights file, a NormalNet state dict or a "
+                         f"TorchScript module; found a {type(payload).__name__} of another layout")
+    _load_state_dict(model, state_dict, path)
+    return model.to(device).eval()
 
 
 @functools.lru_cache(maxsize=4)
@@ -142,6 +161,15 @@ def shipped_model(path: Path, device: str = "cpu"):
     and probing the network takes about 0.7 s, and the frozen module only runs inference, so every
     `LearnedNormals` of a process shares it. (Drop-in model files are loaded afresh each time.)"""
     return load_model(path, device)
+
+
+@functools.lru_cache(maxsize=4)
+def shipped_onnx(path: Path, threads: int | None):
+    """The shipped weights at `path` on ONNX Runtime (exported into the user's cache folder on first
+    use, `onnx_model.shipped_onnx_model`), once per process and thread count."""
+    from .onnx_model import shipped_onnx_model
+
+    return shipped_onnx_model(path, threads)
 
 
 def _frozen(model):
@@ -214,8 +242,30 @@ class LearnedNormals:
         if model is None and not DEFAULT_WEIGHTS.is_file():
             raise InputError(f"{DEFAULT_WEIGHTS}: the shipped normal network weights are missing "
                              "(reinstall uareme-fusion)")
-        self.model = (shipped_model(self.model_path, self.config.device) if model is None
-                      else load_model(self.model_path, self.config.device))
+        self.engine = self._engine(model)
+        if self.engine == "onnx":
+            from .onnx_model import OnnxNormalModel
+
+            try:
+                self.model = (shipped_onnx(self.model_path, self.config.threads) if model is None
+                              else OnnxNormalModel(self.model_path, self.config.threads))
+            except Exception:  # auto: an export that cannot be made or cached here falls back to torch
+                if model is not None or self.config.engine != "auto":
+                    raise
+                self.engine = "torch"
+        if self.engine == "torch":
+            self.model = (shipped_model(self.model_path, self.config.device) if model is None
+                          else load_model(self.model_path, self.config.device))
+
+    def _engine(self, model) -> str:
+        """torch or onnx for this model (see `LearnedNormalsConfig.engine`)."""
+        if model is not None:
+            return "onnx" if Path(model).suffix.lower() == ".onnx" else "torch"
+        if self.config.engine == "auto":
+            from .onnx_model import onnxruntime_available
+
+            return "onnx" if onnxruntime_available() and self.config.device == "cpu" else "torch"
+        return self.config.engine
 
     def estimate_frame(self, frame: Frame) -> NormalMap:
         """Normals of a `Frame`'s RGB image; `InputError` if it has none."""
@@ -237,6 +287,10 @@ class LearnedNormals:
         import torch
 
         cfg = self.config
+        if self.engine == "onnx":
+            size = self.model.input_size or (cfg.width_px, cfg.height_px)
+            small = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
+            return self.model(np.ascontiguousarray(small.transpose(2, 0, 1)[None], np.float32) / np.float32(255.0))[0]
         small = cv2.resize(rgb, (cfg.width_px, cfg.height_px), interpolation=cv2.INTER_AREA)
         x = torch.from_numpy(small).to(cfg.device).permute(2, 0, 1)[None].float().div_(255.0)
         with torch.inference_mode():

@@ -1,4 +1,4 @@
-"""The streaming pipeline (DESIGN.md "Data flow"): source -> normals -> solver -> backend -> sinks.
+"""The streaming pipeline (docs/design.md "Data flow"): source -> normals -> solver -> backend -> sinks.
 
     from uareme_fusion.pipeline import RunConfig, run_to_folder
     summary = run_to_folder("clip.mp4", "out/", RunConfig(backend="mekf"), imu="imu.csv")

@@ -28,8 +28,10 @@ class RunConfig(BaseModel):
     smoother: dict[str, Any] = Field(default_factory=dict)
     """Overrides of the smoother settings (configs/paper.yaml, section `smoother`)."""
     normals: str = "auto"
-    """auto (the source's exact normals when it has them, else learned), learned, depth, source, a
-    TorchScript/state-dict model file (.pt), or a folder of precomputed normal maps (.npz/.npy/.png)."""
+    """auto (the source's exact normals when it has them, else depth when it has depth maps and
+    intrinsics, else learned: `stages.AutoNormals`), learned, depth, source, a
+    TorchScript/state-dict model file (.pt) or ONNX model (.onnx), or a folder of precomputed normal
+    maps (.npz/.npy/.png)."""
     kappa_cap: float = Field(75.0, gt=0)
     """Confidence cap applied before the solver (the paper's released config)."""
     assumed_fov_deg: float = Field(60.0, gt=1.0, lt=179.0)
@@ -46,7 +48,7 @@ class RunConfig(BaseModel):
     """Stop after this many frames (None: the whole source)."""
     threads: int = Field(1, ge=1, le=256)
     """torch CPU threads of the learned normals. 1 by default: beside another busy process, two
-    threads wait on each other and a frame can take 10x longer (README, "Speed on a busy machine")."""
+    threads wait on each other and a frame can take 10x longer (README, "Troubleshooting")."""
     imu_rotation: str | None = None
     """Camera-from-IMU rotation `R_ci` (`v_c = R_ci v_i`): a named convention (android, ios), axis
     letters (rub, flu, ...), 9 numbers of a 3x3, a quaternion x,y,z,w or a Kalibr camchain .yaml

@@ -9,6 +9,10 @@ with `b` the gyro bias. `estimate_imu_rotation` solves this for `R_ci` by Kabsch
 or more axes make it observable. `ImuRotationCheck` collects the pairs during a run (bounded
 memory: at most `MAX_PAIRS`) and reports the estimate for summary.json, with one warning line when
 it is far from the `R_ci` the run used, naming the nearest axis convention (`drivers.extrinsics`).
+It never lets a run fuse a wrongly rotated gyro silently: every `CHECK_EVERY_PAIRS` pairs or so (from
+`REFUSE_MIN_PAIRS` on) it estimates `R_ci`, and once the estimate is observable and further than
+`DISAGREEMENT_DEG` from the one used it refuses the rest of the stream (an `InputError`: the run
+stops as `input_error`, its outputs so far kept, with the `--imu-rotation` to pass).
 
 Convention: `v_c = R_ci v_i`; IMU stamps plus `SourceInfo.imu_time_offset_s` are camera time.
 """
@@ -23,6 +27,7 @@ from scipy.spatial.transform import Rotation
 
 from ..drivers.base import Source
 from ..drivers.extrinsics import axis_letters, convention_name
+from ..errors import InputError
 from ..types import ImuBatch
 from .runner import FrameResult
 
@@ -38,7 +43,12 @@ MAX_UNCERTAINTY_DEG = 5.0
 `residual / sqrt(s2^2 + s3^2)` (s: singular values of the gyro rotation vectors; rotation about
 one axis alone leaves `R_ci` free about it), is below this."""
 DISAGREEMENT_DEG = 30.0
-"""Estimated and used `R_ci` further apart than this: warn."""
+"""Estimated and used `R_ci` further apart than this: warn, or refuse mid-run."""
+REFUSE_MIN_PAIRS = 30
+"""Frame pairs (a second at 30 fps) before a disagreement can stop the run."""
+CHECK_EVERY_PAIRS = 5
+"""During the run `R_ci` is estimated again after each this many new pairs (a tenth of the pairs so
+far once that is more: the cost stays a few fits per second of a long run)."""
 NEAR_CONVENTION_DEG = 20.0
 """An estimate this close to an axis-letter rotation is named by its letters."""
 BIAS_ITERATIONS = 5
@@ -111,6 +121,8 @@ class ImuRotationCheck:
         self._imu_w: list[np.ndarray] = []
         self._prev: tuple[float, np.ndarray] | None = None
         self.pairs: list[tuple[np.ndarray, np.ndarray, float]] = []
+        self.refused: str | None = None
+        """The message the run was stopped with (`refuse_if_disagreeing`), None while it was not."""
 
     @classmethod
     def for_source(cls, source: Source) -> "ImuRotationCheck | None":
@@ -140,9 +152,22 @@ class ImuRotationCheck:
                 phi_i = _gyro_rotvec(imu_t, imu_w, prev[0], t)
                 if phi_i is not None and np.degrees(np.linalg.norm(phi_c)) < MAX_VISUAL_STEP_DEG:
                     self.pairs.append((phi_i, phi_c, t - prev[0]))
+                    self.refuse_if_disagreeing()
             self._prev = (t, R_cm)
         keep = imu_t > t  # memory stays bounded by the samples of one frame interval
         self._imu_t, self._imu_w = [imu_t[keep]], [imu_w[keep]]
+
+    def refuse_if_disagreeing(self) -> None:
+        """Now and then from `REFUSE_MIN_PAIRS` pairs on (`CHECK_EVERY_PAIRS`): an `InputError` (the run
+        stops) when the data's `R_ci` is observable and disagrees with the one used (`warning`)."""
+        n = len(self.pairs)
+        if n < REFUSE_MIN_PAIRS or n % max(CHECK_EVERY_PAIRS, n // 10):
+            return
+        line = self.warning(self.report())
+        if line is not None:
+            self.refused = (f"{line}. Stopped after {n} frame pairs rather than fuse a gyro in the wrong axes; "
+                            "rerun with that --imu-rotation (or the camera-IMU calibration)")
+            raise InputError(self.refused)
 
     def _buffered_imu(self) -> tuple[np.ndarray, np.ndarray]:
         """The gyro samples since the last frame as (t (N,) s on the camera clock, w (N, 3) rad/s)."""

@@ -91,6 +91,15 @@ class RunStats:
     stopped: str = "end"
     error: str | None = None
     signal: int | None = None
+    started_s: float = 0.0
+    """`time.perf_counter()` when the run began (see `fps`)."""
+
+    @property
+    def fps(self) -> float:
+        """Estimates per second of the run's wall time (warm-up included): the one definition of a run's
+        speed, in summary.json, the final table and the progress bar (so far, while it runs)."""
+        elapsed_s = self.wall_s if self.wall_s > 0 else time.perf_counter() - self.started_s
+        return self.estimates / elapsed_s if self.started_s > 0 and elapsed_s > 0 else 0.0
 
     def as_dict(self) -> dict:
         return {"source": self.source, "normals": self.normals, "backend": self.backend,
@@ -99,7 +108,7 @@ class RunStats:
                 "frames_without_depth": self.frames_without_depth, "imu_samples": self.imu_samples,
                 "status_counts": dict(sorted(self.status_counts.items())),
                 "timing_ms": self.times.mean_ms(self.estimates),
-                "fps": self.estimates / self.wall_s if self.wall_s > 0 else 0.0,
+                "fps": self.fps,
                 "wall_s": self.wall_s, "warm_up_s": self.warm_up_s, "stopped": self.stopped, "error": self.error,
                 **({"signal": self.signal} if self.signal is not None else {})}
 
@@ -198,7 +207,7 @@ class Pipeline:
         stats = self.stats
         stats.source = source.info.name
         imu_only = not source.info.has_frames
-        start = time.perf_counter()
+        start = stats.started_s = time.perf_counter()
         events = iter(source.events())
         try:
             # Before the first event: a recording's K from frames spread over it, and the backend's loading

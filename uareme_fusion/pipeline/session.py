@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import json
 import shutil
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
 from ..errors import InputError, OutputError
 from ..evaluation.backend_factory import backend_kind, knows_gravity
 from ..evaluation.metrics import attitude_errors, error_summary
+from ..evaluation.statistics import error_stats
 from ..io.safe_files import ENVIRONMENT_ERRNOS, ReservedFile
 from ..rotations import align_constant
 from ..types import Status
@@ -52,6 +54,25 @@ def prepare_output_folder(out_dir: str | Path, force: bool) -> Path:
         elif path.exists() or path.is_symlink():
             path.unlink()
     return out
+
+
+@contextmanager
+def output_folder(out_dir: str | Path, force: bool) -> Iterator[Path]:
+    """`prepare_output_folder`, and when the block fails with the folder still empty (a source that
+    does not open, a bad setting), the folders it created are removed again: a failed run leaves no
+    empty --out behind. A folder that existed before, or holds anything, is kept."""
+    out = Path(out_dir)
+    created = [p for p in (out, *out.parents) if not p.exists() and not p.is_symlink()]
+    folder = prepare_output_folder(out, force)
+    try:
+        yield folder
+    except BaseException:
+        for path in created:  # the deepest first; stops at the first that holds something
+            try:
+                path.rmdir()
+            except OSError:
+                break
+        raise
 
 
 def make_output_folder(out_dir: str | Path) -> Path:
@@ -119,13 +140,19 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
                          on_result=on_result)
     with stop_signals.writing():  # a signal now waits until summary.json is complete
         summary = summary_document(stats, cfg, command, source)
+        normals_note = getattr(pipeline.normals, "note", None)
+        if normals_note:
+            summary["notes"].append(normals_note)
+            summary["normals_note"] = normals_note
         if pipeline.cues is not None and pipeline.cues.focal is not None:  # K given, estimated or assumed
             summary["intrinsics"] = pipeline.cues.intrinsics_summary()
         for sink in extra_sinks:
             summary.update(getattr(sink, "summary", dict)())
         if check is not None:
             summary["imu_rotation_estimate"] = check.report()
-            summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w]
+            refused = check.refused is not None  # the run's error says it
+            summary["imu_rotation_estimate"]["refused_to_fuse"] = refused
+            summary["warnings"] = [w for w in [check.warning(summary["imu_rotation_estimate"])] if w and not refused]
         if log is not None:
             summary.update(evaluation(log, truth, gravity_aware=knows_gravity(
                 backend_kind(cfg.backend, source.info.has_imu).name, source.info.has_imu)))
@@ -143,6 +170,29 @@ def configure_imu(source: Source, cfg: RunConfig) -> Source:
     of its own (`RunConfig.imu_rotation`, `imu_time_offset_s`); call before the source runs."""
     R_ci = None if cfg.imu_rotation is None else parse_imu_rotation(cfg.imu_rotation)
     return with_imu_geometry(source, R_ci, cfg.imu_time_offset_s)
+
+
+def open_for_run(source_spec: str, cfg: RunConfig, imu: str | Path | None = None, fps: float | None = None,
+                 gt: Path | None = None, gt_time_offset_s: float = 0.0, topics: dict | None = None) -> Source:
+    """The source as `run` opens it: `imu` merged, the configuration's K, camera-IMU rotation and time
+    offset, a ground-truth file `gt` in place of its own, and a ROS bag's `topics` (`image_topic`, ...
+    as `open_source` takes them; None values are left to the bag)."""
+    from ..drivers import open_source
+
+    opened = configure_imu(open_source(str(source_spec), imu=None if imu is None else str(imu), fps=fps,
+                                       intrinsics=cfg.intrinsics, **(topics or {})), cfg)
+    if gt is not None:
+        from ..drivers.ground_truth_file import with_ground_truth_file
+
+        with_ground_truth_file(opened, gt, gt_time_offset_s)
+    return opened
+
+
+def run_into_folder(source_spec: str, out_dir: Path, cfg: RunConfig, force: bool = False) -> dict:
+    """`uareme-fusion run SOURCE --out DIR` without its terminal output (a batch's worker): the same
+    folder rules (`output_folder`), source (`open_for_run`) and run (`run_source`); the summary."""
+    with output_folder(out_dir, force) as out, open_for_run(source_spec, cfg) as source:
+        return run_source(source, out, cfg, command="run")
 
 
 def run_to_folder(source_spec: str, out_dir: str | Path, cfg: RunConfig | None = None, imu: str | None = None,
@@ -181,20 +231,37 @@ def summary_document(stats: RunStats, cfg: RunConfig, command: str, source: Sour
 
 
 def evaluation(log: EstimateLog, truth: GroundTruth, gravity_aware: bool) -> dict:
-    """ARE, tilt and NEES against `truth` over initialised estimates inside its time span.
+    """ARE, tilt and NEES against `truth` over initialised estimates inside its time span
+    (`evaluation_errors`), summarised; with a reference that is not gravity-aligned, also
+    `tilt_unaligned_deg`: the tilt against the reference's z axis without the alignment."""
+    t, errors, unaligned_tilt, note = evaluation_errors(log, truth, gravity_aware)
+    if len(t) == 0:
+        return {"evaluation_note": note, **error_summary(errors)}
+    out = {**error_summary(errors), "evaluation_note": note}
+    if unaligned_tilt is not None and errors["valid"].any():
+        out["tilt_unaligned_deg"] = error_stats(unaligned_tilt[errors["valid"]], ("mean", "rmse", "p95", "max"))
+    return out
+
+
+def evaluation_errors(log: EstimateLog, truth: GroundTruth, gravity_aware: bool):
+    """(t_s (N,), per-frame errors (`metrics.attitude_errors`: `are_deg`, `tilt_deg`, `nees`, `valid`),
+    tilt (N,) without alignment or None, note) of the estimates in `log` against `truth`; `valid`:
+    initialised estimates inside its time span.
 
     Without a gravity-aligned reference (e.g. ICL-NUIM) tilt is measured after the same constant
-    alignment as ARE, since the reference world's z is not up.
+    alignment as ARE, since the reference world's z is not up; the tilt against its z axis without
+    the alignment is returned beside it.
     """
     t, R_est, cov, status = log.arrays()
     if len(t) == 0:
-        return {"evaluation_note": "no estimates to score", **error_summary(
-            {"valid": np.zeros(0, bool), "are_deg": np.zeros(0), "tilt_deg": np.zeros(0), "nees": np.zeros(0)})}
+        empty = {"valid": np.zeros(0, bool), "are_deg": np.zeros(0), "tilt_deg": np.zeros(0), "nees": np.zeros(0)}
+        return t, empty, None, "no estimates to score"
     R_true, in_span = truth.at(t)
     valid = in_span & ((status & int(Status.NOT_INITIALISED)) == 0)
-    note = "tilt against the reference's z axis (gravity-aligned)"
+    note, unaligned_tilt = "tilt against the reference's z axis (gravity-aligned)", None
     if not truth.gravity_aligned and valid.any():
+        unaligned_tilt = attitude_errors(R_est, cov, valid, R_true)["tilt_deg"]
         R_est = align_constant(R_est[valid], R_true[valid]) @ R_est
         note = "reference is not gravity-aligned: tilt after the constant alignment used for ARE"
     errors = attitude_errors(R_est, cov, valid, R_true, yaw_only_nees=gravity_aware and truth.gravity_aligned)
-    return {**error_summary(errors), "evaluation_note": note}
+    return t, errors, unaligned_tilt, note

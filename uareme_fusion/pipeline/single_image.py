@@ -101,7 +101,8 @@ class ImageAnalysis:
                 "conventions": "camera OpenCV (x right, y down, z forward); R_cm maps Manhattan to camera "
                                "coordinates; cov of the right perturbation; up_c = up from the "
                                "segments' horizon (horizon_source atlanta; horizon_std_px its std along its normal) or "
-                               "the Manhattan axis nearest image up (manhattan); horizon [a, b, c]: a x + b y + c = 0 in pixels, [a, b] unit, "
+                               "the Manhattan axis nearest image up (manhattan); "
+                               "horizon [a, b, c]: a x + b y + c = 0 in pixels, [a, b] unit, "
                                "positive on the sky side"}
 
     def _horizon_source(self) -> dict:
@@ -226,7 +227,10 @@ class ImageAnalyser:
             rgb = undistorted_image(camera, rgb)
             given_K = check_K(camera.K)
         t0 = time.perf_counter()
-        normal_map = self._normals(rgb)
+        try:
+            normal_map = self._normals(rgb)
+        except InputError as exc:  # the estimator names a frame ("frame 0 (t = 0 s): ..."); here it is a file
+            raise InputError(f"{path}: {str(exc).split(': ', 1)[-1]}") from None
         t1 = time.perf_counter()
         segments = self.detector.detect(rgb) if self.detector else None
         t2 = time.perf_counter()

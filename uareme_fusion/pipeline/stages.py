@@ -14,7 +14,7 @@ from ..types import Frame, NormalMap
 from .config import RunConfig
 
 NORMAL_FILE_SUFFIXES = (".npz", ".npy", ".png")
-MODEL_FILE_SUFFIXES = (".pt", ".pth", ".ts")
+MODEL_FILE_SUFFIXES = (".pt", ".pth", ".ts", ".onnx")
 
 
 class SourceNormals:
@@ -68,6 +68,11 @@ class CappedNormals:
     def needs_depth(self) -> bool:
         return getattr(self.estimator, "needs_depth", False)
 
+    @property
+    def note(self) -> str | None:
+        """The estimator's note on what it chose (`AutoNormals`), None without one."""
+        return getattr(self.estimator, "note", None)
+
     def estimate_frame(self, frame: Frame) -> NormalMap | None:
         nm = self.estimator.estimate_frame(frame)
         if nm is None:
@@ -78,16 +83,29 @@ class CappedNormals:
 
 
 class AutoNormals:
-    """The source's own normals when its frames carry them, learned normals otherwise (decided on
-    the first frame)."""
+    """The normals right for the input, decided on the first frame: the source's own when its frames
+    carry them (the simulator's exact normals), else `depth` when given (a source with depth maps and
+    intrinsics: TUM, ICL-NUIM, OAK stereo), else learned. `note` says what was chosen when it was
+    depth (a user expecting the network should be told)."""
 
-    def __init__(self, source_name: str, threads: int | None = None):
+    def __init__(self, source_name: str, threads: int | None = None, depth=None):
         self.source_name, self.name, self._chosen, self.threads = source_name, "auto", None, threads
+        self.depth, self.note = depth, None
 
-    def estimate_frame(self, frame: Frame) -> NormalMap:
+    @property
+    def needs_depth(self) -> bool:
+        return getattr(self._chosen, "needs_depth", False)
+
+    def estimate_frame(self, frame: Frame) -> NormalMap | None:
         if self._chosen is None:
-            self._chosen = (SourceNormals(self.source_name) if frame.normals is not None
-                            else _learned(threads=self.threads))
+            if frame.normals is not None:
+                self._chosen = SourceNormals(self.source_name)
+            elif self.depth is not None:
+                self._chosen = self.depth
+                self.note = (f"--normals auto: {self.source_name} has depth maps and intrinsics, so the normals "
+                             "come from depth (--normals learned for the network's)")
+            else:
+                self._chosen = _learned(threads=self.threads)
             self.name = f"auto ({self._chosen.name})"
         return self._chosen.estimate_frame(frame)
 
@@ -113,7 +131,8 @@ def make_normal_estimator(spec: str, info: SourceInfo, threads: int | None = Non
     from ..normals.depth import DepthNormals
 
     if spec == "auto":
-        return AutoNormals(info.name, threads)
+        with_depth = info.has_depth and info.K is not None
+        return AutoNormals(info.name, threads, DepthWhereAvailable(DepthNormals()) if with_depth else None)
     if spec == "source":
         return SourceNormals(info.name)
     if spec == "depth":

@@ -17,6 +17,8 @@ Layout of `out/` (TUM RGB-D plus EuRoC IMU plus ground truth):
   Manhattan-aligned pixels, `R_wc`, `R_wm` (3, 3), `K` (3, 3), `t` (s), `dropped` (bool).
 - `scene.json`: seed, scenario, every scene/trajectory/IMU/render parameter, K, R_ci, time offset,
   the dropped frame indices and, for the bus, `R_wm` per frame as quaternions x y z w.
+- `simulate.incomplete`: present only while the sequence is being written (an interrupted
+  `simulate` leaves it, and `run` refuses the folder saying so; `incomplete_simulation`).
 Frames are timestamped `index / fps` seconds on the camera clock. Same seed, identical files
 (PNG, npz with fixed zip dates, sorted JSON).
 """
@@ -47,6 +49,22 @@ from .scenarios import SCENARIOS, build_scenario
 
 DEPTH_SCALE = TUM_DEPTH_SCALE
 """Depth PNG units per metre (TUM RGB-D / ICL-NUIM convention)."""
+INCOMPLETE_MARKER = "simulate.incomplete"
+"""The file that says a folder is still being written by `simulate` (removed once it is complete)."""
+
+
+def incomplete_simulation(folder: Path) -> str | None:
+    """'an interrupted simulate (N of M frames written)' for a folder `simulate` did not finish; None
+    for any other folder."""
+    marker = Path(folder) / INCOMPLETE_MARKER
+    if not marker.is_file():
+        return None
+    try:
+        total = json.loads(marker.read_text())["frames"]
+    except (OSError, ValueError, KeyError, TypeError):
+        total = "?"
+    done = len(list((Path(folder) / "normals").glob("*.npz")))
+    return f"an interrupted 'simulate' ({done} of {total} frames written, no index or IMU files)"
 
 
 def _save_npz(path: Path, **arrays) -> None:
@@ -73,6 +91,8 @@ def prepare_out_dir(out_dir: Path, force: bool) -> None:
     for sub in ("rgb", "depth", "normals", "imu0"):  # only what write_sequence itself writes
         if force and (out_dir / sub).is_dir():
             shutil.rmtree(out_dir / sub)
+    if force and (out_dir / INCOMPLETE_MARKER).exists():
+        (out_dir / INCOMPLETE_MARKER).unlink()
 
 
 def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
@@ -95,6 +115,10 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
     rng = np.random.default_rng([options.seed, 7])  # image noise, exposure, drops
     for sub in ("rgb", "depth", "normals", "imu0"):
         (out / sub).mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out / INCOMPLETE_MARKER, json.dumps({
+        "frames": options.frames, "scenario": scenario,
+        "note": "uareme-fusion simulate is writing this folder, or was stopped before it finished; "
+                "run it again with --force"}) + "\n")
 
     t_frames = np.arange(options.frames) / options.fps
     dropped = rng.random(options.frames) < spec.drop_probability
@@ -154,4 +178,5 @@ def write_sequence(scenario: str, out_dir: Path, options: SequenceOptions,
                      "IMU stamp t measures camera time t + imu_time_offset_s; v_c = R_ci v_i"),
     )
     write_text_atomic(out / "scene.json", json.dumps(summary, indent=1, sort_keys=True, default=float))
+    (out / INCOMPLETE_MARKER).unlink()
     return summary

@@ -6,7 +6,7 @@ Public API::
     t_s, gyro_rad_s, accel_m_s2 = simulate_imu(traj, rate_hz=200.0, noise=noise, seed=0,
                                               R_ci=np.eye(3), imu_time_offset_s=0.0)
 
-Conventions (DESIGN.md):
+Conventions (docs/design.md):
 - IMU frame `i`; `R_ci` (3, 3) maps IMU coordinates to camera coordinates (`v_c = R_ci @ v_i`).
   The IMU sits at the camera centre (no lever arm).
 - `gyro_rad_s` (N, 3): angular velocity in `i`, `omega_i = R_ci^T omega_c`, plus bias and noise.

@@ -35,17 +35,18 @@ class SequenceOptions:
 
     def validate(self) -> None:
         """Raise InputError naming the option for impossible values."""
+        # --fps first: a live sim source derives its frame count from it (`sim:room --fps 1e9`)
+        if not 1.0 <= self.fps <= 1000.0:
+            raise InputError(f"--fps must be between 1 and 1000, got {self.fps}")
         if self.frames < 1 or self.frames > 1_000_000:
             raise InputError(f"--frames must be between 1 and 1000000, got {self.frames}")
         if self.width < 8 or self.height < 8 or self.width * self.height > MAX_PIXELS:
             raise InputError(f"--size must be at least 8x8 and at most 4096x4096 pixels, got "
                              f"{self.width}x{self.height}")
-        if not 1.0 <= self.fps <= 1000.0:
-            raise InputError(f"--fps must be between 1 and 1000, got {self.fps}")
         if not 100.0 <= self.imu_rate_hz <= 1000.0:
             raise InputError(f"--imu-rate must be between 100 and 1000 Hz, got {self.imu_rate_hz}")
         if self.hfov_deg is not None and not 45.0 <= self.hfov_deg <= 95.0:
-            raise InputError(f"--fov must be between 45 and 95 degrees, got {self.hfov_deg}")
+            raise InputError(f"--fov-deg must be between 45 and 95 degrees, got {self.hfov_deg}")
         if not 0 <= self.seed < 2**63:
             raise InputError(f"--seed must be an integer >= 0, got {self.seed}")
         if not abs(self.imu_time_offset_s) <= MAX_TIME_OFFSET_S:

@@ -6,7 +6,7 @@ Public API::
     R_wc, p_w, omega_c_rad_s, accel_w_m_s2 = traj.sample(t_s)      # t_s: (N,) seconds
     R_wm = traj.R_wm(t_s)                                          # (N, 3, 3)
 
-Conventions (DESIGN.md):
+Conventions (docs/design.md):
 - `R_wc` (N, 3, 3) maps camera coordinates (OpenCV: x right, y down, z forward) to the world
   (z up, gravity (0, 0, -9.81) m/s^2). `p_w` (N, 3) is the camera centre in the world, metres.
 - `omega_c_rad_s` (N, 3) is the camera's angular velocity in the CAMERA (body) frame, rad/s:
@@ -125,10 +125,6 @@ class Trajectory:
         )
         p_w, _, a_w = self.position(t)
         return TrajectorySample(R_wb @ self.R_bc, p_w, omega_b @ self.R_bc, a_w)
-
-    def velocity_w(self, t_s: np.ndarray) -> np.ndarray:
-        """(N, 3) velocity of the camera centre in the world, m/s."""
-        return self.position(np.atleast_1d(np.asarray(t_s, float)))[1]
 
     def R_wm(self, t_s: np.ndarray) -> np.ndarray:
         """(N, 3, 3) Manhattan frame to world: the bus attitude in a vehicle, else a constant."""

@@ -23,7 +23,7 @@ def levenberg_marquardt_so3(cost: Callable[[np.ndarray], float],
                             R0: np.ndarray, max_iterations: int, step_tolerance_rad: float
                             ) -> tuple[np.ndarray, int, float, bool]:
     """Minimise `cost(R)` from `R0`; `gradient_hessian(R)` gives (3,) and (3, 3) with respect to the
-    right perturbation. Returns (R, iterations, cost, converged)."""
+    right perturbation (paper eq. 4-5). Returns (R, iterations, cost, converged)."""
     R = R0
     value = float(cost(R))
     damping = DAMPING_START

@@ -57,7 +57,7 @@ def _cell_candidates(count: int) -> np.ndarray:
 
 
 class ManhattanSolver:
-    """Solves paper eq. 1 by Levenberg-Marquardt over the moment form; see DESIGN.md."""
+    """Solves paper eq. 1 by Levenberg-Marquardt over the moment form; see docs/design.md."""
 
     def __init__(self, config: SolverConfig | None = None):
         self.config = config or SolverConfig()
@@ -129,7 +129,7 @@ class ManhattanSolver:
 
         Treating the cost as sum_i w_i theta_i^2 with errors of variance proportional to 1/w_i gives
         cov = (E / N) H^-1 for the normalised cost E and Hessian H; correlated errors replace N with
-        an effective number of independent pixels (paper eq. 6 scaled to absolute units).
+        an effective number of independent pixels (paper eq. 7 scaled to absolute units).
         """
         cfg = self.config
         _, hess = gradient_hessian(moments.tensor(), moments.total_weight, R_cm)

@@ -6,7 +6,7 @@ vertical, gravity and zero-rate models), `accel` (averaging, low-pass, rest dete
 (`Mekf`, the scheduler), `kernels`/`compiled` (numba IMU path), `state_buffer` (the one array
 holding the state, which the kernels update in place), `offline` (forward-backward).
 
-See DESIGN.md "Backends: mekf". Conventions:
+See docs/design.md "Backends". Conventions:
 - Nominal state: `R_wc` (camera to world, world z up), gyro bias `b_c` (rad/s, held in the camera
   frame, reported in the IMU frame), the Manhattan frame's attitude `R_wm`, and (visual-only mode)
   the camera's angular rate `omega_c` (rad/s, camera frame).

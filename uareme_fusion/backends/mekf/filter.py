@@ -1,6 +1,6 @@
 """`Mekf`: the multiplicative (error-state) EKF, scheduling its models.
 
-See DESIGN.md "Backends: mekf" and the package docstring for the conventions. The filter holds the
+See docs/design.md "Backends" and the package docstring for the conventions. The filter holds the
 nominal state and its covariance, and schedules: IMU samples and frames propagate through the motion
 strategy chosen once for its mode (`motion.py`); a frame's visual rotation, the vertical
 pseudo-measurement and a due accelerometer update are fused in one stacked filterpy update

@@ -47,7 +47,7 @@ def correlated_noise_scale(dt_s: float, correlation_s: float) -> float:
 
 
 def vertical_measurement(R_wm, std_rad, max_rad):
-    """Pseudo-measurement "the Manhattan z axis is (nearly) world up" (DESIGN.md "Conventions"),
+    """Pseudo-measurement "the Manhattan z axis is (nearly) world up" (docs/design.md "Conventions"),
     std `std_rad`, on plain arrays (the compiled kernels call it too): `(ok, residual (3,), variance
     rad^2, H (3, 12))`, `ok` False when m's z is farther than `max_rad` from up."""
     h = R_wm[2].copy()  # R_wm^T @ (0, 0, 1)

@@ -1,0 +1,144 @@
+"""The normal network through ONNX Runtime: the shipped weights exported once, and bring-your-own models.
+
+    model = shipped_onnx_model(DEFAULT_WEIGHTS, threads=1)   # exported on first use, cached
+    model = OnnxNormalModel("my_net.onnx", threads=1)        # any model with the contract below
+    out = model(rgb_1x3hw_float32)                           # (1, 4, h, w) float32
+
+Contract of an ONNX normal model (that of `network.py`): one input (1, 3, H, W) float32 RGB in [0, 1];
+the first output (1, 4, H, W) float32: a unit normal per pixel in the OpenCV camera frame (x right,
+y down, z forward), then kappa >= 0. H and W may be fixed in the file (images are then resized to
+them) or free (the configured size is used). A file with another contract is refused with an
+`InputError` that names it and the shapes found.
+
+The shipped weights (whatever `normals/weights/*.pt` holds) are exported with torch's exporter at
+first use into the user's cache folder (`cache_dir()`), under a name holding the weights' SHA-256,
+so replaced weights get their own export; nothing is downloaded. Needs the `onnx` extra
+(onnxruntime; onnx for the export).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.safe_files import temporary_sibling, publish
+
+EXPORT_VERSION = 1
+"""Part of the cached export's name: bumped when the export itself changes."""
+EXPORT_OPSET = 17
+
+
+def onnxruntime_available() -> bool:
+    return importlib.util.find_spec("onnxruntime") is not None
+
+
+def cache_dir() -> Path:
+    """`$XDG_CACHE_HOME/uareme-fusion` (default `~/.cache/uareme-fusion`)."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "uareme-fusion"
+
+
+def cached_export_path(weights: Path) -> Path:
+    digest = hashlib.sha256(Path(weights).read_bytes()).hexdigest()[:16]
+    return cache_dir() / "onnx" / f"{Path(weights).stem}-{digest}-v{EXPORT_VERSION}.onnx"
+
+
+def export_onnx(weights: Path, target: Path, size_hw: tuple[int, int] = (120, 160)) -> Path:
+    """Export the `NormalNet` of a weights file to `target` (H and W free), written atomically."""
+    import torch
+
+    from .learned import load_network
+
+    net = load_network(Path(weights))
+    example = torch.rand(1, 3, *size_hw)
+    tmp = temporary_sibling(target)
+    try:
+        with warnings.catch_warnings(), torch.no_grad():
+            warnings.simplefilter("ignore")  # the TorchScript-based exporter is marked deprecated
+            torch.onnx.export(net, (example,), str(tmp), input_names=["rgb"], output_names=["normals_kappa"],
+                              dynamic_axes={"rgb": {2: "H", 3: "W"}, "normals_kappa": {2: "H", 3: "W"}},
+                              opset_version=EXPORT_OPSET, dynamo=False)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    publish(tmp, target)
+    return target
+
+
+def shipped_onnx_model(weights: Path, threads: int | None = 1) -> "OnnxNormalModel":
+    """The shipped network on ONNX Runtime, exported into the cache on first use."""
+    path = cached_export_path(weights)
+    if not path.is_file():
+        export_onnx(weights, path)
+    return OnnxNormalModel(path, threads)
+
+
+def _shape_text(shape) -> str:
+    return "(" + ", ".join(str(d) if isinstance(d, int) else repr(d or "?") for d in shape) + ")"
+
+
+class OnnxNormalModel:
+    """An ONNX normal model on ONNX Runtime's CPU provider, checked against the contract on load;
+    `model(x)` maps (1, 3, h, w) float32 to (1, 4, h, w) float32. `input_size` is the (width, height) the
+    file fixes, or None when H and W are free."""
+
+    name = "onnx"
+
+    def __init__(self, path: str | Path, threads: int | None = 1):
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise InputError(f"{self.path}: model file not found")
+        if not onnxruntime_available():
+            raise InputError(f"{self.path}: ONNX models run on onnxruntime, which is not installed "
+                             "(pip install 'uareme-fusion[onnx]')")
+        import onnxruntime as ort
+
+        options = ort.SessionOptions()
+        if threads is not None:
+            options.intra_op_num_threads = int(threads)
+            options.inter_op_num_threads = 1
+        options.log_severity_level = 3
+        try:
+            self.session = ort.InferenceSession(str(self.path), options, providers=["CPUExecutionProvider"])
+        except Exception as exc:  # onnxruntime raises its own exception types for broken files
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise InputError(f"{self.path}: cannot load this ONNX model ({first})") from None
+        self.input_size = self._check_contract()
+
+    def _check_contract(self) -> tuple[int, int] | None:
+        inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        found = (f"found input(s) {', '.join(f'{i.name} {_shape_text(i.shape)} {i.type}' for i in inputs)} and "
+                 f"output(s) {', '.join(f'{o.name} {_shape_text(o.shape)} {o.type}' for o in outputs)}")
+        refusal = InputError(f"{self.path}: an ONNX normal model must map (1, 3, H, W) float RGB in [0, 1] to "
+                             f"(1, 4, H, W) (unit normal, kappa); {found}")
+        if len(inputs) != 1 or not outputs:
+            raise refusal
+        shape, kind = inputs[0].shape, inputs[0].type
+        if (len(shape) != 4 or kind != "tensor(float)" or shape[1] != 3 or shape[0] not in (1, None)
+                and isinstance(shape[0], int)):
+            raise refusal
+        out_shape = outputs[0].shape
+        if len(out_shape) != 4 or (isinstance(out_shape[1], int) and out_shape[1] != 4):
+            raise refusal
+        fixed = all(isinstance(d, int) for d in shape[2:])
+        from .learned import PROBE_SIZE_PX
+
+        w, h = (shape[3], shape[2]) if fixed else PROBE_SIZE_PX
+        try:
+            probe = self(np.full((1, 3, h, w), 0.5, np.float32))
+        except Exception as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise InputError(f"{self.path}: the model fails on a (1, 3, {h}, {w}) RGB input ({first})") from None
+        if probe.shape != (1, 4, h, w):
+            raise InputError(f"{self.path}: an ONNX normal model must map (1, 3, {h}, {w}) RGB to (1, 4, {h}, {w}) "
+                             f"(normal, kappa), it gave {tuple(probe.shape)}; {found}")
+        return (w, h) if fixed else None
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        return np.asarray(self.session.run(None, {self.session.get_inputs()[0].name: x})[0], np.float32)
