@@ -45,6 +45,13 @@ class SolverConfig:
     sensor calibration): a perfect synthetic map does not claim a 0.001-degree answer."""
     max_variance_rad2: float = 1.0
     """Cap on any variance: an unobservable axis (one visible Manhattan direction) gets this."""
+    stream_global_starts: int = 1
+    """With a prior (a stream's frame), how many global candidates are also refined beside the prior:
+    the prior is a start, not an anchor."""
+    jump_margin: float = 9.0
+    """A stream's frame leaves the prior's own minimum for another only when that one's robust score
+    (twice a negative log-likelihood, `joint._robust_scores`) is lower by more than this (about 1 %
+    as likely); the jump is then flagged (`VisualRotation.jump_deg`)."""
 
 
 @lru_cache(maxsize=8)
