@@ -19,11 +19,14 @@ reweighted by the Cauchy loss at that rotation (`lines.cauchy_reweighted`, scale
 again, `robust_iterations` times (iteratively reweighted least squares; each step is one pass over
 the segments' moments). Without `R_init` the starts are the best few global candidates of J and
 each cue's own best candidates (of E_c and of E_c~), each first minimised on the plain J; with
-`R_init` (a frame of a stream) the one start is R_init, reweighted there at once (the plain sextic can
-slide from a good prior to a wrong frame; from a poor prior every segment gets about the same small
-weight, which is the plain sextic again). The minimum kept is the one with the least robust joint score
-sum_c (n_c / s_c) E_c~(R) / min E_c~ over the minima found (E_N~ = E_N, E_L~ the Cauchy cost
-`lines.cauchy_line_cost`): the rotation that explains the most segments and normals together.
+`R_init` (a frame of a stream) R_init is a start, not an anchor: it is reweighted at the coarse scale first
+(a fast turn moves the segments by more than the fine scale), and the best global candidate of J, and the
+lines' best of E_L~, are minimised too when they explain the frame clearly better than R_init does; R_init's
+own minimum is kept unless another scores lower by `SolverConfig.jump_margin` (then `jump_deg` says so).
+The minimum kept is the one with the least robust joint score
+sum_c (n_c / s_c) t_c E_c~(R) / min E_c~ over the minima found (E_N~ = E_N, E_L~ the Cauchy cost
+`lines.cauchy_line_cost`): the rotation that explains the most segments and normals together. A cue
+without information neither chooses (t_c, `_information_trust`) nor steers J (`_steering_weights`).
 
 A frame with one cue only is solved by that cue alone; with normals only, it is exactly the
 normals-only `ManhattanSolver` (same figures).
