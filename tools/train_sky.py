@@ -52,11 +52,9 @@ def samples(folder: Path, clips: str, pixels: int, rng) -> tuple[np.ndarray, np.
 
 
 def unpack(theta, d, hidden):
-    i = 0
-    W1 = theta[i:i + d * hidden].reshape(d, hidden); i += d * hidden
-    b1 = theta[i:i + hidden]; i += hidden
-    W2 = theta[i:i + hidden].reshape(hidden, 1); i += hidden
-    return W1, b1, W2, theta[i:i + 1]
+    ends = np.cumsum([d * hidden, hidden, hidden, 1])
+    W1, b1, W2, b2 = np.split(theta[: ends[-1]], ends[:-1])
+    return W1.reshape(d, hidden), b1, W2.reshape(hidden, 1), b2
 
 
 def loss(theta, x, y, hidden, l2):
@@ -100,7 +98,8 @@ def main():
         return float(np.mean((z > 0) == (yy > 0.5)))
 
     xc, yc = samples(a.data, a.test, a.pixels, np.random.default_rng(1))
-    print(f"train ({a.train}) {len(y)} px: accuracy {accuracy(x, y):.4f}; held out ({a.test}) {len(yc)} px: {accuracy(xc, yc):.4f}")
+    print(f"train ({a.train}) {len(y)} px: accuracy {accuracy(x, y):.4f}; "
+          f"held out ({a.test}) {len(yc)} px: {accuracy(xc, yc):.4f}")
     np.savez(a.out, mean=mean.astype(np.float32), std=std.astype(np.float32), W1=W1.astype(np.float32),
              b1=b1.astype(np.float32), W2=W2.astype(np.float32), b2=b2.astype(np.float32))
     print(f"wrote {a.out}")

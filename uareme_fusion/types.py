@@ -134,6 +134,12 @@ class VisualRotation:
     cues: dict = field(default_factory=dict)
     """Per visual cue ("normals", "lines") that took part: its share of the information (trace of
     its information matrix over the total), cost and count. Empty for the normals-only solver."""
+    jump_deg: float = 0.0
+    """When the frame's own evidence overrode the prior it was started from (a stream's previous frame or
+    prediction), the angle (deg) from the prior's own minimum to the one kept; 0 when it did not."""
+    reason: str = ""
+    """Why the covariance is wide, when the frame has no usable evidence (e.g. "no valid normals, too few
+    segments"); empty otherwise."""
 
     def symmetric_to(self, R_cm_ref: np.ndarray) -> "VisualRotation":
         """The same measurement expressed with the Manhattan labelling nearest `R_cm_ref`.
@@ -170,6 +176,11 @@ class Status(enum.IntFlag):
     """Depth normals were asked for and this frame has no depth map: it used the remaining cues."""
     UPDATE_NONFINITE = enum.auto()
     """A filter update gave a non-finite correction or covariance and was dropped."""
+    VISUAL_JUMP = enum.auto()
+    """The frame's own evidence overrode the prior its solve started from (`VisualRotation.jump_deg`)."""
+    VISUAL_NO_EVIDENCE = enum.auto()
+    """The frame had no usable evidence (black, blank, blurred): its visual covariance is the cap
+    (`VisualRotation.reason` says why)."""
 
 
 def visual_R_wc_covariance(visual: VisualRotation) -> np.ndarray:

@@ -362,7 +362,8 @@ def run(data: Path, cues: str = "normals,lines,sky", ecd_limit: int | None = Non
                           "" if vs is None else f"{vs['mean']:+.4f} deg vs single, paired per frame "
                           f"(95 % {vs['low']:+.4f} .. {vs['high']:+.4f})")
     console.print(table)
-    return {"ecd": ecd, "horizon_uav": uav, "indoor_horizon_known": indoor, "icsl": icsl, "icsl_given_K": icsl_given, "icsl_pooled_K": icsl_pooled, "icl_kt3": icl,
+    return {"ecd": ecd, "horizon_uav": uav, "indoor_horizon_known": indoor, "icsl": icsl, "icsl_given_K": icsl_given,
+            "icsl_pooled_K": icsl_pooled, "icl_kt3": icl,
             "icl_kt3_pooled_K": icl_pooled, "backends_rgb_only": backends}
 
 

@@ -24,6 +24,7 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
 from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
                             unknown_centre_floor)
 from ..solver.horizon_estimate import sky_and_segments
+from ..solver.evidence import no_evidence_reason, without_evidence
 from ..solver.joint import JointSolver
 from ..solver.manhattan import up_candidate
 from ..solver.sky_horizon import SkyDetector
@@ -65,12 +66,15 @@ class CueSolver:
     """
 
     def __init__(self, lines: bool = True, assumed_fov_deg: float = DEFAULT_FOV_DEG,
-                 detector: SegmentDetector | None = None, sky: bool = False):
+                 detector: SegmentDetector | None = None, sky: bool = False, image_normals: bool = True):
         self.detector = (detector or SegmentDetector()) if lines else None
         self.sky = SkyDetector() if sky else None
         """The sky boundary cue (`solver/sky_horizon.py`), None without it."""
         self._sky_now = None
         """The current frame's sky boundary (None: none, or not looked for)."""
+        self.image_normals = image_normals
+        """Whether the normals come from the image (a network): then a frame without image evidence
+        (`solver.evidence`) reports the capped covariance and why; depth normals are not judged so."""
         self.solver = JointSolver()
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.focal: FocalEstimate | None = None
@@ -97,10 +101,13 @@ class CueSolver:
             self._sky_now, segments = sky_and_segments(self._sky_now, segments, K, guess)
         try:
             if other_size:
-                return self._solve_alone(frame, normal_map, segments, R_init)
-            return self._solve(frame, normal_map, segments, R_init)
+                visual = self._solve_alone(frame, normal_map, segments, R_init)
+            else:
+                visual = self._solve(frame, normal_map, segments, R_init)
         except InputError:
             return None
+        reason = no_evidence_reason(frame.rgb) if self.image_normals and normal_map is not None else ""
+        return without_evidence(visual, reason, self.solver.config.max_variance_rad2) if reason else visual
 
     def _other_size(self, frame: Frame) -> bool:
         """Whether a frame without K differs in size from the stream's camera (the first such frame's);

@@ -165,6 +165,10 @@ class Pipeline:
         if normal_map is None and frame.depth is None and getattr(self.normals, "needs_depth", False):
             estimate = dataclasses.replace(estimate, status=estimate.status | Status.DEPTH_MISSING)
             self.stats.frames_without_depth += 1
+        if visual is not None and (visual.jump_deg > 0 or visual.reason):
+            flags = (Status.VISUAL_JUMP if visual.jump_deg > 0 else Status.OK) | (
+                Status.VISUAL_NO_EVIDENCE if visual.reason else Status.OK)
+            estimate = dataclasses.replace(estimate, status=estimate.status | flags)
         t3 = time.perf_counter()
         times.add("normals", t1 - t0)
         times.add("solver", t2 - t1)

@@ -93,7 +93,8 @@ def visual_stages(cfg: RunConfig, info) -> tuple[CappedNormals | None, CueSolver
     chosen = parse_cues(cfg.cues)
     normals = (CappedNormals(make_normal_estimator(cfg.normals, info, cfg.threads), cfg.kappa_cap)
                if "normals" in chosen else None)
-    return normals, CueSolver(lines="lines" in chosen, assumed_fov_deg=cfg.assumed_fov_deg, sky="sky" in chosen)
+    return normals, CueSolver(lines="lines" in chosen, assumed_fov_deg=cfg.assumed_fov_deg, sky="sky" in chosen,
+                              image_normals=cfg.normals != "depth")
 
 
 def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipeline:
