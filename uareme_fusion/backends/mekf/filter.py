@@ -27,9 +27,11 @@ from .measurements import (correlated_noise_scale, gravity_model, stack, vertica
                            visual_model)
 from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
+from .source_trust import (note_accel_information, note_visual_information, update_visual_trust, vertical_variance,
+                           visual_vertical_innovation)
 from .status_bits import status_of
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
-from .state_buffer import (S_IMU_T, S_PRODUCTS, S_REJECTIONS, S_T_STATE, S_T_VISUAL, X_B_C, X_P, X_R_WC, X_R_WM,
+from .state_buffer import (S_ACCEL_VAR_RATE, S_IMU_T, S_PRODUCTS, S_REJECTIONS, S_T_STATE, S_T_VISUAL, X_B_C, X_P, X_R_WC, X_R_WM,
                            BufferArray, BufferScalar, field_views, new_state_buffer)
 
 
@@ -360,6 +362,7 @@ class Mekf(Backend):
         if not ok:
             self.counters["accel_skipped"] += 1
             return None
+        note_accel_information(self.views["s"], var, T)
         if downweighted:
             self.flags |= status_bits.ACCEL_DOWNWEIGHTED
             self.counters["accel_downweighted"] += 1
@@ -372,21 +375,30 @@ class Mekf(Backend):
         the estimate after it (`estimate_out`)."""
         rejected = visual_update_compiled(self, visual) if self._visual_compiled else None
         if rejected is None:  # the reference path (also after a kernel failed: `compiled.fall_back`)
-            self._visual_update(visual, self._take_accel_rows() if self.accel.due else None)
+            self._visual_update(visual)
             return False
         if not rejected or self.rejections < self.config.reinit_after_rejections:
             return True
         self._reinitialise(visual)
         return False
 
-    def _visual_update(self, visual: VisualRotation, accel_rows) -> None:
-        """The frame's rotation as a measurement of `R_cm`, gated and Huber-weighted, stacked with
-        the vertical pseudo-measurement and `accel_rows` (`_accel_rows` of a due accelerometer
-        update, or None) into one update; past the gate, `accel_rows` alone."""
+    def _visual_update(self, visual: VisualRotation) -> None:
+        """The frame's rotation as a measurement of `R_cm`, gated and Huber-weighted, its covariance
+        and the vertical pseudo-measurement's variance as far as the camera is trusted
+        (`source_trust.py`), stacked with the vertical pseudo-measurement and a due accelerometer
+        update (`_accel_rows`) into one update; past the gate, the accelerometer rows alone."""
         cfg = self.config
         r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
         t_s, t_prev_s = self.t_state, self.t_visual_s
         self.t_visual_s = t_s
+        trust, var_v = (self._visual_trust(r, R_vis, t_s, t_prev_s) if self.motion.uses_imu
+                        else (1.0, cfg.manhattan_vertical_std_rad**2))
+        accel_rows = None
+        if self.accel.due:
+            rest_before = self.counters["rest_updates"]
+            accel_rows = self._take_accel_rows()
+            if self.counters["rest_updates"] > rest_before:  # the zero-rate update moved the state
+                r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
         if t_prev_s is not None:
             R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
         S = H @ self.P @ H.T + R_vis  # the gate and Huber weigh the frame's full error
@@ -409,11 +421,25 @@ class Mekf(Backend):
         d = np.sqrt(d2)
         if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_sigma)
+        if trust != 1.0:  # the independent share of the frame's error (gated on the full one)
+            R_vis = R_vis * trust
         # "m's z is up" only where the world is not the Manhattan frame itself (visual only).
-        vertical = (vertical_model(self.R_wm, cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad)
-                    if self.motion.uses_imu else None)
+        vertical = (vertical_model(self.R_wm, np.sqrt(var_v), cfg.manhattan_vertical_max_rad)
+                    if self.motion.uses_imu and var_v < np.inf else None)
         self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
         self.counters["visual_updates"] += 1
+
+    def _visual_trust(self, r: np.ndarray, R_vis: np.ndarray, t_s: float, t_prev_s: float | None):
+        """The camera's vertical against the filter's up, taken into the running trust (`source_trust.py`):
+        `(share, vertical_var)`, the factor on this frame's visual covariance and the vertical
+        pseudo-measurement's variance (rad^2)."""
+        cfg, s = self.config, self.views["s"]
+        var_v = cfg.manhattan_vertical_std_rad**2
+        e, v = visual_vertical_innovation(self.R_wc, self.R_wm, r, R_vis, self.accel.sum_c, self.accel.time_s,
+                                          s[S_ACCEL_VAR_RATE], var_v)
+        share, persistent = update_visual_trust(s, e, v, cfg.visual_trust_frames, cfg.visual_trust_min_share)
+        note_visual_information(s, R_vis, share, 0.0 if t_prev_s is None else t_s - t_prev_s)
+        return share, vertical_variance(s, var_v, cfg.visual_trust_frames)
 
     def _reinitialise(self, visual: VisualRotation) -> None:
         """After `reinit_after_rejections` frames gated out in a row: a new scene alignment from `visual`."""

@@ -1,0 +1,148 @@
+"""How far `Mekf` trusts the camera's vertical, learned from its innovations (DESIGN.md "Never worse
+than the best input"), and each source's share of the tilt information.
+
+A visual rotation says where up is in the camera: `u_vis = R_cm_pred Exp(r) e_z`, m's z axis as this
+frame sees it (`r` the visual residual, `R_cm_pred = R_wc^T R_wm`). The filter's own up in the camera,
+`u_pred = R_wc^T e_z`, comes from the gyro-propagated accelerometer. Their difference `e_k = u_vis -
+u_pred` (rad, camera frame) has per tilt axis the variance `v_k = (R_vis_xx + R_vis_yy) / 2 + tilt var
+of P_th + vertical_std^2` when the frames' errors are independent. A camera whose vertical errs the
+same way frame after frame (learned normals on a real scene: EuRoC V1_01, a static drone, 8.8 deg
+off in every frame while its covariance says 5) is fused by the filter as if each frame were new,
+and its error adds up. So the errors' running mean is matched against what independent errors would
+give (covariance matching over the mean, not the square):
+
+    m = EMA_a(e_k),  v = EMA_a(v_k),  n_eff = min(frames seen, (2 - a) / a),  a = 1 / frames
+    scale = clip(n_eff |m|^2 / (2 v), 1, max_scale)      (E[n_eff |m|^2 / (2 v)] = 1 when independent)
+
+and the visual covariance and the vertical pseudo-measurement's variance are multiplied by `scale`:
+a camera that keeps disagreeing with a quiet accelerometer carries the information of one frame per
+`scale` frames. The accelerometer's own trust is its inflation by |a| against gravity and by its
+innovation against the gyro-propagated up (`measurements.gravity_model`).
+
+Shares (reported per estimate): information per second on tilt of each source, the accelerometer's
+`1 / (noise_density^2 * inflation)` and the camera's `1 / (scale * v_vis * dt)` (v_vis the visual
+tilt variance of one frame, dt the time between visual updates); `share_visual = I_vis / (I_vis +
+I_acc)`.
+
+Plain-array functions on the filter's scalar block `s` (`state_buffer.py`): the compiled kernels call
+the very same ones.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .state_buffer import (S_ACCEL_INFO_RATE, S_ACCEL_VAR_RATE, S_TRUST_COUNT, S_TRUST_MEAN, S_TRUST_PERSISTENT, S_TRUST_SQUARE,
+                           S_TRUST_VAR, S_TRUST_WEIGHT, S_VISUAL_INFO_RATE, S_VISUAL_SCALE)
+
+MIN_SAMPLES = 3
+"""Frames compared with the accelerometer before the trust says anything (the vertical pseudo-measurement
+waits for them; the share stays 1)."""
+
+
+def visual_vertical_innovation(R_wc, R_wm, r, R_vis, acc_sum, acc_time_s, accel_var_rate, vertical_var):
+    """`(e (3,) rad, v rad^2)`: this frame's up in the camera (m's z through the visual residual `r`
+    (3,), right perturbation of the predicted `R_cm = R_wc^T R_wm`) minus the accelerometer's (the
+    direction of the current period's specific force `acc_sum` (3,), carried in the camera frame by the
+    gyro, over `acc_time_s` s), and the variance per tilt axis of that difference were the frame's error
+    independent (module docstring): the visual covariance `R_vis` (3, 3, m frame) on m's x and y axes,
+    the accelerometer's `accel_var_rate / acc_time_s` (its noise density squared times its inflation, the
+    last update's) and `vertical_var` rad^2. `v` is 0 (no sample) without accelerometer samples."""
+    e = np.zeros(3)
+    norm = math.sqrt(acc_sum[0] ** 2 + acc_sum[1] ** 2 + acc_sum[2] ** 2)
+    if not (acc_time_s > 0 and norm > 0 and accel_var_rate > 0):
+        return e, 0.0
+    # Exp(r) e_z by Rodrigues: e_z + a (r x e_z) + b r x (r x e_z) (the helpers of `matrix3` are not
+    # called here: the kernels compile this function alone)
+    theta2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    if theta2 < 1e-8:
+        a, b = 1.0 - theta2 / 6.0, 0.5 - theta2 / 24.0
+    else:
+        theta = math.sqrt(theta2)
+        a, b = math.sin(theta) / theta, (1.0 - math.cos(theta)) / theta2
+    z0, z1, z2 = a * r[1] + b * r[0] * r[2], -a * r[0] + b * r[1] * r[2], 1.0 + b * (r[2] * r[2] - theta2)
+    for i in range(3):  # (R_wc^T R_wm) Exp(r) e_z - acc / |acc|
+        acc = 0.0
+        for j in range(3):
+            R_pred_ij = R_wc[0, i] * R_wm[0, j] + R_wc[1, i] * R_wm[1, j] + R_wc[2, i] * R_wm[2, j]
+            acc += R_pred_ij * (z0 if j == 0 else z1 if j == 1 else z2)
+        e[i] = acc - acc_sum[i] / norm
+    v = 0.5 * (R_vis[0, 0] + R_vis[1, 1]) + accel_var_rate / acc_time_s + vertical_var
+    return e, v
+
+
+def update_visual_trust(s, e, v, frames, min_share):
+    """Take one frame's vertical innovation `e` (3,) and variance `v` (`visual_vertical_innovation`)
+    into the running moments in `s`; return `(share, persistent_var)`: the independent share of the
+    frame's visual covariance (the innovations' variance about their running mean against `2 v`,
+    clipped to [`min_share`, 1]) and the variance per tilt axis of the persistent part (half the
+    squared running mean less what independent errors leave in it, >= 0), rad^2. `frames` is the
+    averaging horizon (0: off: (1, 0)). A non-finite frame is left out."""
+    if not frames > 0:
+        return 1.0, 0.0
+    if not (abs(e[0]) + abs(e[1]) + abs(e[2]) < np.inf and 0.0 < v < np.inf):  # also: no sample
+        return s[S_VISUAL_SCALE], s[S_TRUST_PERSISTENT]
+    a = min(1.0 / frames, 1.0)
+    w = (1.0 - a) * s[S_TRUST_WEIGHT] + a
+    s[S_TRUST_WEIGHT] = w
+    e2 = 0.0
+    for i in range(3):
+        s[S_TRUST_MEAN + i] = (1.0 - a) * s[S_TRUST_MEAN + i] + a * e[i]
+        e2 += e[i] * e[i]
+    s[S_TRUST_SQUARE] = (1.0 - a) * s[S_TRUST_SQUARE] + a * e2
+    s[S_TRUST_VAR] = (1.0 - a) * s[S_TRUST_VAR] + a * v
+    s[S_TRUST_COUNT] += 1.0
+    m0, m1, m2 = s[S_TRUST_MEAN] / w, s[S_TRUST_MEAN + 1] / w, s[S_TRUST_MEAN + 2] / w
+    mean2 = m0 * m0 + m1 * m1 + m2 * m2
+    v_mean = s[S_TRUST_VAR] / w
+    n_eff = min(s[S_TRUST_COUNT], (2.0 - a) / a)
+    share = 1.0
+    if s[S_TRUST_COUNT] >= MIN_SAMPLES:
+        spread = max(s[S_TRUST_SQUARE] / w - mean2, 0.0) * n_eff / (n_eff - 1.0)
+        share = min(max(spread / (2.0 * v_mean), min_share), 1.0)
+    persistent = max(0.5 * mean2 - share * v_mean / n_eff, 0.0)
+    s[S_VISUAL_SCALE] = share
+    s[S_TRUST_PERSISTENT] = persistent
+    return share, persistent
+
+
+def note_visual_information(s, R_vis, scale, dt_s):
+    """Keep the camera's tilt information per second (`scale` times the frame's tilt variance from
+    `R_vis` (3, 3), one frame per `dt_s` s) for the shares."""
+    v = 0.5 * (R_vis[0, 0] + R_vis[1, 1]) * scale
+    s[S_VISUAL_INFO_RATE] = 1.0 / (v * dt_s) if v > 0 and dt_s > 0 else 0.0
+
+
+def note_accel_information(s, var_rad2, T_s):
+    """Keep the accelerometer's tilt information per second (one update of variance `var_rad2` per `T_s`
+    s), and its variance rate `var_rad2 * T_s`."""
+    s[S_ACCEL_VAR_RATE] = var_rad2 * T_s
+    s[S_ACCEL_INFO_RATE] = 1.0 / (var_rad2 * T_s) if var_rad2 > 0 and T_s > 0 else 0.0
+
+
+def tilt_shares(s):
+    """`(share_accel, share_visual)` of the tilt information per second (module docstring); NaN for a
+    source not seen yet."""
+    i_a, i_v = s[S_ACCEL_INFO_RATE], s[S_VISUAL_INFO_RATE]
+    total = i_a + i_v
+    if not total > 0 or not math.isfinite(total):
+        return math.nan, math.nan
+    return i_a / total, i_v / total
+
+
+def vertical_variance(s, vertical_var, frames):
+    """The vertical pseudo-measurement's variance, rad^2, from the trust kept in `s`: the configured
+    `vertical_var`, or, when the camera's vertical errs persistently by more, that persistent variance
+    times the `frames` over which the same error is applied again (a prior re-applied each frame counts
+    once per horizon); `inf` (skip it) until `MIN_SAMPLES` frames were compared with the accelerometer.
+    With the trust off (`frames` 0), `vertical_var`."""
+    if not frames > 0:
+        return vertical_var
+    if s[S_TRUST_COUNT] < MIN_SAMPLES:
+        return math.inf
+    persistent_var = s[S_TRUST_PERSISTENT]
+    if persistent_var > vertical_var:
+        return persistent_var * frames
+    return vertical_var
