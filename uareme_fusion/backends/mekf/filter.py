@@ -27,11 +27,11 @@ from .measurements import (correlated_noise_scale, gravity_model, stack, vertica
                            visual_model)
 from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
-from .source_trust import (note_accel_information, note_visual_information, update_visual_trust, vertical_variance,
+from .source_trust import (note_accel_information, note_visual_information, tilt_shares, update_visual_trust, vertical_variance,
                            visual_vertical_innovation)
 from .status_bits import status_of
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
-from .state_buffer import (S_ACCEL_VAR_RATE, S_IMU_T, S_PRODUCTS, S_REJECTIONS, S_T_STATE, S_T_VISUAL, X_B_C, X_P, X_R_WC, X_R_WM,
+from .state_buffer import (S_ACCEL_VAR_RATE, S_IMU_T, S_VISUAL_INFO_RATE, S_PRODUCTS, S_REJECTIONS, S_T_STATE, S_T_VISUAL, X_B_C, X_P, X_R_WC, X_R_WM,
                            BufferArray, BufferScalar, field_views, new_state_buffer)
 
 
@@ -40,6 +40,15 @@ _ESTIMATE_INDEX = np.stack([np.arange(X_R_WC, X_R_WM).reshape(3, 3), np.arange(X
                             _P_TH.T, np.tile(np.arange(X_B_C, X_P), (3, 1))])
 """Where R_wc, R_wm, P[TH, TH], its transpose and b_c (in each row) lie in the state buffer `x` (5, 3, 3):
 one `take` copies them."""
+
+
+_CAMERA_ONLY = (float("nan"), 1.0)
+"""`Estimate.tilt_shares` without an IMU: the camera alone."""
+
+
+def _finite(visual: VisualRotation) -> bool:
+    """Whether a frame's rotation and covariance are finite (checked only for a gated-out frame)."""
+    return bool(np.isfinite(visual.R_cm).all() and np.isfinite(visual.cov).all())
 
 
 def _shape(a) -> tuple:
@@ -127,7 +136,7 @@ class Mekf(Backend):
         self.F_buffer = np.eye(N_STATE)  # gyro transition: only its TH rows change between chunks
         self.initialised = False
         self.manhattan_initialised = False
-        self._counters = dict(visual_rejected=0, reinitialised=0, accel_downweighted=0, accel_skipped=0,
+        self._counters = dict(visual_rejected=0, visual_nonfinite=0, reinitialised=0, accel_downweighted=0, accel_skipped=0,
                               imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0,
                               rest_updates=0, nonfinite_updates=0)
         self.flags = status_bits.OK  # `Status` bits gathered since the last estimate (`status_bits.py`)
@@ -267,6 +276,11 @@ class Mekf(Backend):
         if visual is None or not fuses_visual:
             if fuses_visual:
                 self.flags |= status_bits.VISUAL_MISSING
+                self.x[S_VISUAL_INFO_RATE] = 0.0  # no share while the camera gives nothing
+        elif not _finite(visual):  # never a start
+            self.flags |= status_bits.VISUAL_REJECTED
+            self.counters["visual_rejected"] += 1
+            self.counters["visual_nonfinite"] += 1
         elif not self.initialised:
             self.motion.start_from_visual(self, t_s, visual)
         elif not self.initialise_manhattan(visual):
@@ -377,6 +391,8 @@ class Mekf(Backend):
         if rejected is None:  # the reference path (also after a kernel failed: `compiled.fall_back`)
             self._visual_update(visual)
             return False
+        if rejected and not _finite(visual):  # gated out, counted, and no sign of a new scene alignment
+            self._count_nonfinite()
         if not rejected or self.rejections < self.config.reinit_after_rejections:
             return True
         self._reinitialise(visual)
@@ -408,6 +424,9 @@ class Mekf(Backend):
             d2 = np.inf
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
             self._count_rejection()
+            self.x[S_VISUAL_INFO_RATE] = 0.0
+            if not _finite(visual):
+                self._count_nonfinite()
             if accel_rows is not None:
                 self._kalman_update(*accel_rows)
             if self.rejections >= cfg.reinit_after_rejections:
@@ -430,22 +449,30 @@ class Mekf(Backend):
         self.counters["visual_updates"] += 1
 
     def _visual_trust(self, r: np.ndarray, R_vis: np.ndarray, t_s: float, t_prev_s: float | None):
-        """The camera's vertical against the filter's up, taken into the running trust (`source_trust.py`):
-        `(share, vertical_var)`, the factor on this frame's visual covariance and the vertical
-        pseudo-measurement's variance (rad^2)."""
+        """The camera's vertical against a quiet accelerometer's, taken into the running trust
+        (`source_trust.py`): `(share, vertical_var)`, the factor on this frame's visual covariance and the
+        vertical pseudo-measurement's variance (rad^2; inf: not applied)."""
         cfg, s = self.config, self.views["s"]
         var_v = cfg.manhattan_vertical_std_rad**2
+        quiet = (cfg.accel_downweight_flag_ratio * cfg.accel_tilt_noise_rad_sqrt_s) ** 2
         e, v = visual_vertical_innovation(self.R_wc, self.R_wm, r, R_vis, self.accel.sum_c, self.accel.time_s,
-                                          s[S_ACCEL_VAR_RATE], var_v)
-        share, persistent = update_visual_trust(s, e, v, cfg.visual_trust_frames, cfg.visual_trust_min_share)
-        note_visual_information(s, R_vis, share, 0.0 if t_prev_s is None else t_s - t_prev_s)
-        return share, vertical_variance(s, var_v, cfg.visual_trust_frames)
+                                          s[S_ACCEL_VAR_RATE], quiet, var_v)
+        share, _ = update_visual_trust(s, e, v, cfg.visual_trust_frames, cfg.visual_trust_min_share)
+        var_v = vertical_variance(s, var_v, cfg.visual_trust_frames)
+        note_visual_information(s, R_vis, share, var_v, 0.0 if t_prev_s is None else t_s - t_prev_s)
+        return share, var_v
 
     def _reinitialise(self, visual: VisualRotation) -> None:
         """After `reinit_after_rejections` frames gated out in a row: a new scene alignment from `visual`."""
         self.flags |= status_bits.REINITIALISED
         self.counters["reinitialised"] += 1
         self.motion.reinitialise(self, visual)
+
+    def _count_nonfinite(self) -> None:
+        """A gated-out frame whose rotation or covariance is not finite: counted apart
+        (`visual_nonfinite`), and not a disagreement that leads to a re-initialisation."""
+        self.counters["visual_nonfinite"] += 1
+        self.rejections -= 1
 
     def _count_rejection(self) -> None:
         self.flags |= status_bits.VISUAL_REJECTED
@@ -505,7 +532,7 @@ class Mekf(Backend):
         """`_estimate` from what the compiled visual update wrote (`estimate_out`): one copy, no arithmetic."""
         R_wc, cov, R_wm, b_c = self.estimate_out.copy()
         bits, self.flags = self.flags, status_bits.OK
-        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm, self._bias_in_imu(b_c[0]))
+        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm, self._bias_in_imu(b_c[0]), tilt_shares(self.views["s"]))
 
     def _bias_in_imu(self, b_c: np.ndarray) -> np.ndarray:
         """The gyro bias `b_c` (3,) rad/s (camera frame, a copy) in the IMU frame."""
@@ -522,10 +549,10 @@ class Mekf(Backend):
         cov *= 0.5
         if not self.motion.uses_imu:
             cov += self.noise_share.persistent_cov
-            bias_i = None
+            bias_i, shares = None, _CAMERA_ONLY
         else:
-            bias_i = self._bias_in_imu(b_c[0])
-        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm if self.manhattan_initialised else None, bias_i)
+            bias_i, shares = self._bias_in_imu(b_c[0]), tilt_shares(self.views["s"])
+        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm if self.manhattan_initialised else None, bias_i, shares)
 
 
 _KERNELS_LOADED: set = set()  # which of `load_kernels`' two sets this process has loaded

@@ -41,7 +41,7 @@ from ..imu_stream import rows_if_clean
 from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
 from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED,
                            S_ACCEL_UPDATES, S_ACCEL_VAR_RATE, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE,
-                           S_REJECTIONS, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_REJECTED, S_VISUAL_UPDATES,
+                           S_REJECTIONS, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_INFO_RATE, S_VISUAL_REJECTED, S_VISUAL_UPDATES,
                            X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S, X_SIZE)
 
 # The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `visual_update` return.
@@ -412,12 +412,13 @@ def visual_update(x, p, R_cm, cov, estimate):
     # How far the camera is trusted (`source_trust.py`), from the frame before the accelerometer rows
     # consume the period's specific force.
     var_v = p[P_VERTICAL_STD] ** 2
-    e, v = visual_vertical_innovation(R_wc, R_wm, r, R_all, acc_sum, s[S_ACC_TIME], s[S_ACCEL_VAR_RATE], var_v)
+    quiet = (p[P_FLAG_RATIO] * p[P_ACC_NOISE]) ** 2
+    e, v = visual_vertical_innovation(R_wc, R_wm, r, R_all, acc_sum, s[S_ACC_TIME], s[S_ACCEL_VAR_RATE], quiet, var_v)
     share, _ = update_visual_trust(s, e, v, p[P_TRUST_FRAMES], p[P_TRUST_MIN_SHARE])
+    var_v = vertical_variance(s, var_v, p[P_TRUST_FRAMES])
     t_prev = s[S_T_VISUAL]
     s[S_T_VISUAL] = s[S_T_STATE]
-    note_visual_information(s, R_all, share, s[S_T_STATE] - t_prev if t_prev == t_prev else 0.0)
-    var_v = vertical_variance(s, var_v, p[P_TRUST_FRAMES])
+    note_visual_information(s, R_all, share, var_v, s[S_T_STATE] - t_prev if t_prev == t_prev else 0.0)
     with_accel, downweighted = False, False
     if s[S_ACCEL_DUE] > 0:  # left to the frame at the end of its batch (`P_DEFER`)
         s[S_ACCEL_DUE] = 0
@@ -439,6 +440,7 @@ def visual_update(x, p, R_cm, cov, estimate):
         code |= VISUAL_REJECTED
         s[S_VISUAL_REJECTED] += 1
         s[S_REJECTIONS] += 1
+        s[S_VISUAL_INFO_RATE] = 0.0  # no share while the camera is gated out
         if with_accel:
             isotropic_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r_a, var_a, H_a, p)
     else:

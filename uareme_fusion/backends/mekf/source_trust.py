@@ -20,9 +20,9 @@ a camera that keeps disagreeing with a quiet accelerometer carries the informati
 innovation against the gyro-propagated up (`measurements.gravity_model`).
 
 Shares (reported per estimate): information per second on tilt of each source, the accelerometer's
-`1 / (noise_density^2 * inflation)` and the camera's `1 / (scale * v_vis * dt)` (v_vis the visual
-tilt variance of one frame, dt the time between visual updates); `share_visual = I_vis / (I_vis +
-I_acc)`.
+`1 / (noise_density^2 * inflation)` and the camera's `1 / ((share v_vis + vertical variance) dt)`
+(v_vis the visual tilt variance of one frame, dt the time between visual updates);
+`share_visual = I_vis / (I_vis + I_acc)`.
 
 Plain-array functions on the filter's scalar block `s` (`state_buffer.py`): the compiled kernels call
 the very same ones.
@@ -42,17 +42,20 @@ MIN_SAMPLES = 3
 waits for them; the share stays 1)."""
 
 
-def visual_vertical_innovation(R_wc, R_wm, r, R_vis, acc_sum, acc_time_s, accel_var_rate, vertical_var):
+def visual_vertical_innovation(R_wc, R_wm, r, R_vis, acc_sum, acc_time_s, accel_var_rate, quiet_var_rate,
+                               vertical_var):
     """`(e (3,) rad, v rad^2)`: this frame's up in the camera (m's z through the visual residual `r`
     (3,), right perturbation of the predicted `R_cm = R_wc^T R_wm`) minus the accelerometer's (the
     direction of the current period's specific force `acc_sum` (3,), carried in the camera frame by the
     gyro, over `acc_time_s` s), and the variance per tilt axis of that difference were the frame's error
     independent (module docstring): the visual covariance `R_vis` (3, 3, m frame) on m's x and y axes,
     the accelerometer's `accel_var_rate / acc_time_s` (its noise density squared times its inflation, the
-    last update's) and `vertical_var` rad^2. `v` is 0 (no sample) without accelerometer samples."""
+    last update's) and `vertical_var` rad^2. `v` is 0 (no sample) without accelerometer samples or
+    when the accelerometer is not quiet: its last update inflated past `quiet_var_rate` (by |a| off
+    gravity or by its disagreement with the gyro-propagated up: a turning vehicle)."""
     e = np.zeros(3)
     norm = math.sqrt(acc_sum[0] ** 2 + acc_sum[1] ** 2 + acc_sum[2] ** 2)
-    if not (acc_time_s > 0 and norm > 0 and accel_var_rate > 0):
+    if not (acc_time_s > 0 and norm > 0 and 0 < accel_var_rate <= quiet_var_rate):
         return e, 0.0
     # Exp(r) e_z by Rodrigues: e_z + a (r x e_z) + b r x (r x e_z) (the helpers of `matrix3` are not
     # called here: the kernels compile this function alone)
@@ -108,11 +111,12 @@ def update_visual_trust(s, e, v, frames, min_share):
     return share, persistent
 
 
-def note_visual_information(s, R_vis, scale, dt_s):
-    """Keep the camera's tilt information per second (`scale` times the frame's tilt variance from
-    `R_vis` (3, 3), one frame per `dt_s` s) for the shares."""
-    v = 0.5 * (R_vis[0, 0] + R_vis[1, 1]) * scale
-    s[S_VISUAL_INFO_RATE] = 1.0 / (v * dt_s) if v > 0 and dt_s > 0 else 0.0
+def note_visual_information(s, R_vis, share, vertical_var, dt_s):
+    """Keep the camera's information per second on the camera's tilt for the shares: one frame per
+    `dt_s` s, its tilt variance from `R_vis` (3, 3) times `share` in series with the vertical
+    pseudo-measurement's `vertical_var` (rad^2; the camera's up reaches the world only through it)."""
+    v = 0.5 * (R_vis[0, 0] + R_vis[1, 1]) * share + vertical_var
+    s[S_VISUAL_INFO_RATE] = 1.0 / (v * dt_s) if 0 < v < np.inf and dt_s > 0 else 0.0
 
 
 def note_accel_information(s, var_rad2, T_s):
