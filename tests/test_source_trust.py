@@ -48,7 +48,7 @@ def test_a_persistent_error_is_found_and_its_independent_share_is_small():
         share, pers = source_trust.update_visual_trust(s, bias + rng.normal(0.0, 0.005, 3) * [1, 1, 0], v, 30.0, 0.05)
     assert share == pytest.approx(0.05)  # the frames agree with each other far better than stated
     assert pers == pytest.approx(0.5 * 0.15**2, rel=0.1)  # per tilt axis
-    assert source_trust.vertical_variance(s, 1e-4, 30.0) == pytest.approx(30 * pers)
+    assert source_trust.vertical_variance(s, 1e-4, 30.0) == pytest.approx(1e-4 + 30 * (pers - 4e-4))
 
 
 def test_vertical_waits_for_samples_and_trust_off_changes_nothing():

@@ -124,7 +124,8 @@ class EstimatesCsvWriter:
             heads = [head if not np.isfinite(b).all() else ("%s,%.6e,%.6e,%.6e" % (head[:-3], *b))
                      for head, b in zip(heads, bias.tolist())]
         names = self._status_names
-        return "".join([f"{head},{q},{s},{names(s)},{sh}\r\n" for head, q, s, sh in zip(heads, quality, status, shares)])
+        return "".join([f"{head},{q},{s},{names(s)},{sh}\r\n"
+                        for head, q, s, sh in zip(heads, quality, status, shares)])
 
     def _status_names(self, status: int) -> str:
         names = self._names.get(status)

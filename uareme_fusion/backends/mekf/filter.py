@@ -27,12 +27,12 @@ from .measurements import (correlated_noise_scale, gravity_model, stack, vertica
                            visual_model)
 from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
-from .source_trust import (note_accel_information, note_visual_information, tilt_shares, update_visual_trust, vertical_variance,
-                           visual_vertical_innovation)
+from .source_trust import (note_accel_information, note_visual_information, tilt_shares, update_visual_trust,
+                           vertical_variance, visual_vertical_innovation)
 from .status_bits import status_of
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
-from .state_buffer import (S_ACCEL_VAR_RATE, S_IMU_T, S_VISUAL_INFO_RATE, S_PRODUCTS, S_REJECTIONS, S_T_STATE, S_T_VISUAL, X_B_C, X_P, X_R_WC, X_R_WM,
-                           BufferArray, BufferScalar, field_views, new_state_buffer)
+from .state_buffer import (BufferArray, BufferScalar, S_ACCEL_VAR_RATE, S_IMU_T, S_PRODUCTS, S_REJECTIONS, S_T_STATE,
+                           S_T_VISUAL, S_VISUAL_INFO_RATE, X_B_C, X_P, X_R_WC, X_R_WM, field_views, new_state_buffer)
 
 
 _P_TH = X_P + N_STATE * np.arange(N_STATE)[TH, None] + np.arange(N_STATE)[TH]  # where P[TH, TH] lies in `x`
@@ -136,7 +136,8 @@ class Mekf(Backend):
         self.F_buffer = np.eye(N_STATE)  # gyro transition: only its TH rows change between chunks
         self.initialised = False
         self.manhattan_initialised = False
-        self._counters = dict(visual_rejected=0, visual_nonfinite=0, reinitialised=0, accel_downweighted=0, accel_skipped=0,
+        self._counters = dict(visual_rejected=0, visual_nonfinite=0, reinitialised=0, accel_downweighted=0,
+                              accel_skipped=0,
                               imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0,
                               rest_updates=0, nonfinite_updates=0)
         self.flags = status_bits.OK  # `Status` bits gathered since the last estimate (`status_bits.py`)

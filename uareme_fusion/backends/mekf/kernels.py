@@ -39,10 +39,11 @@ from .source_trust import (note_accel_information, note_visual_information, upda
                            visual_vertical_innovation)
 from ..imu_stream import rows_if_clean
 from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
-from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED,
-                           S_ACCEL_UPDATES, S_ACCEL_VAR_RATE, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE,
-                           S_REJECTIONS, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_INFO_RATE, S_VISUAL_REJECTED, S_VISUAL_UPDATES,
-                           X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S, X_SIZE)
+from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_ACCEL_VAR_RATE,
+                           S_ACC_ELAPSED, S_ACC_TIME, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REJECTIONS,
+                           S_REST_N, S_REST_SINCE, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_INFO_RATE,
+                           S_VISUAL_REJECTED, S_VISUAL_UPDATES, X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P,
+                           X_REST_SUMS, X_R_WC, X_R_WM, X_S, X_SIZE)
 
 # The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `visual_update` return.
 DOWNWEIGHTED, NONFINITE = status_bits.ACCEL_DOWNWEIGHTED, status_bits.UPDATE_NONFINITE

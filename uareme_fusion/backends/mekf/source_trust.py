@@ -34,9 +34,13 @@ import math
 
 import numpy as np
 
-from .state_buffer import (S_ACCEL_INFO_RATE, S_ACCEL_VAR_RATE, S_TRUST_COUNT, S_TRUST_MEAN, S_TRUST_PERSISTENT, S_TRUST_SQUARE,
-                           S_TRUST_VAR, S_TRUST_WEIGHT, S_VISUAL_INFO_RATE, S_VISUAL_SCALE)
+from .state_buffer import (S_ACCEL_INFO_RATE, S_ACCEL_VAR_RATE, S_TRUST_COUNT, S_TRUST_MEAN, S_TRUST_PERSISTENT,
+                           S_TRUST_SQUARE, S_TRUST_VAR, S_TRUST_WEIGHT, S_VISUAL_INFO_RATE, S_VISUAL_SCALE)
 
+PERSISTENT_MARGIN = 4.0
+"""A persistent error of the camera's vertical loosens the vertical pseudo-measurement only beyond this
+many times its variance (twice its std: the running estimate's own scatter stays below it on the
+simulated bus, whose vertical is right)."""
 MIN_SAMPLES = 3
 """Frames compared with the accelerometer before the trust says anything (the vertical pseudo-measurement
 waits for them; the share stays 1)."""
@@ -138,15 +142,13 @@ def tilt_shares(s):
 
 def vertical_variance(s, vertical_var, frames):
     """The vertical pseudo-measurement's variance, rad^2, from the trust kept in `s`: the configured
-    `vertical_var`, or, when the camera's vertical errs persistently by more, that persistent variance
-    times the `frames` over which the same error is applied again (a prior re-applied each frame counts
-    once per horizon); `inf` (skip it) until `MIN_SAMPLES` frames were compared with the accelerometer.
-    With the trust off (`frames` 0), `vertical_var`."""
+    `vertical_var`, plus, for a persistent error of the camera's vertical beyond `PERSISTENT_MARGIN`
+    times it, that excess times the `frames` over which the same error is applied again (a prior
+    re-applied each frame counts once per horizon); continuous in the persistent variance. `inf`
+    (skip it) until `MIN_SAMPLES` frames were compared with a quiet accelerometer. With the trust
+    off (`frames` 0), `vertical_var`."""
     if not frames > 0:
         return vertical_var
     if s[S_TRUST_COUNT] < MIN_SAMPLES:
         return math.inf
-    persistent_var = s[S_TRUST_PERSISTENT]
-    if persistent_var > vertical_var:
-        return persistent_var * frames
-    return vertical_var
+    return vertical_var + max(s[S_TRUST_PERSISTENT] - PERSISTENT_MARGIN * vertical_var, 0.0) * frames
