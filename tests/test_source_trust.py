@@ -33,7 +33,7 @@ def test_independent_errors_keep_the_camera_fully_trusted():
     for _ in range(300):
         e = rng.normal(0.0, np.sqrt(v), 3)
         e[2] = 0.0
-        share, pers = source_trust.update_visual_trust(s, e, v, 30.0, 0.05)
+        share, pers = source_trust.update_visual_trust(s, e, v, 30.0, 0.05, 0.0)
         shares.append(share)
         persistent.append(pers)
     assert np.mean(shares[30:]) > 0.8  # the spread matches the stated variance
@@ -45,7 +45,8 @@ def test_a_persistent_error_is_found_and_its_independent_share_is_small():
     rng = np.random.default_rng(1)
     s, v, bias = _scalars(), 0.0076, np.array([0.15, 0.0, 0.0])  # 8.6 deg off, 5 deg stated
     for _ in range(100):
-        share, pers = source_trust.update_visual_trust(s, bias + rng.normal(0.0, 0.005, 3) * [1, 1, 0], v, 30.0, 0.05)
+        share, pers = source_trust.update_visual_trust(s, bias + rng.normal(0.0, 0.005, 3) * [1, 1, 0], v, 30.0, 0.05,
+                                                         0.0)
     assert share == pytest.approx(0.05)  # the frames agree with each other far better than stated
     assert pers == pytest.approx(0.5 * 0.15**2, rel=0.1)  # per tilt axis
     assert source_trust.vertical_variance(s, 1e-4, 30.0) == pytest.approx(1e-4 + 30 * (pers - 4e-4))
@@ -55,9 +56,9 @@ def test_vertical_waits_for_samples_and_trust_off_changes_nothing():
     s = _scalars()
     assert source_trust.vertical_variance(s, 1e-4, 30.0) == np.inf
     assert source_trust.vertical_variance(s, 1e-4, 0.0) == 1e-4
-    assert source_trust.update_visual_trust(s, np.ones(3), 1.0, 0.0, 0.05) == (1.0, 0.0)
+    assert source_trust.update_visual_trust(s, np.ones(3), 1.0, 0.0, 0.05, 0.0) == (1.0, 0.0)
     before = s.copy()
-    source_trust.update_visual_trust(s, np.full(3, np.nan), 1.0, 30.0, 0.05)  # a NaN frame is left out
+    source_trust.update_visual_trust(s, np.full(3, np.nan), 1.0, 30.0, 0.05, 0.0)  # a NaN frame is left out
     assert np.array_equal(before, s, equal_nan=True)
 
 
@@ -106,7 +107,7 @@ def _biased(tilt_deg=8.0, std_deg=5.0, seed=0):
 @pytest.mark.parametrize("compiled", [True, False])
 def test_a_camera_that_keeps_disagreeing_with_a_quiet_accelerometer_loses_the_tilt(compiled):
     trusted = _stream(Mekf(MekfConfig(mode="visual_imu", visual_trust_frames=0, compiled=compiled)), 5.0, _biased())
-    learned = _stream(Mekf(MekfConfig(mode="visual_imu", compiled=compiled)), 5.0, _biased())
+    learned = _stream(Mekf(MekfConfig(mode="visual_imu", visual_trust_frames=30, compiled=compiled)), 5.0, _biased())
     tilt_trusted = np.mean([_tilt_deg(e.R_wc) for e in trusted[20:]])
     tilt_learned = np.mean([_tilt_deg(e.R_wc) for e in learned[20:]])
     assert tilt_trusted > 2.0  # the old filter: 8 deg of persistent error pulls tilt
@@ -116,8 +117,8 @@ def test_a_camera_that_keeps_disagreeing_with_a_quiet_accelerometer_loses_the_ti
 
 
 def test_both_paths_agree_with_the_trust():
-    a = _stream(Mekf(MekfConfig(mode="visual_imu", compiled=True)), 3.0, _biased())
-    b = _stream(Mekf(MekfConfig(mode="visual_imu", compiled=False)), 3.0, _biased())
+    a = _stream(Mekf(MekfConfig(mode="visual_imu", visual_trust_frames=30, compiled=True)), 3.0, _biased())
+    b = _stream(Mekf(MekfConfig(mode="visual_imu", visual_trust_frames=30, compiled=False)), 3.0, _biased())
     for ea, eb in zip(a, b):
         np.testing.assert_allclose(ea.R_wc, eb.R_wc, atol=1e-9)
         np.testing.assert_allclose(ea.cov, eb.cov, rtol=1e-6, atol=1e-14)

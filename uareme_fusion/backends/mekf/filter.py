@@ -27,8 +27,8 @@ from .measurements import (correlated_noise_scale, gravity_model, stack, vertica
                            visual_model)
 from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
-from .source_trust import (note_accel_information, note_visual_information, tilt_shares, update_visual_trust,
-                           vertical_variance, visual_vertical_innovation)
+from .source_trust import (note_accel_information, note_visual_information, squared_rate, tilt_shares,
+                           update_visual_trust, vertical_variance, visual_vertical_innovation)
 from .status_bits import status_of
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
 from .state_buffer import (BufferArray, BufferScalar, S_ACCEL_VAR_RATE, S_IMU_T, S_PRODUCTS, S_REJECTIONS, S_T_STATE,
@@ -458,7 +458,8 @@ class Mekf(Backend):
         quiet = (cfg.accel_downweight_flag_ratio * cfg.accel_tilt_noise_rad_sqrt_s) ** 2
         e, v = visual_vertical_innovation(self.R_wc, self.R_wm, r, R_vis, self.accel.sum_c, self.accel.time_s,
                                           s[S_ACCEL_VAR_RATE], quiet, var_v)
-        share, _ = update_visual_trust(s, e, v, cfg.visual_trust_frames, cfg.visual_trust_min_share)
+        share, _ = update_visual_trust(s, e, v, cfg.visual_trust_frames, cfg.visual_trust_min_share,
+                                       squared_rate(self.last_gyro_c, self.b_c))
         var_v = vertical_variance(s, var_v, cfg.visual_trust_frames)
         note_visual_information(s, R_vis, share, var_v, 0.0 if t_prev_s is None else t_s - t_prev_s)
         return share, var_v

@@ -35,8 +35,8 @@ from . import state_buffer, status_bits
 from .accel import chunk_bounds
 from .matrix3 import exp3_into, inv3, log3_into, matmul3_into
 from .measurements import correlated_noise_scale, gravity_model, vertical_measurement, zero_rate_model
-from .source_trust import (note_accel_information, note_visual_information, update_visual_trust, vertical_variance,
-                           visual_vertical_innovation)
+from .source_trust import (note_accel_information, note_visual_information, squared_rate, update_visual_trust,
+                           vertical_variance, visual_vertical_innovation)
 from ..imu_stream import rows_if_clean
 from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
 from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_ACCEL_VAR_RATE,
@@ -405,7 +405,7 @@ def visual_update(x, p, R_cm, cov, estimate):
     (the attitude block of `P`, symmetrised), `R_wm`, and `b_c` in the first row. Returns the
     `VISUAL_REJECTED` | `DOWNWEIGHTED` | `NONFINITE` bits of what happened; the re-initialisation after
     many rejections is left to the caller."""
-    s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state_views(x)
+    s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums = state_views(x)
     nonfinite_before = s[S_NONFINITE]
     code = 0
     r, R_all, H = np.zeros(9), np.zeros((9, 9)), np.zeros((9, 12))
@@ -415,7 +415,7 @@ def visual_update(x, p, R_cm, cov, estimate):
     var_v = p[P_VERTICAL_STD] ** 2
     quiet = (p[P_FLAG_RATIO] * p[P_ACC_NOISE]) ** 2
     e, v = visual_vertical_innovation(R_wc, R_wm, r, R_all, acc_sum, s[S_ACC_TIME], s[S_ACCEL_VAR_RATE], quiet, var_v)
-    share, _ = update_visual_trust(s, e, v, p[P_TRUST_FRAMES], p[P_TRUST_MIN_SHARE])
+    share, _ = update_visual_trust(s, e, v, p[P_TRUST_FRAMES], p[P_TRUST_MIN_SHARE], squared_rate(last_gyro, b_c))
     var_v = vertical_variance(s, var_v, p[P_TRUST_FRAMES])
     t_prev = s[S_T_VISUAL]
     s[S_T_VISUAL] = s[S_T_STATE]
@@ -661,7 +661,7 @@ if jit.available():
                  accel_rows, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks, state_views, rows_if_clean,
                  integrate_batch, correlated_noise_scale, log3_into, vertical_measurement, visual_measurement,
                  note_accel_information, note_visual_information, update_visual_trust, vertical_variance,
-                 visual_vertical_innovation)
+                 visual_vertical_innovation, squared_rate)
         # The modules whose functions the kernels inline or whose constants they freeze.
         jit.drop_stale_caches({__file__, rotations.__file__, state_buffer.__file__, status_bits.__file__}
                               | {sys.modules[f.__module__].__file__ for f in _pure})
