@@ -2,22 +2,25 @@
 than the best input"), and each source's share of the tilt information.
 
 A visual rotation says where up is in the camera: `u_vis = R_cm_pred Exp(r) e_z`, m's z axis as this
-frame sees it (`r` the visual residual, `R_cm_pred = R_wc^T R_wm`). The filter's own up in the camera,
-`u_pred = R_wc^T e_z`, comes from the gyro-propagated accelerometer. Their difference `e_k = u_vis -
-u_pred` (rad, camera frame) has per tilt axis the variance `v_k = (R_vis_xx + R_vis_yy) / 2 + tilt var
-of P_th + vertical_std^2` when the frames' errors are independent. A camera whose vertical errs the
-same way frame after frame (learned normals on a real scene: EuRoC V1_01, a static drone, 8.8 deg
-off in every frame while its covariance says 5) is fused by the filter as if each frame were new,
-and its error adds up. So the errors' running mean is matched against what independent errors would
-give (covariance matching over the mean, not the square):
+frame sees it (`r` the visual residual, `R_cm_pred = R_wc^T R_wm`). A quiet accelerometer says it too:
+`u_acc`, the direction of the current period's specific force carried in the camera frame by the gyro
+(no sample while its last update was inflated: a turning or accelerating platform). Their difference
+`e_k = u_vis - u_acc` (rad) has per tilt axis the variance `v_k = (R_vis_xx + R_vis_yy) / 2 + accel
+variance + vertical_std^2` were the frame's error independent. A camera whose vertical errs the same
+way frame after frame (learned normals on a real scene: EuRoC V1_01, a static drone, 8.8 deg off in
+every frame while its covariance says 5) is otherwise fused as if each frame were new, and the vertical
+pseudo-measurement, re-applied every frame to a constant R_wm, moves that error into the camera tilt.
+So over the frames where the camera is still (`update_visual_trust`):
 
-    m = EMA_a(e_k),  v = EMA_a(v_k),  n_eff = min(frames seen, (2 - a) / a),  a = 1 / frames
-    scale = clip(n_eff |m|^2 / (2 v), 1, max_scale)      (E[n_eff |m|^2 / (2 v)] = 1 when independent)
+    m = EMA(e_k), spread = EMA(|e_k|^2) - |m|^2, v = EMA(v_k), n_eff the EMA's effective count
+    share = clip(spread / (2 v), min_share, 1)        the independent share of the covariance, fused
+    persistent = max(|m|^2 / 2 - share v / n_eff, 0)   rad^2 per tilt axis
 
-and the visual covariance and the vertical pseudo-measurement's variance are multiplied by `scale`:
-a camera that keeps disagreeing with a quiet accelerometer carries the information of one frame per
-`scale` frames. The accelerometer's own trust is its inflation by |a| against gravity and by its
-innovation against the gyro-propagated up (`measurements.gravity_model`).
+and the vertical pseudo-measurement's variance grows by the persistent variance beyond
+`PERSISTENT_MARGIN` times its own, times the horizon (`vertical_variance`): R_wm's tilt then takes the
+camera's persistent error and the camera's tilt stays the accelerometer's. The accelerometer's own
+trust is its inflation by |a| against gravity and by its innovation against the gyro-propagated up
+(`measurements.gravity_model`).
 
 Shares (reported per estimate): information per second on tilt of each source, the accelerometer's
 `1 / (noise_density^2 * inflation)` and the camera's `1 / ((share v_vis + vertical variance) dt)`
@@ -34,8 +37,9 @@ import math
 
 import numpy as np
 
-from .state_buffer import (S_ACCEL_INFO_RATE, S_ACCEL_VAR_RATE, S_TRUST_COUNT, S_TRUST_MEAN, S_TRUST_PERSISTENT,
-                           S_TRUST_SQUARE, S_TRUST_VAR, S_TRUST_WEIGHT, S_VISUAL_INFO_RATE, S_VISUAL_SCALE)
+from .state_buffer import (S_ACCEL_INFO_RATE, S_ACCEL_VAR_RATE, S_TRUST_COUNT, S_TRUST_FRAMES, S_TRUST_MEAN,
+                           S_TRUST_PERSISTENT, S_TRUST_SQUARE, S_TRUST_VAR, S_TRUST_WEIGHT, S_VISUAL_INFO_RATE,
+                           S_VISUAL_SCALE)
 
 STILL_RATE_RAD_S = 0.15
 """Below this gyro rate (rad/s, about 9 deg/s: above an uncalibrated MEMS gyro's bias, EuRoC's 0.08)
@@ -96,8 +100,11 @@ def update_visual_trust(s, e, v, frames, min_share, rate_rad_s2):
     tilt p95 0.56 -> 2.26 deg with the share applied in motion)."""
     if not frames > 0:
         return 1.0, 0.0
+    s[S_TRUST_FRAMES] += 1.0
     if not (abs(e[0]) + abs(e[1]) + abs(e[2]) < np.inf and 0.0 < v < np.inf):  # also: no sample
         return s[S_VISUAL_SCALE], s[S_TRUST_PERSISTENT]
+    if not rate_rad_s2 < STILL_RATE_RAD_S**2:  # in motion: the frame says nothing of the camera's trust
+        return 1.0, s[S_TRUST_PERSISTENT]
     a = min(1.0 / frames, 1.0)
     w = (1.0 - a) * s[S_TRUST_WEIGHT] + a
     s[S_TRUST_WEIGHT] = w
@@ -152,11 +159,11 @@ def vertical_variance(s, vertical_var, frames):
     `vertical_var`, plus, for a persistent error of the camera's vertical beyond `PERSISTENT_MARGIN`
     times it, that excess times the `frames` over which the same error is applied again (a prior
     re-applied each frame counts once per horizon); continuous in the persistent variance. `inf`
-    (skip it) until `MIN_SAMPLES` frames were compared with a quiet accelerometer. With the trust
+    (skip it) for the first `MIN_SAMPLES` frames unless compared with a quiet accelerometer. With the trust
     off (`frames` 0), `vertical_var`."""
     if not frames > 0:
         return vertical_var
-    if s[S_TRUST_COUNT] < MIN_SAMPLES:
+    if s[S_TRUST_FRAMES] < MIN_SAMPLES and s[S_TRUST_COUNT] < MIN_SAMPLES:
         return math.inf
     return vertical_var + max(s[S_TRUST_PERSISTENT] - PERSISTENT_MARGIN * vertical_var, 0.0) * frames
 
