@@ -200,7 +200,9 @@ class Estimate:
     `R_wc` maps camera coordinates to the world (z up); `cov` (3, 3, rad^2) is the covariance of the
     right perturbation of `R_wc`. `up_c` is world up in the camera frame. `R_wm` is the Manhattan
     frame's attitude in the world and `gyro_bias_rad_s` the estimated gyro bias, when the backend has
-    them.
+    them. `tilt_shares` is `(accelerometer, camera)`: each source's share of the tilt information the
+    filter fuses now (`backends/mekf/source_trust.py`; NaN for a source it has not seen), when the
+    backend weighs sources.
     """
 
     t_s: float
@@ -209,6 +211,7 @@ class Estimate:
     status: Status = Status.OK
     R_wm: np.ndarray | None = None
     gyro_bias_rad_s: np.ndarray | None = None
+    tilt_shares: tuple[float, float] | None = None
 
     @property
     def up_c(self) -> np.ndarray:

@@ -28,11 +28,16 @@ ESTIMATE_COLUMNS = (
     ["t_s", "qx", "qy", "qz", "qw"]
     + [f"cov_{i}{j}_rad2" for i in range(3) for j in range(3)]
     + ["up_x", "up_y", "up_z", "bias_x_rad_s", "bias_y_rad_s", "bias_z_rad_s",
-       "visual_quality", "status", "status_flags"]
+       "visual_quality", "status", "status_flags", "share_accel", "share_visual"]
 )
 """estimates.csv columns: quaternion x y z w of `R_wc`; covariance (3x3 row-major, rad^2) of the right
 perturbation of `R_wc`; up = world up in the camera frame (OpenCV axes); gyro bias in the IMU frame
-(empty when the backend has none); status as an integer and as flag names joined by `|`."""
+(empty when the backend has none); status as an integer and as flag names joined by `|`; the shares
+(0..1, summing to 1) of the accelerometer and of the camera in the tilt information the EKF fuses at
+that estimate, each source's information per second on tilt as far as the filter trusts it
+(`backends/mekf/source_trust.py`: a camera whose vertical keeps disagreeing with a quiet accelerometer
+gets a small share); empty for a source the backend has not seen or a backend that does not weigh
+sources (single, smoother)."""
 
 
 def status_names(status: Status) -> str:
@@ -74,6 +79,17 @@ _CSV_NUMBERS = ",".join(["%.9f"] * 5 + ["%.6e"] * 9 + ["%.9f"] * 3)
 """estimates.csv's numeric columns up to the up vector (`ESTIMATE_COLUMNS`); none needs csv quoting."""
 
 
+def share_cells(shares) -> str:
+    """The `share_accel,share_visual` cells of an `Estimate.tilt_shares` (empty for None or NaN)."""
+    if shares is None:
+        return ","
+    return ",".join("" if not np.isfinite(x) else f"{x:.4f}" for x in shares)
+
+
+_IMU_ONLY_SHARES = ","
+"""The share cells of estimates from an IMU-only stream in bulk: empty (no camera to share with)."""
+
+
 class EstimatesCsvWriter:
     def __init__(self, path: Path):
         self.path = Path(path)
@@ -86,15 +102,16 @@ class EstimatesCsvWriter:
         bias = None if est.gyro_bias_rad_s is None else np.asarray(est.gyro_bias_rad_s, float)[None]
         quality = "" if result.visual is None else f"{result.visual.quality:.4f}"
         self._rows.write_row(self._lines(np.array([result.t_s]), np.asarray(est.R_wc, float)[None],
-                                         np.asarray(est.cov, float)[None], bias, [quality], [int(est.status)]))
+                                         np.asarray(est.cov, float)[None], bias, [quality], [int(est.status)],
+                                         [share_cells(est.tilt_shares)]))
 
     def write_many(self, estimates: Estimates) -> None:
         """The rows of many estimates (no visual rotation), written (and taken back) together."""
         n = len(estimates)
         self._rows.write_row(self._lines(estimates.t_s, estimates.R_wc, estimates.cov, estimates.gyro_bias_rad_s,
-                                         [""] * n, estimates.status.tolist()), counts=n)
+                                         [""] * n, estimates.status.tolist(), [_IMU_ONLY_SHARES] * n), counts=n)
 
-    def _lines(self, t_s, R_wc, cov, bias, quality: list[str], status: list[int]) -> str:
+    def _lines(self, t_s, R_wc, cov, bias, quality: list[str], status: list[int], shares: list[str]) -> str:
         """csv rows (\\r\\n ends, as `csv_line`) of M estimates: `t_s` (M,), `R_wc` and `cov` (M, 3, 3),
         `bias` (M, 3) or None (a NaN row: empty cells), visual quality cells and status ints."""
         n = t_s.shape[0]
@@ -107,7 +124,8 @@ class EstimatesCsvWriter:
             heads = [head if not np.isfinite(b).all() else ("%s,%.6e,%.6e,%.6e" % (head[:-3], *b))
                      for head, b in zip(heads, bias.tolist())]
         names = self._status_names
-        return "".join([f"{head},{q},{s},{names(s)}\r\n" for head, q, s in zip(heads, quality, status)])
+        return "".join([f"{head},{q},{s},{names(s)},{sh}\r\n"
+                        for head, q, s, sh in zip(heads, quality, status, shares)])
 
     def _status_names(self, status: int) -> str:
         names = self._names.get(status)

@@ -90,6 +90,7 @@ def parameter_vector(filt, defer: bool) -> np.ndarray:
     p[K.P_GATE_CHI2], p[K.P_HUBER] = cfg.visual_gate_chi2, cfg.visual_huber_sigma
     p[K.P_VERTICAL_STD], p[K.P_VERTICAL_MAX] = cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad
     p[K.P_VISUAL_CORRELATION] = cfg.visual_error_correlation_s
+    p[K.P_TRUST_FRAMES], p[K.P_TRUST_MIN_SHARE] = cfg.visual_trust_frames, cfg.visual_trust_min_share
     return p
 
 

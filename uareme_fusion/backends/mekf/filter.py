@@ -27,10 +27,12 @@ from .measurements import (correlated_noise_scale, gravity_model, stack, vertica
                            visual_model)
 from .motion import ConstantRateMotion, GyroMotion
 from .segments import process_imu_segments
+from .source_trust import (note_accel_information, note_visual_information, squared_rate, tilt_shares,
+                           update_visual_trust, vertical_variance, visual_vertical_innovation)
 from .status_bits import status_of
 from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
-from .state_buffer import (S_IMU_T, S_PRODUCTS, S_REJECTIONS, S_T_STATE, S_T_VISUAL, X_B_C, X_P, X_R_WC, X_R_WM,
-                           BufferArray, BufferScalar, field_views, new_state_buffer)
+from .state_buffer import (BufferArray, BufferScalar, S_ACCEL_VAR_RATE, S_IMU_T, S_PRODUCTS, S_REJECTIONS, S_T_STATE,
+                           S_T_VISUAL, S_VISUAL_INFO_RATE, X_B_C, X_P, X_R_WC, X_R_WM, field_views, new_state_buffer)
 
 
 _P_TH = X_P + N_STATE * np.arange(N_STATE)[TH, None] + np.arange(N_STATE)[TH]  # where P[TH, TH] lies in `x`
@@ -38,6 +40,15 @@ _ESTIMATE_INDEX = np.stack([np.arange(X_R_WC, X_R_WM).reshape(3, 3), np.arange(X
                             _P_TH.T, np.tile(np.arange(X_B_C, X_P), (3, 1))])
 """Where R_wc, R_wm, P[TH, TH], its transpose and b_c (in each row) lie in the state buffer `x` (5, 3, 3):
 one `take` copies them."""
+
+
+_CAMERA_ONLY = (float("nan"), 1.0)
+"""`Estimate.tilt_shares` without an IMU: the camera alone."""
+
+
+def _finite(visual: VisualRotation) -> bool:
+    """Whether a frame's rotation and covariance are finite (checked only for a gated-out frame)."""
+    return bool(np.isfinite(visual.R_cm).all() and np.isfinite(visual.cov).all())
 
 
 def _shape(a) -> tuple:
@@ -125,7 +136,8 @@ class Mekf(Backend):
         self.F_buffer = np.eye(N_STATE)  # gyro transition: only its TH rows change between chunks
         self.initialised = False
         self.manhattan_initialised = False
-        self._counters = dict(visual_rejected=0, reinitialised=0, accel_downweighted=0, accel_skipped=0,
+        self._counters = dict(visual_rejected=0, visual_nonfinite=0, reinitialised=0, accel_downweighted=0,
+                              accel_skipped=0,
                               imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0,
                               rest_updates=0, nonfinite_updates=0)
         self.flags = status_bits.OK  # `Status` bits gathered since the last estimate (`status_bits.py`)
@@ -265,6 +277,11 @@ class Mekf(Backend):
         if visual is None or not fuses_visual:
             if fuses_visual:
                 self.flags |= status_bits.VISUAL_MISSING
+                self.x[S_VISUAL_INFO_RATE] = 0.0  # no share while the camera gives nothing
+        elif not _finite(visual):  # never a start
+            self.flags |= status_bits.VISUAL_REJECTED
+            self.counters["visual_rejected"] += 1
+            self.counters["visual_nonfinite"] += 1
         elif not self.initialised:
             self.motion.start_from_visual(self, t_s, visual)
         elif not self.initialise_manhattan(visual):
@@ -360,6 +377,7 @@ class Mekf(Backend):
         if not ok:
             self.counters["accel_skipped"] += 1
             return None
+        note_accel_information(self.views["s"], var, T)
         if downweighted:
             self.flags |= status_bits.ACCEL_DOWNWEIGHTED
             self.counters["accel_downweighted"] += 1
@@ -372,21 +390,32 @@ class Mekf(Backend):
         the estimate after it (`estimate_out`)."""
         rejected = visual_update_compiled(self, visual) if self._visual_compiled else None
         if rejected is None:  # the reference path (also after a kernel failed: `compiled.fall_back`)
-            self._visual_update(visual, self._take_accel_rows() if self.accel.due else None)
+            self._visual_update(visual)
             return False
+        if rejected and not _finite(visual):  # gated out, counted, and no sign of a new scene alignment
+            self._count_nonfinite()
         if not rejected or self.rejections < self.config.reinit_after_rejections:
             return True
         self._reinitialise(visual)
         return False
 
-    def _visual_update(self, visual: VisualRotation, accel_rows) -> None:
-        """The frame's rotation as a measurement of `R_cm`, gated and Huber-weighted, stacked with
-        the vertical pseudo-measurement and `accel_rows` (`_accel_rows` of a due accelerometer
-        update, or None) into one update; past the gate, `accel_rows` alone."""
+    def _visual_update(self, visual: VisualRotation) -> None:
+        """The frame's rotation as a measurement of `R_cm`, gated and Huber-weighted, its covariance
+        and the vertical pseudo-measurement's variance as far as the camera is trusted
+        (`source_trust.py`), stacked with the vertical pseudo-measurement and a due accelerometer
+        update (`_accel_rows`) into one update; past the gate, the accelerometer rows alone."""
         cfg = self.config
         r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
         t_s, t_prev_s = self.t_state, self.t_visual_s
         self.t_visual_s = t_s
+        trust, var_v = (self._visual_trust(r, R_vis, t_s, t_prev_s) if self.motion.uses_imu
+                        else (1.0, cfg.manhattan_vertical_std_rad**2))
+        accel_rows = None
+        if self.accel.due:
+            rest_before = self.counters["rest_updates"]
+            accel_rows = self._take_accel_rows()
+            if self.counters["rest_updates"] > rest_before:  # the zero-rate update moved the state
+                r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
         if t_prev_s is not None:
             R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
         S = H @ self.P @ H.T + R_vis  # the gate and Huber weigh the frame's full error
@@ -396,6 +425,9 @@ class Mekf(Backend):
             d2 = np.inf
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
             self._count_rejection()
+            self.x[S_VISUAL_INFO_RATE] = 0.0
+            if not _finite(visual):
+                self._count_nonfinite()
             if accel_rows is not None:
                 self._kalman_update(*accel_rows)
             if self.rejections >= cfg.reinit_after_rejections:
@@ -409,17 +441,40 @@ class Mekf(Backend):
         d = np.sqrt(d2)
         if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_sigma)
+        if trust != 1.0:  # the independent share of the frame's error (gated on the full one)
+            R_vis = R_vis * trust
         # "m's z is up" only where the world is not the Manhattan frame itself (visual only).
-        vertical = (vertical_model(self.R_wm, cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad)
-                    if self.motion.uses_imu else None)
+        vertical = (vertical_model(self.R_wm, np.sqrt(var_v), cfg.manhattan_vertical_max_rad)
+                    if self.motion.uses_imu and var_v < np.inf else None)
         self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
         self.counters["visual_updates"] += 1
+
+    def _visual_trust(self, r: np.ndarray, R_vis: np.ndarray, t_s: float, t_prev_s: float | None):
+        """The camera's vertical against a quiet accelerometer's, taken into the running trust
+        (`source_trust.py`): `(share, vertical_var)`, the factor on this frame's visual covariance and the
+        vertical pseudo-measurement's variance (rad^2; inf: not applied)."""
+        cfg, s = self.config, self.views["s"]
+        var_v = cfg.manhattan_vertical_std_rad**2
+        quiet = (cfg.accel_downweight_flag_ratio * cfg.accel_tilt_noise_rad_sqrt_s) ** 2
+        e, v = visual_vertical_innovation(self.R_wc, self.R_wm, r, R_vis, self.accel.sum_c, self.accel.time_s,
+                                          s[S_ACCEL_VAR_RATE], quiet, var_v)
+        share, _ = update_visual_trust(s, e, v, cfg.visual_trust_frames, cfg.visual_trust_min_share,
+                                       squared_rate(self.last_gyro_c, self.b_c))
+        var_v = vertical_variance(s, var_v, cfg.visual_trust_frames)
+        note_visual_information(s, R_vis, share, var_v, 0.0 if t_prev_s is None else t_s - t_prev_s)
+        return share, var_v
 
     def _reinitialise(self, visual: VisualRotation) -> None:
         """After `reinit_after_rejections` frames gated out in a row: a new scene alignment from `visual`."""
         self.flags |= status_bits.REINITIALISED
         self.counters["reinitialised"] += 1
         self.motion.reinitialise(self, visual)
+
+    def _count_nonfinite(self) -> None:
+        """A gated-out frame whose rotation or covariance is not finite: counted apart
+        (`visual_nonfinite`), and not a disagreement that leads to a re-initialisation."""
+        self.counters["visual_nonfinite"] += 1
+        self.rejections -= 1
 
     def _count_rejection(self) -> None:
         self.flags |= status_bits.VISUAL_REJECTED
@@ -479,7 +534,7 @@ class Mekf(Backend):
         """`_estimate` from what the compiled visual update wrote (`estimate_out`): one copy, no arithmetic."""
         R_wc, cov, R_wm, b_c = self.estimate_out.copy()
         bits, self.flags = self.flags, status_bits.OK
-        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm, self._bias_in_imu(b_c[0]))
+        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm, self._bias_in_imu(b_c[0]), tilt_shares(self.views["s"]))
 
     def _bias_in_imu(self, b_c: np.ndarray) -> np.ndarray:
         """The gyro bias `b_c` (3,) rad/s (camera frame, a copy) in the IMU frame."""
@@ -496,10 +551,10 @@ class Mekf(Backend):
         cov *= 0.5
         if not self.motion.uses_imu:
             cov += self.noise_share.persistent_cov
-            bias_i = None
+            bias_i, shares = None, _CAMERA_ONLY
         else:
-            bias_i = self._bias_in_imu(b_c[0])
-        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm if self.manhattan_initialised else None, bias_i)
+            bias_i, shares = self._bias_in_imu(b_c[0]), tilt_shares(self.views["s"])
+        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm if self.manhattan_initialised else None, bias_i, shares)
 
 
 _KERNELS_LOADED: set = set()  # which of `load_kernels`' two sets this process has loaded

@@ -35,12 +35,15 @@ from . import state_buffer, status_bits
 from .accel import chunk_bounds
 from .matrix3 import exp3_into, inv3, log3_into, matmul3_into
 from .measurements import correlated_noise_scale, gravity_model, vertical_measurement, zero_rate_model
+from .source_trust import (note_accel_information, note_visual_information, squared_rate, update_visual_trust,
+                           vertical_variance, visual_vertical_innovation)
 from ..imu_stream import rows_if_clean
 from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
-from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED,
-                           S_ACCEL_UPDATES, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE,
-                           S_REJECTIONS, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_REJECTED, S_VISUAL_UPDATES,
-                           X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P, X_R_WC, X_R_WM, X_REST_SUMS, X_S, X_SIZE)
+from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_ACCEL_VAR_RATE,
+                           S_ACC_ELAPSED, S_ACC_TIME, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REJECTIONS,
+                           S_REST_N, S_REST_SINCE, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_INFO_RATE,
+                           S_VISUAL_REJECTED, S_VISUAL_UPDATES, X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P,
+                           X_REST_SUMS, X_R_WC, X_R_WM, X_S, X_SIZE)
 
 # The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `visual_update` return.
 DOWNWEIGHTED, NONFINITE = status_bits.ACCEL_DOWNWEIGHTED, status_bits.UPDATE_NONFINITE
@@ -56,8 +59,8 @@ a constant of the compiled code."""
 (P_Q_GYRO, P_Q_BIAS, P_Q_RATE, P_TRAPEZOID, P_PERIOD, P_DUE, P_DEFER, P_LP_TAU, P_INV_G, P_GRAVITY,
  P_ACC_NOISE, P_NORM_SCALE, P_INNOV_SCALE, P_FLAG_RATIO, P_REST_GYRO, P_REST_ACCEL, P_REST_MIN_S,
  P_REST_STD, P_MF_INIT, P_MF_YAW_RW, P_MF_TILT_RW, P_ORTHO_EVERY, P_RECORD, P_GAP_LIMIT, P_GATE_CHI2, P_HUBER,
- P_VERTICAL_STD, P_VERTICAL_MAX, P_VISUAL_CORRELATION) = range(29)
-P_SIZE = 29
+ P_VERTICAL_STD, P_VERTICAL_MAX, P_VISUAL_CORRELATION, P_TRUST_FRAMES, P_TRUST_MIN_SHARE) = range(31)
+P_SIZE = 31
 
 
 def propagate_chunk(R_wc, b_c, P, last_gyro, t_state, t, gyro, extra_s, trapezoid, q_gyro, q_bias, q_rate,
@@ -306,6 +309,7 @@ def accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
     if not ok:
         s[S_ACCEL_SKIPPED] += 1
         return False, r, var, H, False
+    note_accel_information(s, var, T)
     if downweighted:
         s[S_ACCEL_DOWNWEIGHTED] += 1
     s[S_ACCEL_UPDATES] += 1
@@ -401,17 +405,29 @@ def visual_update(x, p, R_cm, cov, estimate):
     (the attitude block of `P`, symmetrised), `R_wm`, and `b_c` in the first row. Returns the
     `VISUAL_REJECTED` | `DOWNWEIGHTED` | `NONFINITE` bits of what happened; the re-initialisation after
     many rejections is left to the caller."""
-    s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state_views(x)
+    s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums = state_views(x)
     nonfinite_before = s[S_NONFINITE]
     code = 0
+    r, R_all, H = np.zeros(9), np.zeros((9, 9)), np.zeros((9, 12))
+    visual_measurement(R_wc, R_wm, R_cm, cov, r, R_all, H)
+    # How far the camera is trusted (`source_trust.py`), from the frame before the accelerometer rows
+    # consume the period's specific force.
+    var_v = p[P_VERTICAL_STD] ** 2
+    quiet = (p[P_FLAG_RATIO] * p[P_ACC_NOISE]) ** 2
+    e, v = visual_vertical_innovation(R_wc, R_wm, r, R_all, acc_sum, s[S_ACC_TIME], s[S_ACCEL_VAR_RATE], quiet, var_v)
+    share, _ = update_visual_trust(s, e, v, p[P_TRUST_FRAMES], p[P_TRUST_MIN_SHARE], squared_rate(last_gyro, b_c))
+    var_v = vertical_variance(s, var_v, p[P_TRUST_FRAMES])
+    t_prev = s[S_T_VISUAL]
+    s[S_T_VISUAL] = s[S_T_STATE]
+    note_visual_information(s, R_all, share, var_v, s[S_T_STATE] - t_prev if t_prev == t_prev else 0.0)
     with_accel, downweighted = False, False
     if s[S_ACCEL_DUE] > 0:  # left to the frame at the end of its batch (`P_DEFER`)
         s[S_ACCEL_DUE] = 0
+        rest_before = s[S_REST_UPDATES]
         with_accel, r_a, var_a, H_a, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
-    r, R_all, H = np.zeros(9), np.zeros((9, 9)), np.zeros((9, 12))
-    visual_measurement(R_wc, R_wm, R_cm, cov, r, R_all, H)
-    t_prev = s[S_T_VISUAL]
-    s[S_T_VISUAL] = s[S_T_STATE]
+        if s[S_REST_UPDATES] > rest_before:  # the zero-rate update moved the state: the residual again
+            r[:], R_all[:, :], H[:, :] = 0.0, 0.0, 0.0
+            visual_measurement(R_wc, R_wm, R_cm, cov, r, R_all, H)
     if t_prev == t_prev:  # not NaN: a previous visual update
         R_all[0:3, 0:3] *= correlated_noise_scale(s[S_T_STATE] - t_prev, p[P_VISUAL_CORRELATION])
     PHt = matmul_into(P, H[0:3].T, np.empty((12, 3)))  # the gate and Huber weigh the frame's full error
@@ -425,6 +441,7 @@ def visual_update(x, p, R_cm, cov, estimate):
         code |= VISUAL_REJECTED
         s[S_VISUAL_REJECTED] += 1
         s[S_REJECTIONS] += 1
+        s[S_VISUAL_INFO_RATE] = 0.0  # no share while the camera is gated out
         if with_accel:
             isotropic_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r_a, var_a, H_a, p)
     else:
@@ -432,9 +449,11 @@ def visual_update(x, p, R_cm, cov, estimate):
         d = math.sqrt(d2)
         if d > p[P_HUBER]:  # Huber weight w = k / d  ->  covariance / w
             R_all[0:3, 0:3] *= d / p[P_HUBER]
+        if share != 1.0:  # the independent share of the frame's error (gated on the full one)
+            R_all[0:3, 0:3] *= share
         m = 3
-        ok, r_v, var_v, H_v = vertical_measurement(R_wm, p[P_VERTICAL_STD], p[P_VERTICAL_MAX])
-        if ok:
+        ok, r_v, _, H_v = vertical_measurement(R_wm, p[P_VERTICAL_STD], p[P_VERTICAL_MAX])
+        if ok and var_v < np.inf:
             r[3:6] = r_v
             H[3:6] = H_v
             for i in range(3):
@@ -640,7 +659,9 @@ if jit.available():
                  matmul3_into, gyro_predict_in_place, carry_lowpass_in_place, propagate_chunk, accel_measurement,
                  zero_rate_measurement, matmul_into, solve_into, inject_and_reset, kalman_update, isotropic_update,
                  accel_rows, accel_and_rest_update, has_gap, chunk_bounds, integrate_chunks, state_views, rows_if_clean,
-                 integrate_batch, correlated_noise_scale, log3_into, vertical_measurement, visual_measurement)
+                 integrate_batch, correlated_noise_scale, log3_into, vertical_measurement, visual_measurement,
+                 note_accel_information, note_visual_information, update_visual_trust, vertical_variance,
+                 visual_vertical_innovation, squared_rate)
         # The modules whose functions the kernels inline or whose constants they freeze.
         jit.drop_stale_caches({__file__, rotations.__file__, state_buffer.__file__, status_bits.__file__}
                               | {sys.modules[f.__module__].__file__ for f in _pure})

@@ -23,6 +23,7 @@ from .compiled import compiled_path_applies, integrate_compiled
 from .config import MekfMode
 from .propagation import constant_rate_model, gyro_chunk, gyro_process_noise, gyro_rates, gyro_transition
 from .propagation import manhattan_walk_noise
+from .source_trust import note_accel_information
 from .state import BG, I3, MF, N_STATE, RATE, TH, ZERO_STATE, orthonormal
 
 _NO_ROWS = np.zeros((0, COLUMNS))
@@ -249,6 +250,7 @@ class GyroMotion:
         filt.P = np.zeros((N_STATE, N_STATE))
         filt.P[TH, TH] = cfg.initial_tilt_std_rad**2 * (I3 - np.outer(up_c, up_c))
         filt.P[BG, BG] = cfg.gyro_bias_initial_std_rad_s**2 * I3
+        note_accel_information(filt.views["s"], cfg.accel_tilt_noise_rad_sqrt_s**2, 1.0)  # before its first update
         filt.t_state = filt.imu_t_s = float(t_all[0])
         filt.last_gyro_c = held.gyro_rad_s[0]
         filt.initialised = True
