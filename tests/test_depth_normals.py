@@ -12,6 +12,7 @@ from uareme_fusion.normals.depth import (
     ICL_NUIM_DEPTH_UNIT_M,
     ICL_NUIM_K_OPENCV,
     ICL_NUIM_K_PUBLISHED,
+    RENDERED_DEPTH,
     ICSL_CORRIDOR_K,
     MILLIMETRE_DEPTH_UNIT_M,
     DepthNormals,
@@ -239,9 +240,10 @@ def icl_sequence(shared_data):
 
 def icl_depth_rotations(shared_data):
     """Single-frame rotations from depth normals on ICL-NUIM kt3 (each solve initialised from the
-    previous frame), with the ground truth converted to the OpenCV camera frame."""
+    previous frame), with the ground truth converted to the OpenCV camera frame. ICL-NUIM's depth is
+    rendered: its normals take `RENDERED_DEPTH`, as a run on the folder does (`depth_normals_for`)."""
     root, index, R_wc_published = icl_sequence(shared_data)
-    est = DepthNormals()
+    est = DepthNormals(RENDERED_DEPTH)
     backend = SingleFrame()
     estimates = []
     for i in index:

@@ -150,8 +150,9 @@ def main(argv=None) -> None:
         figures = horizon_figures(Path(args.model) if args.model else DEFAULT_WEIGHTS)
         print(f"bench horizon figures: ICSL RGB vs depth rotation, no intrinsics, mean ({figures['icsl_frames']} "
               f"frames) {figures['icsl_mean_deg']:.3f} deg, median {figures['icsl_median_deg']:.3f}, NEES mean "
-              f"{figures['icsl_nees_mean']:.2f}; K pooled over each sequence: mean {figures['icsl_pooled_mean_deg']:.3f} "
-              f"deg, median {figures['icsl_pooled_median_deg']:.3f}; ICL kt3 RGB-only ARE mean {figures['kt3_are_mean_deg']:.3f} deg, "
+              f"{figures['icsl_nees_mean']:.2f}; K pooled over each sequence: mean "
+              f"{figures['icsl_pooled_mean_deg']:.3f} deg, median {figures['icsl_pooled_median_deg']:.3f}; "
+              f"ICL kt3 RGB-only ARE mean {figures['kt3_are_mean_deg']:.3f} deg, "
               f"NEES mean {figures['kt3_nees_mean']:.2f}")
         if args.json:
             Path(args.json).write_text(json.dumps(figures, indent=1))

@@ -74,6 +74,10 @@ class SourceInfo:
     """Added to IMU timestamps to put them on the camera clock."""
     image_size: tuple[int, int] | None = None
     """(height, width) of yielded frames when known."""
+    depth_rendered: bool = False
+    """True when the depth maps are rendered (ICL-NUIM, the simulator) rather than measured: their noise
+    is per pixel, with no plane-wide part (a real sensor's calibration tilts whole planes), so depth
+    normals count one independent error per fit window (`normals.depth.depth_normals_for`)."""
     platform: str | None = None
     """What carries the camera when the source says so (`handheld`, `vehicle`, `building`: scene.json or
     source.json `platform`); the EKF preset when none is asked for. None: unknown."""

@@ -99,7 +99,8 @@ class SimulatedSource(Source):
         """What was left out or not used, for the run summary."""
         self.info = SourceInfo(name=f"sim:{scenario}", n_frames=n_frames, fps=o.fps, K=self.K.copy(),
                                K_origin="simulator camera", has_depth=self.render, has_imu=self.use_imu, R_ci=self.R_ci.copy(),
-                               image_size=(o.height, o.width), platform=SCENARIOS[scenario].platform)
+                               image_size=(o.height, o.width), platform=SCENARIOS[scenario].platform,
+                               depth_rendered=True)
 
     # ----- frames -------------------------------------------------------------------------------
     def _chunks(self, n: int, per_chunk: int) -> Iterator[tuple[int, int]]:

@@ -128,11 +128,11 @@ class DepthWhereAvailable:
 def make_normal_estimator(spec: str, info: SourceInfo, threads: int | None = None):
     """The normal estimator named by `spec` (see `RunConfig.normals`); checks that the source can feed it.
     `threads`: torch CPU threads of a learned network (None: `LearnedNormalsConfig`'s default)."""
-    from ..normals.depth import DepthNormals
+    from ..normals.depth import depth_normals_for
 
     if spec == "auto":
         with_depth = info.has_depth and info.K is not None
-        return AutoNormals(info.name, threads, DepthWhereAvailable(DepthNormals()) if with_depth else None)
+        return AutoNormals(info.name, threads, DepthWhereAvailable(depth_normals_for(info)) if with_depth else None)
     if spec == "source":
         return SourceNormals(info.name)
     if spec == "depth":
@@ -142,7 +142,7 @@ def make_normal_estimator(spec: str, info: SourceInfo, threads: int | None = Non
         if info.K is None:
             raise InputError(f"{info.name}: --normals depth needs the camera intrinsics, and this source does not "
                              "know them: give --intrinsics fx,fy,cx,cy or a camera file")
-        return DepthWhereAvailable(DepthNormals())
+        return DepthWhereAvailable(depth_normals_for(info))
     if spec == "learned":
         return _learned(threads=threads)
     path = Path(spec)
