@@ -67,3 +67,21 @@ def test_eval_says_when_tilt_is_after_the_alignment_and_shows_the_unaligned_tilt
     # the reference here is in fact z up: the tilt without alignment is the aligned one's size
     assert summary["tilt_unaligned_deg"]["mean"] == pytest.approx(aligned["tilt_deg"]["mean"], abs=0.5)
     assert summary["tilt_deg"]["mean"] <= summary["tilt_unaligned_deg"]["mean"] + 0.5
+
+
+def _depth_regions_cap(folder) -> float:
+    from uareme_fusion.drivers.tum import TumSource
+    from uareme_fusion.pipeline.stages import make_normal_estimator
+
+    with TumSource(folder) as source:
+        return make_normal_estimator("depth", source.info).estimator.config.max_independent_regions
+
+
+def test_rendered_depth_counts_every_window_and_a_real_sensor_folder_is_capped(rgbd_folder, tmp_path):
+    """A simulated folder (scene.json) has rendered depth: one independent error per window (no cap).
+    The same files in a TUM-named folder without scene.json are a real sensor's: the 60-region cap."""
+    assert _depth_regions_cap(rgbd_folder) == float("inf")
+    real = tmp_path / "rgbd_dataset_freiburg1_copy"
+    shutil.copytree(rgbd_folder, real)
+    (real / "scene.json").unlink()
+    assert _depth_regions_cap(real) == 60.0

@@ -178,7 +178,8 @@ class TumSource(Source):
             R_ci=self.meta.get("R_ci") if self.meta.get("R_ci") is not None else np.eye(3),
             imu_time_offset_s=self.meta.get("imu_time_offset_s", 0.0), platform=self.meta.get("platform"),
             image_size=None if first is None else first.rgb.shape[:2],
-            depth_rendered=self.seq.K is not None or (self.camera is not None and "ICL-NUIM" in str(self.camera.origin)),
+            depth_rendered=(self.root / SIM_META).is_file()
+            or (self.camera is not None and "ICL-NUIM" in str(self.camera.origin)),
         )
 
     def _camera(self) -> CameraModel | None:
