@@ -275,7 +275,8 @@ class ImageAnalyser:
             return visual
         sky_up = seen.sky.observation(focal.K).up_c
         guess = up_candidate(visual.R_cm)[1] if visual is not None else sky_up
-        sky, segments = sky_and_segments(seen.sky, seen.segments, focal.K, guess, self.sky_veto)
+        sky, segments = sky_and_segments(seen.sky, seen.segments, focal.K, guess, self.sky_veto,
+                                         visual.R_cm if visual is not None else None)
         if sky is None:
             return visual
         R0 = aligned_rotation(visual.R_cm, sky_up) if visual is not None else None

@@ -47,6 +47,12 @@ class SkyVetoConfig:
     """... and the two horizons differ (ECD score, fraction of the height) by more than this many of
     their combined std, and by at least `min_difference_fraction`."""
     min_difference_fraction: float = 0.05
+    structure_agree_deg: float = 5.0
+    """The structure cannot veto a sky whose up is one of its own Manhattan axes within this: its Atlanta
+    zenith is then another of its axes, not the vertical (a horizon_uav photo turned 90 deg: the
+    receding ground lines met where image up points, 32 effective "verticals", a horizon 88 deg off,
+    while the structure's axis nearest the sky's up was 1.2 deg from it; the 5 ECD skylines vetoed: 23-29
+    deg)."""
 
 
 def sky_vetoed(sky, atlanta, config: SkyVetoConfig | None = None) -> bool:
@@ -63,13 +69,15 @@ def sky_vetoed(sky, atlanta, config: SkyVetoConfig | None = None) -> bool:
     return bool(difference > max(cfg.sigmas * combined, cfg.min_difference_fraction))
 
 
-def sky_and_segments(sky, segments, K: np.ndarray, up_guess_c: np.ndarray, config: SkyVetoConfig | None = None):
+def sky_and_segments(sky, segments, K: np.ndarray, up_guess_c: np.ndarray, config: SkyVetoConfig | None = None,
+                     R_cm: np.ndarray | None = None):
     """(sky, segments) for a solve with the sky boundary `sky`: the segments' Atlanta horizon (from
     `up_guess_c`) decides. Without a confident one seen with man-made verticals (`SkyVetoConfig`'s
     `min_vertical_effective` and `max_std_fraction`) the segments cannot tell up (a runway's or a field's
     edges: on horizon_uav they pulled the horizon off the sky's, 73.7 % pass with them against 96.9 %
     without), so the sky alone sets it: (sky, None). With one, a disagreeing sky is vetoed:
-    (None, segments); an agreeing one joins them: (sky, segments)."""
+    (None, segments); an agreeing one joins them: (sky, segments). With the structure's rotation `R_cm`,
+    a sky whose up is one of its axes (`SkyVetoConfig.structure_agree_deg`) is not vetoed: (sky, None)."""
     from .atlanta import estimate_horizon
 
     cfg = config or SkyVetoConfig()
@@ -79,6 +87,12 @@ def sky_and_segments(sky, segments, K: np.ndarray, up_guess_c: np.ndarray, confi
     if (atlanta is None or atlanta.n_vertical < cfg.min_vertical_effective
             or atlanta.t_std_px > cfg.max_std_fraction * sky.height):
         return sky, None
+    if R_cm is not None:
+        from .manhattan import up_candidate
+
+        sky_up = sky.observation(K).up_c
+        if np.degrees(np.arccos(np.clip(up_candidate(R_cm, sky_up)[1] @ sky_up, -1.0, 1.0))) < cfg.structure_agree_deg:
+            return sky, None
     return (None, segments) if sky_vetoed(sky, atlanta, cfg) else (sky, segments)
 
 
