@@ -257,7 +257,7 @@ def test_a_stream_pools_K_even_when_no_frame_alone_tells_the_focal_length(tmp_pa
     assert abs(stream.focal.f_px - 520.0) < 0.03 * 520.0
 
 
-def test_frames_of_another_size_are_refused_by_the_pool_and_by_a_stream(tmp_path):
+def test_frames_of_another_size_are_refused_by_the_pool_and_scaled_or_refused_by_a_stream(tmp_path):
     from uareme_fusion.pipeline.cues import CueSolver
     from uareme_fusion.types import Frame
 
@@ -270,8 +270,14 @@ def test_frames_of_another_size_are_refused_by_the_pool_and_by_a_stream(tmp_path
     rgb = cv2.imread(str(_drawn_folder(tmp_path, 1, 13)[0]))[..., ::-1].copy()
     assert stream.solve(Frame(t_s=0.0, rgb=rgb, index=0), None) is not None
     assert stream.focal.source == "estimated" and stream.focal.width == W  # the stream's K, from the scene
-    with pytest.raises(InputError, match=r"frame 1 \(t 0.100 s\): 320x240 px, but the stream's camera is 640x480"):
-        stream.solve(Frame(t_s=0.1, rgb=cv2.resize(rgb, (320, 240)), index=1), None)
+    K_stream = stream.focal.K.copy()
+    # the same camera's image resized (same aspect ratio): solved with the stream's K scaled to it, which
+    # takes no part in the stream's K; another aspect ratio is another camera, refused in one line
+    assert stream.solve(Frame(t_s=0.1, rgb=cv2.resize(rgb, (320, 240)), index=1), None) is not None
+    np.testing.assert_array_equal(stream.focal.K, K_stream)
+    assert stream._scaled((320, 240)).K[0, 0] == pytest.approx(K_stream[0, 0] / 2)
+    with pytest.raises(InputError, match=r"frame 2 \(t 0.200 s\): 320x320 px, but the stream's camera is 640x480"):
+        stream.solve(Frame(t_s=0.2, rgb=cv2.resize(rgb, (320, 320)), index=2), None)
     assumed = CueSolver(lines=True, assumed_fov_deg=60.0)  # no K from the scene yet: another size is solved alone
     blank = np.full((H, W, 3), 235, np.uint8)
     assumed.solve(Frame(t_s=0.0, rgb=blank, index=0), None)

@@ -111,20 +111,36 @@ class CueSolver:
 
     def _other_size(self, frame: Frame) -> bool:
         """Whether a frame without K differs in size from the stream's camera (the first such frame's);
-        a one-line InputError when it does and the stream's K came from the scene (it holds for one size)."""
+        a one-line InputError when it does, the stream's K came from the scene (it holds for one size) and
+        the frame is not that camera's image resized (another aspect ratio)."""
         if frame.K is not None or frame.rgb is None:
             return False
         size = (frame.rgb.shape[1], frame.rgb.shape[0])
         self._size = self._size or size
-        if size != self._size and self.focal is not None and self.focal.source == "estimated":
+        if (size != self._size and self.focal is not None and self.focal.source == "estimated"
+                and self._scaled(size) is None):
             raise InputError(f"frame {self._index(frame)} (t {frame.t_s:.3f} s): {size[0]}x{size[1]} px, but the stream's "
                              f"camera is {self._size[0]}x{self._size[1]} px: one camera's frames have one size")
         return size != self._size
 
+    def _scaled(self, size: tuple[int, int]) -> FocalEstimate | None:
+        """The stream's estimated K scaled to a frame of `size` (w, h) with the camera's aspect ratio (the
+        same camera's image resized, within 1 %); None for another aspect ratio or without an estimate."""
+        if self.focal is None or self.focal.source != "estimated" or self._size is None:
+            return None
+        sx, sy = size[0] / self._size[0], size[1] / self._size[1]
+        if abs(sx / sy - 1.0) > 0.01:
+            return None
+        K = np.diag([sx, sy, 1.0]) @ self.focal.K
+        return FocalEstimate(K, "estimated", self.focal.std_px * sx, width=size[0],
+                             origin=f"{self.focal.origin or 'estimated'}, scaled to {size[0]}x{size[1]} px")
+
     def _solve_alone(self, frame: Frame, normal_map, segments: LineSegments | None, R_init) -> VisualRotation:
-        """A frame of another size while the stream's K is not from the scene: the assumed field of view at
-        its own size; it takes no part in the stream's focal length."""
-        return self._solve_at(self._assumed(*frame.rgb.shape[:2]), normal_map, segments, R_init, frame.t_s)
+        """A frame of another size: the stream's estimated K scaled to it when it is the camera's image
+        resized, else the assumed field of view at its own size; it takes no part in the stream's focal length."""
+        h, w = frame.rgb.shape[:2]
+        focal = self._scaled((w, h)) or self._assumed(h, w)
+        return self._solve_at(focal, normal_map, segments, R_init, frame.t_s)
 
     def _assumed(self, h: int, w: int) -> FocalEstimate:
         """The assumed field of view's K for an h x w image."""
