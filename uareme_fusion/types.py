@@ -181,6 +181,11 @@ class Status(enum.IntFlag):
     VISUAL_NO_EVIDENCE = enum.auto()
     """The frame had no usable evidence (black, blank, blurred): its visual covariance is the cap
     (`VisualRotation.reason` says why)."""
+    VISUAL_IGNORED = enum.auto()
+    """The frame's visual rotation disagreed with the filter's prediction beyond what both
+    covariances allow (`MekfConfig.disagreement_chi2`, at least `disagreement_min_deg`), so its update
+    was rejected or Huber-weighted down to little: the estimate may be drifting from the camera.
+    After `MekfConfig.reinit_after_disagreement_s` of it the filter re-initialises (`REINITIALISED`)."""
 
 
 def visual_R_wc_covariance(visual: VisualRotation) -> np.ndarray:

@@ -131,6 +131,18 @@ class MekfConfig(GyroNoiseConfig):
     """Huber threshold on the Mahalanobis distance: beyond it the visual covariance is scaled by d/k."""
     reinit_after_rejections: int = Field(8, ge=1, le=1000000)
     """Consecutive gated-out frames after which the Manhattan frame is re-initialised."""
+    reinit_after_disagreement_s: float = Field(1.0, ge=0.0, le=3600.0)
+    """Seconds (camera clock) of frames in a row whose visual rotation disagrees with the prediction
+    (`disagreement_chi2`: rejected, or accepted only with a small Huber weight) after which the filter
+    re-initialises from the frame's rotation. Each such frame carries `Status.VISUAL_IGNORED`, so no
+    estimate drifts away from the camera while every flag is clear."""
+    disagreement_chi2: float = Field(25.0, gt=0.0, le=1e12)
+    """A frame disagrees when the Mahalanobis d^2 of predicted against visual `R_cm` (after the
+    24-fold symmetry), with the prediction's and the visual covariance (no correlation or
+    share scaling), exceeds this (3 dof; 25: p ~ 1.7e-5) ..."""
+    disagreement_min_deg: float = Field(2.0, ge=0.0, le=180.0)
+    """... and the angle between them exceeds this, deg (an over-confident visual covariance alone
+    does not make a small difference a disagreement)."""
     R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
     """Camera-from-IMU rotation (`v_c = R_ci v_i`), 3x3 row-major."""
     imu_time_offset_s: float = Field(0.0, ge=-3600.0, le=3600.0)

@@ -136,11 +136,13 @@ class Mekf(Backend):
         self.F_buffer = np.eye(N_STATE)  # gyro transition: only its TH rows change between chunks
         self.initialised = False
         self.manhattan_initialised = False
-        self._counters = dict(visual_rejected=0, visual_nonfinite=0, reinitialised=0, accel_downweighted=0,
-                              accel_skipped=0,
+        self._counters = dict(visual_rejected=0, visual_nonfinite=0, visual_ignored=0, reinitialised=0,
+                              accel_downweighted=0, accel_skipped=0,
                               imu_gaps=0, imu_ignored=0, visual_updates=0, accel_updates=0,
                               rest_updates=0, nonfinite_updates=0)
         self.flags = status_bits.OK  # `Status` bits gathered since the last estimate (`status_bits.py`)
+        self.disagree_since_s: float | None = None  # first frame of the current run of ignored visual rotations, s
+        self._disagree_P = None  # the error-state covariance at that frame
         self.in_imu_gap = False  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
         self.pending: list[ImuBatch] = []
         self.pending_span_s = 0.0
@@ -271,7 +273,15 @@ class Mekf(Backend):
         self.propagate_to(t_s)
         fuses_visual = self.motion.fuses_visual
         if visual is not None and self.manhattan_initialised and fuses_visual:
-            return self._compiled_estimate(t_s) if self._fuse_visual(visual) else self._estimate(t_s)
+            ignored = self._ignored_too_long(t_s, visual)
+            if ignored is None:
+                return self._compiled_estimate(t_s) if self._fuse_visual(visual) else self._estimate(t_s)
+            if ignored:  # else skipped (visual only): the filter coasts
+                self._reinitialise(visual)
+                self.t_visual_s = t_s
+            if self.accel.due:
+                self.accel_update()
+            return self._estimate(t_s)
         if self.accel.due:
             self.accel_update()
         if visual is None or not fuses_visual:
@@ -464,8 +474,44 @@ class Mekf(Backend):
         note_visual_information(s, R_vis, share, var_v, 0.0 if t_prev_s is None else t_s - t_prev_s)
         return share, var_v
 
+    def _ignored_too_long(self, t_s: float, visual: VisualRotation) -> bool | None:
+        """Whether the camera has been ignored long enough to re-initialise from `visual`, decided once
+        per frame before either update path (reference or compiled) runs. A frame disagrees when its
+        `R_cm`, labelled nearest the prediction, is further from it than the prediction's and its own
+        covariance allow (d^2 over `disagreement_chi2` and angle over `disagreement_min_deg`): the gate
+        then rejects it, or the Huber weight lets it move the estimate little, and persistent disagreement is drift the
+        other flags do not show. Such a frame is flagged `VISUAL_IGNORED`; after
+        `reinit_after_disagreement_s` (s) of them in a row, True (re-initialise). None: fuse the frame
+        as usual (it agrees, or the IMU's gate and Huber weight handle it). False: skip it, without an
+        IMU, where fusing a large innovation would also corrupt the constant-rate model's rate and
+        spin the estimate away; the filter coasts. A non-finite frame changes nothing."""
+        if not _finite(visual):
+            return None
+        cfg = self.config
+        r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
+        angle = float(np.linalg.norm(r))
+        try:
+            # During a run, the covariance of its start: coasting grows P, and must not let the wrong
+            # rotations in as a jump.
+            P = self.P if self.disagree_since_s is None else self._disagree_P
+            d2 = float(r @ np.linalg.solve(H @ P @ H.T + R_vis, r))
+        except np.linalg.LinAlgError:
+            d2 = np.inf
+        if not (angle > np.radians(cfg.disagreement_min_deg) and not d2 <= cfg.disagreement_chi2):
+            self.disagree_since_s = None
+            return None
+        self.flags |= status_bits.VISUAL_IGNORED
+        self._counters["visual_ignored"] += 1
+        if self.disagree_since_s is None:
+            self.disagree_since_s, self._disagree_P = t_s, self.P.copy()
+        if t_s - self.disagree_since_s >= cfg.reinit_after_disagreement_s:
+            return True
+        return None if self.motion.uses_imu else False
+
     def _reinitialise(self, visual: VisualRotation) -> None:
-        """After `reinit_after_rejections` frames gated out in a row: a new scene alignment from `visual`."""
+        """After `reinit_after_rejections` frames gated out in a row, or `reinit_after_disagreement_s`
+        of visual rotations ignored (`_ignored_too_long`): a new scene alignment from `visual`."""
+        self.disagree_since_s = None
         self.flags |= status_bits.REINITIALISED
         self.counters["reinitialised"] += 1
         self.motion.reinitialise(self, visual)
