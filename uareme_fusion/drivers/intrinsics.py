@@ -89,15 +89,24 @@ _PUBLISHED_NAMES = (
 )
 
 
-def published_camera(folder: Path) -> CameraModel | None:
-    """The published intrinsics of the dataset a folder's name (or its parent's) identifies, else None."""
+def published_dataset(folder: Path) -> tuple[str, str] | None:
+    """(dataset, the folder name that identified it) for the dataset a folder's name (or its parent's)
+    identifies by `_PUBLISHED_NAMES`, else None."""
     for name in (Path(folder).resolve().name, Path(folder).resolve().parent.name):
         for pattern, dataset in _PUBLISHED_NAMES:
             match = pattern.search(name.lower())
             if match:
-                key = dataset(match)
-                return replace(PUBLISHED[key], origin=f"published {key} intrinsics (folder name {name})")
+                return dataset(match), name
     return None
+
+
+def published_camera(folder: Path) -> CameraModel | None:
+    """The published intrinsics of the dataset a folder's name (or its parent's) identifies, else None."""
+    found = published_dataset(folder)
+    if found is None:
+        return None
+    key, name = found
+    return replace(PUBLISHED[key], origin=f"published {key} intrinsics (folder name {name})")
 
 
 def parse_intrinsics(value: str) -> CameraModel:

@@ -37,11 +37,12 @@ from uareme_fusion.errors import InputError, SourceError
 from uareme_fusion.rotations import is_rotation
 from uareme_fusion.types import Frame, ImuBatch, NormalMap
 
+from ..formats.datasets import RENDERED_DEPTH_DATASETS
 from ..formats.tum import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
 from .base import PLATFORMS, GroundTruth, Source, SourceInfo
 from .imu_csv import non_increasing_note, read_imu_log
 from .interleave import interleave
-from .intrinsics import CameraModel, Undistorter, published_camera
+from .intrinsics import CameraModel, Undistorter, published_camera, published_dataset
 
 SIM_META = "scene.json"
 RECORD_META = "source.json"
@@ -171,6 +172,8 @@ class TumSource(Source):
         first = self.seq.read_frame(0) if len(self.seq) else None
         self._undistorter = (Undistorter(self.camera, first.rgb.shape[:2])
                              if first is not None and self.camera is not None and self.camera.distorted else None)
+        dataset = published_dataset(self.root)
+        rendered = (self.root / SIM_META).is_file() or (dataset is not None and dataset[0] in RENDERED_DEPTH_DATASETS)
         self.info = SourceInfo(
             name=str(root), n_frames=len(self.seq), fps=fps, K=self.seq.K,
             K_origin=None if self.camera is None else self.camera.origin,
@@ -178,8 +181,7 @@ class TumSource(Source):
             R_ci=self.meta.get("R_ci") if self.meta.get("R_ci") is not None else np.eye(3),
             imu_time_offset_s=self.meta.get("imu_time_offset_s", 0.0), platform=self.meta.get("platform"),
             image_size=None if first is None else first.rgb.shape[:2],
-            depth_rendered=(self.root / SIM_META).is_file()
-            or (self.camera is not None and "ICL-NUIM" in str(self.camera.origin)),
+            depth_rendered=rendered,
         )
 
     def _camera(self) -> CameraModel | None:

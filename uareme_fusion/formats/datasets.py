@@ -32,6 +32,9 @@ PUBLISHED_INTRINSICS: dict[str, tuple[np.ndarray, np.ndarray]] = {
 }
 """(K, distortion) that datasets publish, by dataset name (ICL-NUIM in OpenCV axes)."""
 
+RENDERED_DEPTH_DATASETS = frozenset({"ICL-NUIM"})
+"""Datasets of `PUBLISHED_INTRINSICS` whose depth maps are rendered, not measured (`SourceInfo.depth_rendered`)."""
+
 FLIP_Y = np.diag([1.0, -1.0, 1.0])
 """The reflection between a y-up camera frame (negative published fy) and OpenCV's y-down frame."""
 
