@@ -4,9 +4,9 @@ not an anchor, a frame without evidence reports a wide covariance and why."""
 import numpy as np
 import pytest
 
-from uareme_fusion.lines.detect import LineSegments
+from uareme_fusion.solver.line_detection import LineSegments
 from uareme_fusion.overlay.camera import assumed_K
-from uareme_fusion.pipeline.cues import CueSolver
+from uareme_fusion.solver.cues import CueSolver
 from uareme_fusion.rotations import exp_so3, log_so3, nearest_symmetric
 from uareme_fusion.sim.line_segments import manhattan_segments
 from uareme_fusion.sim.normal_maps import manhattan_normal_map

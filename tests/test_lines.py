@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from uareme_fusion.errors import ConfigError
-from uareme_fusion.lines.detect import detect_segments
+from uareme_fusion.solver.line_detection import detect_segments
 from uareme_fusion.overlay.camera import assumed_K
-from uareme_fusion.pipeline.cues import parse_cues
+from uareme_fusion.solver.cues import parse_cues
 from uareme_fusion.rotations import exp_so3, log_so3, nearest_symmetric
 from uareme_fusion.sim.line_segments import manhattan_segments
 from uareme_fusion.solver import solve_manhattan
@@ -236,7 +236,7 @@ def test_image_command_takes_a_folder_and_prints_one_json_per_image(tmp_path):
 
 
 def test_stream_focal_is_the_median_of_the_frames():
-    from uareme_fusion.pipeline.cues import stream_focal
+    from uareme_fusion.solver.cues import stream_focal
 
     focal = stream_focal([500.0, 510.0, 490.0, 900.0, 505.0], H, W)
     assert focal.f_px == 505.0 and focal.source == "estimated"
@@ -247,7 +247,7 @@ def test_stream_focal_is_the_median_of_the_frames():
 def test_lines_only_pipeline_on_drawn_segments(tmp_path):
     """A stream with no normal estimator: the line cue alone gives the visual rotations."""
     from uareme_fusion.backends.single import SingleFrame
-    from uareme_fusion.pipeline.cues import CueSolver
+    from uareme_fusion.solver.cues import CueSolver
     from uareme_fusion.pipeline.runner import Pipeline
     from uareme_fusion.types import Frame
 
@@ -269,7 +269,7 @@ def test_lines_only_pipeline_on_drawn_segments(tmp_path):
 
 def _atlanta_segments(R_cw, K, azimuths_deg, rng):
     """Segments along world up (z) and along horizontal directions at `azimuths_deg` (not orthogonal)."""
-    from uareme_fusion.lines.detect import LineSegments
+    from uareme_fusion.solver.line_detection import LineSegments
 
     parts = []
     for i, a in enumerate(np.radians(azimuths_deg)):

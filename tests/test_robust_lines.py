@@ -4,7 +4,7 @@ comparison's reference (`benchmarks/horizon.chained_reference`)."""
 import numpy as np
 
 from uareme_fusion.benchmarks.horizon import chained_reference
-from uareme_fusion.lines.detect import LineSegments
+from uareme_fusion.solver.line_detection import LineSegments
 from uareme_fusion.overlay.camera import assumed_K
 from uareme_fusion.rotations import exp_so3, log_so3, manhattan_symmetries, nearest_symmetric
 from uareme_fusion.sim.line_segments import manhattan_segments

@@ -258,7 +258,7 @@ def test_a_stream_pools_K_even_when_no_frame_alone_tells_the_focal_length(tmp_pa
 
 
 def test_frames_of_another_size_are_refused_by_the_pool_and_scaled_or_refused_by_a_stream(tmp_path):
-    from uareme_fusion.pipeline.cues import CueSolver
+    from uareme_fusion.solver.cues import CueSolver
     from uareme_fusion.types import Frame
 
     rng = np.random.default_rng(11)

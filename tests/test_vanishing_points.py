@@ -51,7 +51,7 @@ def test_zenith_found_far_from_a_wrong_guess_and_despite_clutter():
 
 def test_zenith_inside_the_image_is_never_proposed():
     """Segments radiating from a point inside the frame (ground markings) make no zenith."""
-    from uareme_fusion.lines.detect import LineSegments
+    from uareme_fusion.solver.line_detection import LineSegments
 
     rng = np.random.default_rng(1)
     centre = np.array([300.0, 400.0])

@@ -67,11 +67,11 @@ class RunConfig(BaseModel):
                 raise ValueError(str(exc).split(": ", 1)[-1]) from None
         return value
     cues: str = "normals,lines,sky"
-    """Visual cues of the joint solver: normals, lines, sky (comma-separated); see pipeline/cues.py."""
+    """Visual cues of the joint solver: normals, lines, sky (comma-separated); see solver/cues.py."""
 
     @field_validator("cues")
     @classmethod
     def _known_cues(cls, value: str) -> str:
-        from .cues import parse_cues
+        from ..solver.cues import parse_cues
 
         return ",".join(parse_cues(value))

@@ -26,7 +26,7 @@ from ..drivers.base import Source
 from ..errors import InputError, OutputError, SourceError
 from ..types import Estimate, Estimates, Frame, ImuBatch, NormalMap, Status, VisualRotation
 from . import stop_signals
-from .cues import pool_before_run, solve_frame
+from ..solver.cues import pool_before_run, solve_frame
 
 STAGES = ("source", "normals", "solver", "backend", "sinks")
 IMU_ONLY_BULK_BATCHES = 256

@@ -27,7 +27,7 @@ from ..io.safe_files import ENVIRONMENT_ERRNOS, ReservedFile
 from ..rotations import align_constant
 from ..types import Status
 from .config import RunConfig
-from .cues import CueSolver, parse_cues
+from ..solver.cues import CueSolver, parse_cues
 from .imu_rotation_check import ImuRotationCheck
 from .runner import Pipeline, RunStats
 from . import stop_signals

@@ -19,7 +19,7 @@ import logging
 import numpy as np
 
 from ..errors import ConfigError, InputError
-from ..lines.detect import LineSegments, SegmentDetector
+from .line_detection import LineSegments, SegmentDetector
 from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
 from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
                             unknown_centre_floor)
