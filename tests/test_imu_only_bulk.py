@@ -16,7 +16,7 @@ from uareme_fusion.config import load_config
 from uareme_fusion.drivers.base import Source, SourceInfo
 from uareme_fusion.drivers.interleave import split_by_span
 from uareme_fusion.pipeline.runner import Pipeline
-from uareme_fusion.pipeline.sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
+from uareme_fusion.sinks.estimate_files import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
 from uareme_fusion.sim.imu import simulate_imu
 from uareme_fusion.sim.trajectory import make_trajectory
 from uareme_fusion.types import Status

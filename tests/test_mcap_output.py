@@ -13,9 +13,9 @@ from mcap.reader import NonSeekingReader, make_reader  # noqa: E402
 from helpers import WalkSource, cli, error_lines  # noqa: E402
 from uareme_fusion.overlay.horizon import horizon_line  # noqa: E402
 from uareme_fusion.pipeline import RunConfig  # noqa: E402
-from uareme_fusion.pipeline.runner import FrameResult  # noqa: E402
+from uareme_fusion.types import FrameResult  # noqa: E402
 from uareme_fusion.types import Estimate  # noqa: E402
-from uareme_fusion.pipeline.mcap_sink import TOPICS, McapSink, up_arrow_px  # noqa: E402
+from uareme_fusion.sinks.mcap_file import TOPICS, McapSink, up_arrow_px  # noqa: E402
 from uareme_fusion.pipeline.session import run_source  # noqa: E402
 from uareme_fusion.sim.dataset import SequenceOptions, write_sequence  # noqa: E402
 

@@ -10,7 +10,7 @@ import pytest
 
 from uareme_fusion.errors import InputError
 from uareme_fusion.pipeline import RunConfig
-from uareme_fusion.pipeline.drawing_sinks import GroundSink, HorizonVideoSink, VideoFileWriter
+from uareme_fusion.sinks.drawing import GroundSink, HorizonVideoSink, VideoFileWriter
 from uareme_fusion.pipeline.session import run_source
 from uareme_fusion.types import Frame
 

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from uareme_fusion.cli import app
-from uareme_fusion.pipeline.rerun_sink import roll_pitch_deg
+from uareme_fusion.sinks.rerun_file import roll_pitch_deg
 
 rerun = pytest.importorskip("rerun", reason="rerun-sdk is not installed (the 'viewer' extra)")
 

@@ -135,7 +135,7 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
     from .evaluation.sequence import VisualSequence
     from .drivers.simulated import SimulatedSource
     from .pipeline import RunConfig
-    from .pipeline.drawing_sinks import HorizonVideoSink
+    from .sinks.drawing import HorizonVideoSink
     from .pipeline.session import build_pipeline
 
     figures, tilts = {}, {}

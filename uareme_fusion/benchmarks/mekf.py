@@ -184,7 +184,7 @@ def run_command_cost_us(path: Path) -> tuple[float, float, int]:
     from ..drivers.registry import open_source
     from ..pipeline import RunConfig
     from ..pipeline.session import build_pipeline
-    from ..pipeline.sinks import EstimatesCsvWriter, TumTrajectoryWriter
+    from ..sinks.estimate_files import EstimatesCsvWriter, TumTrajectoryWriter
 
     cpu, wall = [], []
     for _ in range(3):

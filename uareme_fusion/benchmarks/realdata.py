@@ -203,7 +203,7 @@ def eval_run(spec: str, cfg, progress=None, gt: Path | None = None) -> dict:
     from ..drivers.ground_truth_file import with_ground_truth_file
     from ..evaluation.backend_factory import backend_kind, knows_gravity
     from ..pipeline.session import configure_imu, evaluation_errors, run_source
-    from ..pipeline.sinks import EstimateLog
+    from ..sinks.estimate_files import EstimateLog
 
     log = EstimateLog()
     with tempfile.TemporaryDirectory() as out, open_source(spec) as source:

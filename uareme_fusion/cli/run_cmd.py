@@ -85,11 +85,11 @@ def viewer_sinks(rerun: Optional[Path], mcap: Optional[Path] = None, source: Opt
     def factory(src, out_dir, cfg):
         sinks = []
         if rerun is not None:
-            from ..pipeline.rerun_sink import RerunSink
+            from ..sinks.rerun_file import RerunSink
 
             sinks.append(RerunSink(rerun, cfg.assumed_fov_deg))
         if mcap is not None:
-            from ..pipeline.mcap_sink import McapSink
+            from ..sinks.mcap_file import McapSink
 
             sinks.append(McapSink(mcap, cfg.assumed_fov_deg))
         return sinks

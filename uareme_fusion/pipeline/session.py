@@ -31,7 +31,7 @@ from ..solver.cues import CueSolver, parse_cues
 from .imu_rotation_check import ImuRotationCheck
 from .runner import Pipeline, RunStats
 from . import stop_signals
-from .sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
+from ..sinks.estimate_files import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
 from .stages import CappedNormals, make_backend, make_normal_estimator, mekf_preset_for
 
 

@@ -19,7 +19,7 @@ from ..io.safe_files import cannot_write, discard, publish, refuse_link, tempora
 from ..io.video_writer import OPENCV_CODECS, open_video_encoder
 from ..overlay import draw_ground, ground_mask, side_by_side
 from ..overlay.compose import draw_overlay
-from .runner import FrameResult
+from ..types import FrameResult
 
 VIDEO_CODECS = OPENCV_CODECS
 """The video extensions written (encoders in `io.video_writer`)."""

@@ -38,9 +38,8 @@ from ..overlay import intrinsics_or_assumed
 from ..overlay.camera import assumed_fov_note
 from ..overlay.horizon import HORIZON_RGB, horizon_segment
 from ..rotations import quat_xyzw
-from ..types import Estimates, Status
-from .rerun_sink import roll_pitch_deg
-from .runner import FrameResult
+from ..types import Estimates, FrameResult, Status
+from .rerun_file import roll_pitch_deg
 
 CAMERA_FRAME_ID = "camera"
 WORLD_FRAME_ID = "world"

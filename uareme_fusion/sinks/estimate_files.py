@@ -21,8 +21,7 @@ import numpy as np
 from ..formats.tum import TUM_ROW
 from ..io.safe_files import RowFile
 from ..rotations import quat_xyzw
-from ..types import Estimates, Status
-from .runner import FrameResult
+from ..types import Estimates, FrameResult, Status
 
 ESTIMATE_COLUMNS = (
     ["t_s", "qx", "qy", "qz", "qw"]

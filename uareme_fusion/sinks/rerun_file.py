@@ -24,9 +24,8 @@ from ..io.safe_files import cannot_write
 from ..io.normal_maps import normals_to_rgb
 from ..overlay import confidence_to_rgb, intrinsics_or_assumed
 from ..rotations import quat_xyzw
-from ..types import Status
-from .drawing_sinks import overlay_image
-from .runner import FrameResult
+from ..types import FrameResult, Status
+from .drawing import overlay_image
 
 APPLICATION_ID = "uareme-fusion"
 
