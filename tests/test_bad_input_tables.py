@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from uareme_fusion.backends.mekf import Mekf, MekfConfig
-from uareme_fusion.drivers.broad import read_broad
+from uareme_fusion.formats.broad import read_broad
 from uareme_fusion.formats.euroc import read_euroc_imu
 from uareme_fusion.formats.tum import (
     load_tum_rgbd,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from uareme_fusion.drivers.broad import read_broad
+from uareme_fusion.formats.broad import read_broad
 from uareme_fusion.errors import InputError
 
 

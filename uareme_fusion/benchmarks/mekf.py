@@ -42,7 +42,7 @@ from ..backends.mekf.filter import load_kernels
 from ..backends.mekf.offline import forward_backward_imu
 from ..backends.single import SingleFrame
 from ..config import load_config
-from ..drivers.broad import read_broad
+from ..formats.broad import read_broad
 from ..evaluation.scenarios import RunResult, run_scenario
 from ..evaluation.statistics import error_stats, rmse
 from ..rotations import tilt_error_deg, up_in_camera
