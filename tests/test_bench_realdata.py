@@ -62,7 +62,7 @@ def test_quick_bench_on_real_kt3_prints_the_runs_figures(shared_data, tmp_path):
     from uareme_fusion.evaluation.compare import errors_over_time, run_backend
     from uareme_fusion.evaluation.source_sequence import source_sequence
     from uareme_fusion.pipeline import RunConfig
-    from uareme_fusion.pipeline.stages import make_backend
+    from uareme_fusion.pipeline.stages import backend_for_run
 
     out_json, out_md = tmp_path / "r.json", tmp_path / "r.md"
     result = CliRunner().invoke(app, ["bench", "realdata", "--quick", "--sequences", "kt3", "--data", str(shared_data),
@@ -81,7 +81,7 @@ def test_quick_bench_on_real_kt3_prints_the_runs_figures(shared_data, tmp_path):
     with open_source(str(kt3_dir)) as source:
         seq = source_sequence(source, RunConfig(normals="learned", cues="lines", max_frames=QUICK_FRAMES))
         info = source.info
-    err = errors_over_time(run_backend(make_backend(RunConfig(backend="single"), info), seq), seq.R_wc_true)
+    err = errors_over_time(run_backend(backend_for_run(RunConfig(backend="single"), info), seq), seq.R_wc_true)
     lines_single = kt3["cue_sets"]["RGB lines"]["single"]
     assert lines_single["are_mean_deg"] == pytest.approx(np.nanmean(err["are_deg"]), abs=1e-9)
     assert lines_single["frames"] == QUICK_FRAMES

@@ -7,10 +7,10 @@ import pytest
 
 from uareme_fusion.drivers.base import SourceInfo
 from uareme_fusion.errors import InputError
-from uareme_fusion.evaluation.backend_factory import BACKEND_NAMES, backend_kind, knows_gravity, make_backend
-from uareme_fusion.evaluation.statistics import error_stats, rmse
+from uareme_fusion.backends.factory import BACKEND_NAMES, backend_kind, knows_gravity, make_backend
+from uareme_fusion.scoring.statistics import error_stats, rmse
 from uareme_fusion.pipeline import RunConfig
-from uareme_fusion.pipeline.stages import make_backend as pipeline_backend
+from uareme_fusion.pipeline.stages import backend_for_run
 
 
 def test_statistics_are_the_textbook_ones():
@@ -41,7 +41,7 @@ def test_run_and_compare_build_the_same_smoother(has_imu):
     """`run --backend smoother` builds, through the same factory, the backend `compare` names
     smoother (no IMU) or smoother-gyro (with an IMU), with the same settings."""
     info = SourceInfo(name="test", has_imu=has_imu)
-    from_run = pipeline_backend(RunConfig(backend="smoother"), info)
+    from_run = backend_for_run(RunConfig(backend="smoother"), info)
     from_compare = make_backend("smoother-gyro" if has_imu else "smoother")
     assert from_run.name == from_compare.name
     assert from_run.config.model_dump() == from_compare.config.model_dump()
@@ -50,7 +50,7 @@ def test_run_and_compare_build_the_same_smoother(has_imu):
 def test_run_applies_the_source_imu_geometry_and_overrides_to_the_ekf():
     R_ci = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     info = SourceInfo(name="test", has_imu=True, R_ci=R_ci, imu_time_offset_s=0.02)
-    mekf = pipeline_backend(RunConfig(mekf={"gyro_noise_rad_s_sqrt_hz": 0.005}), info)
+    mekf = backend_for_run(RunConfig(mekf={"gyro_noise_rad_s_sqrt_hz": 0.005}), info)
     np.testing.assert_array_equal(mekf.config.R_ci, R_ci)
     assert mekf.config.imu_time_offset_s == 0.02  # one convention end to end: t_cam = t_imu + offset
     assert mekf.config.gyro_noise_rad_s_sqrt_hz == 0.005

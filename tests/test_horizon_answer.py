@@ -169,7 +169,7 @@ def test_stream_of_a_rolling_drone_photo_follows_the_sky(shared_data, tmp_path):
     no intrinsics: every frame's horizon within 2 deg and 0.05 H of the turned label."""
     import csv
 
-    from uareme_fusion.benchmarks.horizon import horizon_error
+    from uareme_fusion.scoring.horizon import horizon_error
     from uareme_fusion.benchmarks.horizon_uav import label_line, roll_error_deg
     from uareme_fusion.pipeline import RunConfig
     from uareme_fusion.pipeline.session import run_to_folder

@@ -282,7 +282,7 @@ def _atlanta_segments(R_cw, K, azimuths_deg, rng):
 def test_atlanta_horizon_from_non_orthogonal_horizontal_directions():
     from uareme_fusion.overlay.horizon import horizon_line
     from uareme_fusion.solver.atlanta import estimate_horizon
-    from uareme_fusion.benchmarks.horizon import horizon_error
+    from uareme_fusion.scoring.horizon import horizon_error
 
     rng = np.random.default_rng(3)
     level = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])  # world (x fwd, z up) to camera

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from uareme_fusion.evaluation.metrics import attitude_errors, error_summary, step_errors_deg
+from uareme_fusion.scoring.metrics import attitude_errors, error_summary, step_errors_deg
 
 
 def test_one_jump_is_one_frame_jump_however_many_frames_it_leaves_off():

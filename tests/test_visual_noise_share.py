@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from uareme_fusion.backends.visual_noise_share import VisualNoiseShare
-from uareme_fusion.evaluation.backend_factory import make_backend
+from uareme_fusion.backends.factory import make_backend
 from uareme_fusion.evaluation.compare import errors_over_time, run_backend
 from uareme_fusion.evaluation.sequence import VisualSequence
 from uareme_fusion.sim.trajectory import make_trajectory

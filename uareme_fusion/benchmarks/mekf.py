@@ -44,7 +44,7 @@ from ..backends.single import SingleFrame
 from ..config import load_config
 from ..formats.broad import read_broad
 from ..evaluation.scenarios import RunResult, run_scenario
-from ..evaluation.statistics import error_stats, rmse
+from ..scoring.statistics import error_stats, rmse
 from ..rotations import tilt_error_deg, up_in_camera
 from .fused_cost import REPLAYS, fused_cost_us, recording_mekf_factory
 from .peers import vqf_6d_R_wi

@@ -12,7 +12,7 @@ Two ways of running, both the library's own:
   (`evaluation.source_sequence`: learned normals + lines, learned normals alone, lines alone; depth
   normals + lines where the source has depth), then `single`, `mekf` and `smoother` run on the same
   rotations (`evaluation.compare.run_backend`, each backend made as `run` makes it:
-  `pipeline.stages.make_backend`), so a paired per-frame difference isolates the backend or the cue;
+  `pipeline.stages.backend_for_run`), so a paired per-frame difference isolates the backend or the cue;
 - `eval` runs: what a user's `uareme-fusion eval` gives (`pipeline.session.run_source`): ICL kt3 with
   default options (no --normals), EuRoC micro with default options against the IMU log alone
   (`eval mav0/imu0/data.csv --gt ...`) over the same frames, TUM with and without its accelerometer.
@@ -177,17 +177,17 @@ def cue_set_sequence(seq: RealSequence, normals: str, cues: str, max_frames: int
 
 def backend_errors(visual, info) -> dict:
     """Per-frame errors (`compare.errors_over_time`) of each of `BACKENDS` on one `VisualSequence`,
-    each made as `run` makes it for this source (`stages.make_backend`; the sequence's IMU is already in
+    each made as `run` makes it for this source (`stages.backend_for_run`; the sequence's IMU is already in
     camera axes and on the camera clock)."""
-    from ..evaluation.backend_factory import backend_kind, knows_gravity
+    from ..backends.factory import backend_kind, knows_gravity
     from ..evaluation.compare import errors_over_time, run_backend
     from ..pipeline import RunConfig
-    from ..pipeline.stages import make_backend
+    from ..pipeline.stages import backend_for_run
 
     camera_axes = dataclasses.replace(info, R_ci=np.eye(3), imu_time_offset_s=0.0, has_imu=visual.has_imu)
     out = {}
     for name in BACKENDS:
-        run = run_backend(make_backend(RunConfig(backend=name), camera_axes), visual)
+        run = run_backend(backend_for_run(RunConfig(backend=name), camera_axes), visual)
         kind = backend_kind(name, visual.has_imu).name
         err = errors_over_time(run, visual.R_wc_true, yaw_only_nees=knows_gravity(kind, visual.has_imu))
         err["std_deg"] = total_std_deg(np.array([e.cov for e in run.estimates]))
@@ -201,7 +201,7 @@ def eval_run(spec: str, cfg, progress=None, gt: Path | None = None) -> dict:
     "has_imu"}`."""
     from ..drivers import open_source
     from ..drivers.ground_truth_override import with_ground_truth_file
-    from ..evaluation.backend_factory import backend_kind, knows_gravity
+    from ..backends.factory import backend_kind, knows_gravity
     from ..pipeline.session import configure_imu, evaluation_errors, run_source
     from ..sinks.estimate_files import EstimateLog
 

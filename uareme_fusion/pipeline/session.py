@@ -20,9 +20,9 @@ import numpy as np
 from ..drivers.base import GroundTruth, Source
 from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
 from ..errors import InputError, OutputError
-from ..evaluation.backend_factory import backend_kind, knows_gravity
-from ..evaluation.metrics import attitude_errors, error_summary
-from ..evaluation.statistics import error_stats
+from ..backends.factory import backend_kind, knows_gravity
+from ..scoring.metrics import attitude_errors, error_summary
+from ..scoring.statistics import error_stats
 from ..io.safe_files import ENVIRONMENT_ERRNOS, ReservedFile
 from ..rotations import align_constant
 from ..types import Status
@@ -32,7 +32,7 @@ from .imu_rotation_check import ImuRotationCheck
 from .runner import Pipeline, RunStats
 from . import stop_signals
 from ..sinks.estimate_files import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
-from .stages import CappedNormals, make_backend, make_normal_estimator, mekf_preset_for
+from .stages import CappedNormals, backend_for_run, make_normal_estimator, mekf_preset_for
 
 
 OUTPUT_NAMES = ("trajectory.tum", "estimates.csv", "summary.json", "masks", "overlay", "ground.mp4")
@@ -99,7 +99,7 @@ def visual_stages(cfg: RunConfig, info) -> tuple[CappedNormals | None, CueSolver
 
 def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipeline:
     normals, cues = visual_stages(cfg, source.info) if source.info.has_frames else (None, None)
-    backend = make_backend(cfg, source.info)
+    backend = backend_for_run(cfg, source.info)
     if cfg.offline:
         from ..backends.mekf.offline import offline_backend
 

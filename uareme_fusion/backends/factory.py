@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..backends.base import Backend
 from ..config import load_config, validate_config
 from ..errors import InputError
+from .base import Backend
 
 
 @dataclass(frozen=True)
@@ -56,17 +56,17 @@ def make_backend(name: str, imu_geometry: dict | None = None, mekf_preset: str |
     kind = backend_kind(name)
     overrides = overrides or {}
     if kind.name == "single":
-        from ..backends.single import SingleFrame
+        from .single import SingleFrame
 
         return SingleFrame()
     if kind.name.startswith("smoother"):
-        from ..backends.smoother import Smoother, SmootherConfig, SmootherMode
+        from .smoother import Smoother, SmootherConfig, SmootherMode
 
         base = load_config("paper", SmootherConfig, section="smoother").model_dump()
         if kind.name == "smoother-gyro":
             base.update(mode=SmootherMode.GYRO, **(imu_geometry or {}))
         return Smoother(validate_config({**base, **overrides}, SmootherConfig, "run config [smoother]"))
-    from ..backends.mekf import Mekf, MekfConfig
+    from .mekf import Mekf, MekfConfig
 
     base = (MekfConfig() if mekf_preset is None else load_config(mekf_preset, MekfConfig)).model_dump()
     base.update(imu_geometry or {})
