@@ -200,7 +200,7 @@ def eval_run(spec: str, cfg, progress=None, gt: Path | None = None) -> dict:
     and per-estimate errors (`session.evaluation_errors`): `{"summary", "t_s", "errors", "notes",
     "has_imu"}`."""
     from ..drivers import open_source
-    from ..drivers.ground_truth_override import with_ground_truth_file
+    from ..drivers.ground_truth_file import with_ground_truth_file
     from ..backends.factory import backend_kind, knows_gravity
     from ..pipeline.session import configure_imu, evaluation_errors, run_source
     from ..sinks.estimate_files import EstimateLog

@@ -183,7 +183,7 @@ def open_for_run(source_spec: str, cfg: RunConfig, imu: str | Path | None = None
     opened = configure_imu(open_source(str(source_spec), imu=None if imu is None else str(imu), fps=fps,
                                        intrinsics=cfg.intrinsics, **(topics or {})), cfg)
     if gt is not None:
-        from ..drivers.ground_truth_override import with_ground_truth_file
+        from ..drivers.ground_truth_file import with_ground_truth_file
 
         with_ground_truth_file(opened, gt, gt_time_offset_s)
     return opened

@@ -8,7 +8,7 @@ Formats (told apart by the first data line: commas mean EuRoC):
   `R_wi`, turned into the camera's `R_wc = R_wi R_ci^T` with the run's camera-IMU rotation.
 Both worlds are taken as gravity-aligned (z up), as in EuRoC, TUM RGB-D with its IMU and our own
 outputs; `time_offset_s` is added to the file's stamps to put them on the source's clock (the same
-convention as `--imu-time-offset-s`). `drivers.ground_truth_override` gives a source this truth.
+convention as `--imu-time-offset-s`). `drivers.ground_truth_file` gives a source this truth.
 """
 
 from __future__ import annotations
