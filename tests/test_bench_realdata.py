@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from uareme_fusion.benchmarks.realdata import _nearest, markdown, no_worse, std_separation, total_std_deg
+from uareme_fusion.benchmarks.realdata import _nearest, std_separation, total_std_deg
+from uareme_fusion.benchmarks.realdata_rows import markdown, no_worse
 from uareme_fusion.cli import app
 from uareme_fusion.evaluation.paired_difference import paired_difference
 

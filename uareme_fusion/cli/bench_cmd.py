@@ -97,7 +97,7 @@ def bench(
         results = mekf.run(seeds=seeds, quick=quick, broad_dir=data or Path("../shared/data/broad_subset"),
                            run_cost=run_cost)
     elif what == "realdata":
-        from ..benchmarks import realdata
+        from ..benchmarks import realdata, realdata_rows
 
         wanted = realdata.SEQUENCES if sequences is None else tuple(s.strip() for s in sequences.split(",") if s.strip())
         unknown = sorted(set(wanted) - set(realdata.SEQUENCES))
@@ -107,7 +107,7 @@ def bench(
         if markdown_out is not None:
             from ..io.safe_files import write_text_atomic
 
-            write_text_atomic(markdown_out, realdata.markdown(results))
+            write_text_atomic(markdown_out, realdata_rows.markdown(results))
     elif what == "normals":
         from ..benchmarks import normals
 
