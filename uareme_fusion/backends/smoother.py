@@ -8,7 +8,7 @@ covariance is rotated with it). `R_wc` is chosen because gyro preintegration (`A
 gravity factor (`AttitudeFactorRot3`) are written for a body-to-navigation rotation.
 
 GTSAM's `Rot3` tangent convention is the project's: `retract(R, xi) = R @ Exp(xi)` (right
-perturbation; checked in tests/test_smoother.py), and `Marginals.marginalCovariance(X(k))` is the
+perturbation; checked in tests/backends/test_smoother.py), and `Marginals.marginalCovariance(X(k))` is the
 covariance of that `xi` in rad^2. So the `Estimate.cov` returned here is the right-perturbation
 covariance of `R_wc`, as docs/design.md requires.
 

@@ -1,5 +1,5 @@
-"""Property-based bad input (hypothesis), extending tests/test_solver_properties.py and
-tests/test_mekf_bad_input.py: per-pixel kappa of any value, any rotation prior, extreme scales and
+"""Property-based bad input (hypothesis), extending tests/solver/test_solver_properties.py and
+tests/backends/test_mekf_bad_input.py: per-pixel kappa of any value, any rotation prior, extreme scales and
 degenerate maps for the solver; any depth map and intrinsics for depth normals; visual rotations
 with any covariance (tiny, huge, ill-conditioned) and any frame timing for the MEKF, through its
 public API. Outputs stay finite, rotations orthonormal, covariances symmetric positive."""

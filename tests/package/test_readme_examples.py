@@ -14,7 +14,7 @@ from uareme_fusion.drivers import open_source
 from uareme_fusion.rotations import up_in_camera
 from uareme_fusion.types import Frame, Status
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+README = Path(__file__).resolve().parents[2] / "README.md"
 BLOCKS = re.findall(r"^```python\n(.*?)^```", README.read_text(encoding="utf-8"), flags=re.S | re.M)
 
 

@@ -1,5 +1,5 @@
 """The whole-CLI sweep of issue 15: every command given a missing file, a folder for a file, an empty
-file (an empty --config is all defaults, by design: tests/test_config.py), an unreadable folder
+file (an empty --config is all defaults, by design: tests/core/test_config.py), an unreadable folder
 (chmod 000; skipped as root) and an output on a read-only file system (a tmpfs mounted read-only;
 skipped where it cannot be mounted). Each gives one error line naming the path, exit 2 for the
 user's mistake or 1 for a failing environment, and no traceback."""

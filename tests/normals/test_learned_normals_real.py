@@ -14,7 +14,7 @@ from uareme_fusion.normals import LearnedNormals
 from uareme_fusion.sim.render import Renderer, intrinsics_from_fov
 from uareme_fusion.sim.scenarios import build_scenario
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
 from train_normals import CONFIDENT_DEPTH_KAPPA, motion_kernel, rolled, tum_labelled  # noqa: E402
 
 TUM_EVAL_STRIDE = 40

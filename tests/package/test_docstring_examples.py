@@ -1,5 +1,5 @@
 """The runnable examples in the docstrings of the public entry points `solve_manhattan` and
-`run_source` run and print what they say (`Mekf`'s is run by tests/test_mekf.py)."""
+`run_source` run and print what they say (`Mekf`'s is run by tests/backends/test_mekf.py)."""
 
 import doctest
 
