@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -319,7 +320,26 @@ def test_a_kernel_that_fails_in_the_warm_up_moves_the_filter_to_the_reference(mo
     with pytest.warns(RuntimeWarning) as caught:
         filt.warm_up(has_imu=True, has_frames=True)
     assert sum("compiled kernels unavailable" in str(w.message) for w in caught) == 1
-    assert not filt.compiled and not filt._stages_frames and not filt._visual_compiled
+    assert not filt.compiled
+    # Its IMU batches, accelerometer and visual updates run on the reference path (every kernel still
+    # raises, and a second warning would fail here), with the reference filter's estimates.
+    traj, t, gyro, accel = stream(10, duration_s=2.0)
+
+    def frames(t_f, _filt):
+        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0]
+        return VisualRotation(R_cm=R_cm, cov=1e-4 * np.eye(3), cost=0.01, iterations=3, n_valid=100)
+
+    reference = Mekf(load_config("handheld", MekfConfig).model_copy(update={"compiled": False}))
+    ests, ests_reference = [], []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for i in range(0, t.size, 7):
+            for one, out in ((filt, ests), (reference, ests_reference)):
+                one.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
+                t_f = float(t[min(i + 7, t.size) - 1]) + 0.001
+                out.append(one.process_frame(t_f, frames(t_f, one)))
+    assert filt.counters["visual_updates"] > 20
+    assert_same_filters(filt, reference, ests, ests_reference)
 
 
 def _doubled(x):
@@ -337,9 +357,11 @@ def test_a_kernel_compiles_where_no_cache_folder_is_writable(tmp_path, monkeypat
     # numba looks only in NUMBA_CACHE_DIR, which cannot be created (a file is in the way)
     monkeypatch.setattr(numba_config, "CACHE_LOCATOR_CLASSES", "UserProvidedCacheLocator")
     monkeypatch.setattr(numba_config, "CACHE_DIR", str(not_a_folder))
-    kernel = jit.compiled(_doubled, cache=True)
-    assert type(kernel._cache).__name__ == "NullCache"
-    assert kernel(np.arange(3.0)).tolist() == [0.0, 2.0, 4.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "compiled kernels unavailable": it compiled, nothing fell back
+        kernel = jit.compiled(_doubled, cache=True)
+        assert kernel is not None and kernel(np.arange(3.0)).tolist() == [0.0, 2.0, 4.0]
+    assert not_a_folder.is_file() and list(tmp_path.iterdir()) == [not_a_folder]  # and nothing was cached
 
 
 def test_kernel_caches_older_than_any_module_they_draw_on_are_dropped(tmp_path):

@@ -102,8 +102,8 @@ def test_paper_preset_holds_the_paper_values_and_rejects_unknown_keys(tmp_path):
         load_config(tmp_path / "missing.yaml", SmootherConfig)
 
 
-def test_noiseless_visual_rotations_give_the_truth_and_the_window_holds_30_frames():
-    t = np.arange(60) / 15.0
+def test_noiseless_visual_rotations_give_the_truth_past_the_window():
+    t = np.arange(60) / 15.0  # twice the paper's 30-frame window: frames leave it and are marginalised
     R_true = R_wc_at(t)
     sm = Smoother()
     ests = feed(sm, t, [exact_visual(R) for R in R_true])
@@ -111,7 +111,6 @@ def test_noiseless_visual_rotations_give_the_truth_and_the_window_holds_30_frame
     # The smoothness factor pulls towards the previous frame; with 0.06 deg visual sigma it stays tiny.
     assert err.max() < 0.2
     assert all(e.status == Status.OK for e in ests)
-    assert len(sm._smoother.timestamps()) == 30
     np.testing.assert_allclose(sm.predicted_R_cm(t[-1] + 0.05), ests[-1].R_wc.T, atol=1e-12)
 
 
@@ -200,11 +199,12 @@ def test_label_up_as_z_puts_the_manhattan_axis_nearest_up_on_z():
     np.testing.assert_allclose(P, np.rint(P), atol=1e-9)
 
 
-def solve_sequence(backend, t, R_true, kinds, seed, imu=None):
-    """Real solver on synthetic maps, initialised from the backend's prediction (paper Sec. 3.2).
+def solve_sequence(backend, t, R_true, kinds, seed, imu=None, estimates: list | None = None):
+    """Real solver on synthetic maps, initialised from the backend's prediction (paper Sec. 3.2); the
+    estimates' `R_wc` (and the estimates themselves appended to `estimates` when given).
 
     kinds: 0 good map, 1 dropped (None), 2 blank wall (one axis, strong noise), 3 random normals."""
-    ests, start = [], 0
+    ests, start = [] if estimates is None else estimates, 0
     for k, tk in enumerate(t):
         if imu is not None:
             end = np.searchsorted(imu[0], tk, side="right")
@@ -254,12 +254,13 @@ def test_gyro_mode_estimates_the_bias_and_beats_paper_mode():
     kinds = rng.choice(4, size=len(t), p=[0.72, 0.15, 0.05, 0.08])
     kinds[:3] = 0
     gyro = Smoother(SmootherConfig(mode="gyro"))
-    R_gyro = solve_sequence(gyro, t, R_true, kinds, seed=6, imu=imu)
+    gyro_estimates = []
+    R_gyro = solve_sequence(gyro, t, R_true, kinds, seed=6, imu=imu, estimates=gyro_estimates)
     R_paper = solve_sequence(Smoother(), t, R_true, kinds, seed=6, imu=imu)
     are_gyro, are_paper = are_deg(R_gyro, R_true), are_deg(R_paper, R_true)
     assert are_gyro.mean() < 0.7 * are_paper.mean()
     assert are_gyro.max() < 5.0
-    np.testing.assert_allclose(gyro._last.gyro_bias_rad_s, bias, atol=0.006)
+    np.testing.assert_allclose(gyro_estimates[-1].gyro_bias_rad_s, bias, atol=0.006)
     # World is gravity aligned: the estimated up matches the truth without any alignment.
     up_err = np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", R_gyro[:, 2, :], R_true[:, 2, :]), -1, 1)))
     assert np.median(up_err) < 1.5

@@ -273,16 +273,24 @@ def test_frames_of_another_size_are_refused_by_the_pool_and_scaled_or_refused_by
     K_stream = stream.focal.K.copy()
     # the same camera's image resized (same aspect ratio): solved with the stream's K scaled to it, which
     # takes no part in the stream's K; another aspect ratio is another camera, refused in one line
-    assert stream.solve(Frame(t_s=0.1, rgb=cv2.resize(rgb, (320, 240)), index=1), None) is not None
+    half = cv2.resize(rgb, (320, 240))
+    visual = stream.solve(Frame(t_s=0.1, rgb=half, index=1), None)
     np.testing.assert_array_equal(stream.focal.K, K_stream)
-    assert stream._scaled((320, 240)).K[0, 0] == pytest.approx(K_stream[0, 0] / 2)
+    given = CueSolver(lines=True).solve(Frame(t_s=0.1, rgb=half, K=np.diag([0.5, 0.5, 1.0]) @ K_stream, index=1), None)
+    np.testing.assert_allclose(visual.R_cm, given.R_cm, atol=1e-9)  # as if that K had been given
     with pytest.raises(InputError, match=r"frame 2 \(t 0.200 s\): 320x320 px, but the stream's camera is 640x480"):
         stream.solve(Frame(t_s=0.2, rgb=cv2.resize(rgb, (320, 320)), index=2), None)
     assumed = CueSolver(lines=True, assumed_fov_deg=60.0)  # no K from the scene yet: another size is solved alone
     blank = np.full((H, W, 3), 235, np.uint8)
     assumed.solve(Frame(t_s=0.0, rgb=blank, index=0), None)
     assert assumed.solve(Frame(t_s=0.1, rgb=cv2.resize(rgb, (320, 240)), index=1), None) is not None
-    assert assumed.focal.source == "assumed" and assumed.focal.width == W and assumed._attempts == 0
+    assert assumed.focal.source == "assumed" and assumed.focal.width == W
+    # ... and leaves the stream as it was: its next frame is solved as by a stream that never saw it
+    fresh = CueSolver(lines=True, assumed_fov_deg=60.0)
+    fresh.solve(Frame(t_s=0.0, rgb=blank, index=0), None)
+    after, after_fresh = (s.solve(Frame(t_s=0.2, rgb=rgb, index=2), None) for s in (assumed, fresh))
+    np.testing.assert_allclose(after.R_cm, after_fresh.R_cm, atol=1e-12)
+    assert assumed.focal.K.tolist() == fresh.focal.K.tolist() and assumed.focal.source == fresh.focal.source
 
 
 def test_the_pooled_bench_refuses_a_folder_without_frames(tmp_path):
