@@ -358,7 +358,7 @@ BROAD_CASES = [
     ("no_rate", lambda p: broad_file(p, sampling_rate=None), "lacks attribute sampling_rate"),
     ("no_quat_no_movement", lambda p: broad_file(p, opt_quat=None, movement=None), "lacks opt_quat, movement"),
     ("gyro_two_columns", lambda p: broad_file(p, imu_gyr=np.zeros((20, 2))), r"expected imu_gyr/imu_acc \(N, 3\)"),
-    ("acc_shorter", lambda p: broad_file(p, imu_acc=np.zeros((10, 3))), r"\(10, 3\)"),
+    ("accel_shorter", lambda p: broad_file(p, imu_acc=np.zeros((10, 3))), r"\(10, 3\)"),
     ("quat_three", lambda p: broad_file(p, opt_quat=np.zeros((20, 3))), r"opt_quat \(N, 4\)"),
     ("zero_rate", lambda p: broad_file(p, sampling_rate=0.0), "sampling_rate must be positive, got 0"),
     ("nan_rate", lambda p: broad_file(p, sampling_rate=np.nan), "sampling_rate must be positive, got nan"),

@@ -75,7 +75,7 @@ def parameter_vector(filt, defer: bool) -> np.ndarray:
     p[K.P_DEFER] = float(defer)
     p[K.P_LP_TAU] = cfg.accel_lowpass_tau_s
     p[K.P_INV_G], p[K.P_GRAVITY] = 1.0 / cfg.gravity_m_s2, cfg.gravity_m_s2
-    p[K.P_ACC_NOISE] = cfg.accel_tilt_noise_rad_sqrt_s
+    p[K.P_ACCEL_NOISE] = cfg.accel_tilt_noise_rad_sqrt_s
     p[K.P_NORM_SCALE], p[K.P_INNOV_SCALE] = cfg.accel_norm_scale, cfg.accel_innovation_scale_rad
     p[K.P_FLAG_RATIO] = cfg.accel_downweight_flag_ratio
     p[K.P_REST_GYRO], p[K.P_REST_ACCEL] = cfg.rest_gyro_max_rad_s, cfg.rest_accel_max_m_s2

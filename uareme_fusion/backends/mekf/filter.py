@@ -372,16 +372,16 @@ class Mekf(Backend):
         free fall). Consumes the period. The reference path: compiled, `kernels.accel_rows` does this
         inside the update that takes it."""
         cfg = self.config
-        acc_c, T = self.accel.take_mean()
+        accel_c, T = self.accel.take_mean()
         if cfg.rest_gyro_max_rad_s > 0:
             rows = self.accel.rest_measurement(T, self.t_state, self.b_c, cfg, self.q_gyro)
             if rows is not None:
                 self._kalman_update(*rows)
                 self.counters["rest_updates"] += 1
-        acc_c = self.accel.lowpass(acc_c, T, cfg.accel_lowpass_tau_s)
+        accel_c = self.accel.lowpass(accel_c, T, cfg.accel_lowpass_tau_s)
         use_lp_J = cfg.accel_lowpass_tau_s > 0
         ok, r, var, H, downweighted = gravity_model(
-            acc_c, T, self.R_wc, self.accel.lp_J[1], use_lp_J, cfg.gravity_m_s2,
+            accel_c, T, self.R_wc, self.accel.lp_J[1], use_lp_J, cfg.gravity_m_s2,
             cfg.accel_tilt_noise_rad_sqrt_s, cfg.accel_norm_scale, cfg.accel_innovation_scale_rad,
             cfg.accel_downweight_flag_ratio)
         if not ok:

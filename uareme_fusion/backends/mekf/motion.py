@@ -216,8 +216,8 @@ class GyroMotion:
         _, filt.P = kf_predict(ZERO_STATE, filt.P, F, Q)
         if cfg.record_imu_estimates and n:
             filt.record_P.append(np.repeat(filt.P[None, TH, TH], n, axis=0))
-        acc_time_s = T_elapsed - extra_s if unknown_var == 0.0 else float(dt[:n].sum())
-        filt.accel.add_chunk(C, accel_c, dt, acc_time_s if n else 0.0, T_elapsed)
+        accel_time_s = T_elapsed - extra_s if unknown_var == 0.0 else float(dt[:n].sum())
+        filt.accel.add_chunk(C, accel_c, dt, accel_time_s if n else 0.0, T_elapsed)
         filt.accel.carry_lowpass(C_N, A_bias)
         if cfg.rest_gyro_max_rad_s > 0 and n:
             filt.accel.add_rest(gyro_c, accel_c)
