@@ -409,10 +409,10 @@ def test_warm_up_loads_every_kernel_a_filter_with_an_imu_calls():
     """In a fresh process (numba loads a kernel at its first call), `warm_up` leaves no kernel of the
     stream to come to load: IMU-only in bulk, then with frames; without an IMU, or in visual-only
     mode, it loads nothing."""
-    code = ("from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels as K\n"
+    code = ("from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels\n"
             "from uareme_fusion.backends import imu_stream\n"
             "names = ('KERNEL', 'ACCEL_UPDATE', 'SEGMENTS', 'STAGE', 'INTEGRATE_STAGED', 'VISUAL_UPDATE')\n"
-            "loaded = lambda: ''.join(str(len(getattr(K, n).signatures)) for n in names)\n"
+            "loaded = lambda: ''.join(str(len(getattr(kernels, n).signatures)) for n in names)\n"
             "Mekf('handheld').warm_up(False, True); Mekf(MekfConfig(mode='visual_only')).warm_up(True, True)\n"
             "print(loaded()); Mekf('imu_only').warm_up(True, False); print(loaded())\n"
             "Mekf('handheld').warm_up(True, True); print(loaded(), len(imu_stream._ROWS_IF_CLEAN.signatures))\n")
