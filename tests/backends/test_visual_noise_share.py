@@ -70,6 +70,7 @@ def test_visual_only_filters_fuse_the_independent_share_and_report_the_persisten
 
 
 @pytest.mark.parametrize("name", ["mekf", "smoother"])
+@pytest.mark.slow
 def test_independent_frame_errors_are_still_averaged(name):
     seq = _sequence(0.0)
     single_are, _ = _are_nees("single", seq)
@@ -78,6 +79,7 @@ def test_independent_frame_errors_are_still_averaged(name):
     assert are < 0.9 * single_are and are <= plain_are + 0.05
 
 
+@pytest.mark.slow
 def test_real_icsl_stream_rgb_only_filters_no_worse_than_single(shared_data, tmp_path, monkeypatch):
     """The first 40 real ICSL-more frames, segments only, streamed as a live camera (no intrinsics, K
     pooled mid-stream; frames 10-14 see too few segments and the single-frame chain ends on a wrong

@@ -55,6 +55,7 @@ def test_markdown_holds_every_row():
     assert "| S | a/b | 1.00 | <= 2 |  |  | ok |" in text and "- tum: skipped, not fetched" in text
 
 
+@pytest.mark.slow
 def test_quick_bench_on_real_kt3_prints_the_runs_figures(shared_data, tmp_path):
     """kt3's first frames: the bench's `eval` row is `uareme-fusion eval` with default options over the same
     frames (depth normals, ARE <= 0.5), and its cue-set figures are those of `compare` on the same frames."""

@@ -335,6 +335,7 @@ def test_intrinsics_option_replaces_the_camera_info(bags, sim_dir):
         np.testing.assert_array_equal(frame.rgb, next(e for e in folder.events() if isinstance(e, Frame)).rgb)
 
 
+@pytest.mark.slow
 def test_horizon_ground_and_compare_take_a_bag(bags, tmp_path):
     proc = cli("horizon", bags["ros1.bag"], "--out", tmp_path / "h.mp4", "--normals", "depth")
     assert proc.returncode == 0, proc.stderr

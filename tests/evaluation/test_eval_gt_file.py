@@ -40,6 +40,7 @@ PLAIN = ("--cues", "normals")
 focal length on each of the first 30 frames (a few seconds per run), which the scores here do not need."""
 
 
+@pytest.mark.slow
 def test_tum_and_euroc_files_score_like_the_source_s_own_ground_truth(plain):
     own = _scores(plain, "own", str(plain / "seq"))
     gt_tum = plain / "seq" / "groundtruth.txt"

@@ -203,6 +203,7 @@ def assert_rows_complete(out: Path) -> dict:
     return summary
 
 
+@pytest.mark.slow
 def test_a_full_disk_keeps_every_complete_row_and_exits_1(small_disk):
     out = small_disk / "out"
     proc = cli("run", "sim:room", "--out", out)

@@ -259,6 +259,7 @@ def icl_rotations(shared_data):
     return icl_depth_rotations(shared_data)
 
 
+@pytest.mark.slow
 def test_icl_nuim_rotation_from_depth_normals(icl_rotations):
     R_wc_est, R_wc_published, _ = icl_rotations
     assert len(R_wc_est) == 100
@@ -266,6 +267,7 @@ def test_icl_nuim_rotation_from_depth_normals(icl_rotations):
     assert are.mean() <= 2.0 and are.max() < 3.0
 
 
+@pytest.mark.slow
 def test_icl_nuim_covariance_is_conservative_but_same_order(icl_rotations):
     """Measured NEES 0.47: non-Manhattan clutter raises the residual more than the error. The
     covariance must stay on the safe side without being useless (it was 0.026 before depth normals
@@ -277,6 +279,7 @@ def test_icl_nuim_covariance_is_conservative_but_same_order(icl_rotations):
     assert 0.2 < mean_nees < 4.5
 
 
+@pytest.mark.slow
 def test_icl_nuim_negative_fy_convention(icl_rotations):
     """Depth normals rotated into the world stay fixed only with the y-flipped ground truth:
     R_wm = R_wc @ R_cm must not change across frames."""

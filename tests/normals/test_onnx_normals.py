@@ -23,6 +23,7 @@ def engines():
     return {name: LearnedNormals(config=LearnedNormalsConfig(engine=name)) for name in ("torch", "onnx")}
 
 
+@pytest.mark.slow
 def test_onnx_gives_torchs_normals_on_real_images(engines, shared_data):
     images = (sorted((shared_data / "icl_nuim_office_kt3" / "rgb").glob("*.png"))[:2]
               + sorted((shared_data / "icsl_corridor" / "rgb").glob("*.png"))[:2]
@@ -37,6 +38,7 @@ def test_onnx_gives_torchs_normals_on_real_images(engines, shared_data):
         assert np.count_nonzero(b.kappa) > 0.9 * b.kappa.size  # a real map, not an empty one
 
 
+@pytest.mark.slow
 def test_the_export_is_cached_under_the_weights_digest(tmp_path, monkeypatch):
     from uareme_fusion.normals import onnx_model
 
@@ -62,6 +64,7 @@ def _export(module, path, shape=(1, 3, 48, 64), dynamic=True):
     return path
 
 
+@pytest.mark.slow
 def test_a_model_with_the_contract_runs_from_normals_file(tmp_path, engines):
     """A user's model of a fixed size (here the shipped network exported at 96x128): used at its size."""
     from uareme_fusion.normals.learned import load_network

@@ -68,6 +68,7 @@ def assert_same_as_plain_runs(folders, tmp_path):
         assert without_timing(ours) == without_timing(theirs)
 
 
+@pytest.mark.slow
 def test_batch_on_the_process_pool(recordings, tmp_path):
     out = tmp_path / "batch"
     proc = cli("batch", *sources_of(recordings), "--out", out, "--workers", 2)
@@ -86,6 +87,7 @@ def test_batch_on_the_process_pool(recordings, tmp_path):
 
 
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="ray is not installed (the ray extra)")
+@pytest.mark.slow
 def test_batch_on_a_local_ray_cluster(recordings, tmp_path):
     out = tmp_path / "batch_ray"
     proc = cli("batch", *sources_of(recordings), "--out", out, "--workers", 2, "--ray", "local")

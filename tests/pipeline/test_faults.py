@@ -115,12 +115,14 @@ def clean(tmp_path_factory) -> Trace:
     return run_faulty(tmp_path_factory.mktemp("clean"), FaultySource())
 
 
+@pytest.mark.slow
 def test_clean_run_is_the_reference(clean):
     assert clean.summary["stopped"] == "end" and clean.summary["frames"] == 240
     assert clean.tilt_deg[clean.at(1.0):].max() < 0.1
     assert not clean.flagged(Status.IMU_GAP | Status.GYRO_SATURATED | Status.VISUAL_MISSING).any()
 
 
+@pytest.mark.slow
 def test_camera_and_imu_stall_flags_the_gap_inflates_and_recovers(tmp_path, clean):
     """Both streams stop for 2 s (a USB hiccup): the first estimate after it says IMU_GAP, with the
     attitude uncertainty of an unknown rotation over the gap, and the error is back at once."""
@@ -133,6 +135,7 @@ def test_camera_and_imu_stall_flags_the_gap_inflates_and_recovers(tmp_path, clea
     assert trace.std_deg[trace.at(FAULT[1] + 1.0)] < 1.3 * clean.std_deg[clean.at(FAULT[1] + 1.0)]
 
 
+@pytest.mark.slow
 def test_frame_gap_is_bridged_by_the_gyro(tmp_path, clean):
     """No frames for 2 s while the IMU runs: the gyro carries the attitude (covariance grows a little),
     the first frame back tightens it again."""
@@ -156,6 +159,7 @@ def test_blank_frames_are_flagged_and_the_covariance_grows_until_they_end(tmp_pa
     assert trace.std_deg[after] < 0.8 * std[-1] and trace.tilt_deg[after:].max() < RECOVERED_TILT_DEG
 
 
+@pytest.mark.slow
 def test_gyro_saturating_in_fast_turns_is_flagged_and_inflated(tmp_path, clean):
     """A gyro of 0.9 rad/s range in a walk turning at up to 1.4 rad/s: readings clip; the estimates
     over clipped samples say GYRO_SATURATED with a larger covariance, and the vision keeps tilt right."""
@@ -256,6 +260,7 @@ def test_oak_that_disconnects_mid_run_exits_1_with_outputs_kept(tmp_path, monkey
     assert summary["imu_samples"] > 60 and summary["source_info"]["has_imu"]
 
 
+@pytest.mark.slow
 def test_truncated_video_exits_1_naming_the_frame_with_outputs_kept(tmp_path):
     path = tmp_path / "clip.avi"
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (64, 48))

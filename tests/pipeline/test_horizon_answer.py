@@ -90,6 +90,7 @@ def _check_one_answer(doc: dict) -> None:
         assert doc["horizon"] is None
 
 
+@pytest.mark.slow
 def test_one_answer_on_the_dev_images(shared_data):
     """Real photos of every dev folder (every 12th: runways, cities, corridors, an office): line, up and
     rotation from one estimate (the runway photo whose Atlanta line stood 60 deg from its rotation's up)."""
@@ -164,6 +165,7 @@ def test_rotated_and_fisheye_drone_photo_is_right_or_wide(shared_data, tmp_path)
             assert roll < max(5.0, 3.0 * doc["horizon_angle_std_deg"]), (name, roll, doc["horizon_angle_std_deg"])
 
 
+@pytest.mark.slow
 def test_stream_of_a_rolling_drone_photo_follows_the_sky(shared_data, tmp_path):
     """A real drone photo turned 0.7 deg more each frame (12 frames, centre crop), `run` with the EKF and
     no intrinsics: every frame's horizon within 2 deg and 0.05 H of the turned label."""

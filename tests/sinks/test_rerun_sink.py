@@ -36,6 +36,7 @@ def test_roll_and_pitch_of_level_and_tilted_cameras():
     assert roll_pitch_deg([np.sin(0.3), -np.cos(0.3), 0])[0] == pytest.approx(np.degrees(0.3))
 
 
+@pytest.mark.slow
 def test_run_writes_a_recording_that_reads_back(tmp_path):
     rrd = tmp_path / "view" / "run.rrd"
     result = CliRunner().invoke(app, ["run", "sim:room", "--max-frames", "12", "--out", str(tmp_path / "out"),

@@ -191,12 +191,14 @@ def ecd_first_15(shared_data):
     return analyser, ecd_scores(shared_data / "eurasian_cities", analyser, limit=15)
 
 
+@pytest.mark.slow
 def test_ecd_subset_horizon_beats_the_level_camera(ecd_first_15):
     _, scores = ecd_first_15
     assert scores["auc_percent"] > scores["level_auc_percent"] + 15.0
     assert min(scores["auc_odd_percent"], scores["auc_even_percent"]) > scores["level_auc_percent"]
 
 
+@pytest.mark.slow
 def test_icsl_focal_length_within_five_percent(shared_data):
     from uareme_fusion.benchmarks.horizon import icsl_scores
     from uareme_fusion.pipeline.single_image import ImageAnalyser
@@ -307,6 +309,7 @@ def test_atlanta_horizon_absent_without_horizontal_segments():
     assert estimate_horizon(only_vertical, K, R[:, 1]) is None
 
 
+@pytest.mark.slow
 def test_ecd_subset_atlanta_horizon(shared_data, ecd_first_15):
     analyser, scores = ecd_first_15
     # measured 91.3 (90.0 before the VP mixture, 78.1 before the zenith and VP consensus); level 29.1

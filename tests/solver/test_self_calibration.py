@@ -127,6 +127,7 @@ def test_image_same_camera_prints_the_pooled_K_and_refuses_mixed_sizes(tmp_path)
         list(ImageAnalyser(cues="lines").analyse_same_camera(sorted(tmp_path.glob("*.png"))))
 
 
+@pytest.mark.slow
 def test_icsl_frames_pool_one_K(shared_data):
     """Seven real ICSL corridor frames (published fx 537.6, principal point (316.2, 245.5)). The pooled f
     runs about 5 % long there, an error common to all frames: f 567.5 +- 15.2 px over these 7 (the
@@ -235,6 +236,7 @@ def test_exact_normals_hold_the_rotations_and_pin_an_off_centre_principal_point(
     assert np.all(held.std_px[1:] < 0.5 * alone.std_px[1:])
 
 
+@pytest.mark.slow
 def test_a_stream_pools_K_even_when_no_frame_alone_tells_the_focal_length(tmp_path, monkeypatch):
     from uareme_fusion.pipeline import cues
     from uareme_fusion.solver.focal import FocalEstimate
