@@ -118,7 +118,7 @@ def test_single_prior_marginal_equals_the_visual_covariance_without_kernel():
     rng = np.random.default_rng(2)
     R_cm = exp_so3(rng.normal(size=3))
     cov = np.diag([1e-4, 4e-4, 9e-4])
-    sm = Smoother(SmootherConfig(huber_k=None))
+    sm = Smoother(SmootherConfig(visual_huber_sigma=None))
     est = sm.process_frame(0.0, VisualRotation(R_cm=R_cm, cov=cov, cost=0.0, iterations=1, n_valid=1))
     np.testing.assert_allclose(est.R_wc, R_cm.T, atol=1e-9)
     np.testing.assert_allclose(est.cov, R_cm @ cov @ R_cm.T, rtol=1e-6, atol=1e-12)
@@ -275,7 +275,7 @@ def test_seeded_nees_of_the_marginal_covariance_is_consistent_without_kernel():
     values, unrotated = [], []
     for seed in range(8):
         rng = np.random.default_rng(100 + seed)
-        sm = Smoother(SmootherConfig(huber_k=None))
+        sm = Smoother(SmootherConfig(visual_huber_sigma=None))
         for k in range(40):
             delta = rng.multivariate_normal(np.zeros(3), cov_cm)
             vis = VisualRotation(R_cm=R_true.T @ exp_so3(-delta), cov=cov_cm, cost=0.0, iterations=1, n_valid=1)

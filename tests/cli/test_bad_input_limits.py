@@ -99,7 +99,7 @@ def test_a_camera_index_of_twenty_digits_is_one_line(tmp_path):
 
 
 def test_mekf_takes_a_preset_name():
-    assert Mekf("vehicle").config.manhattan_yaw_rw_rad_sqrt_s == 0.5
+    assert Mekf("vehicle").config.manhattan_yaw_rw_rad_per_sqrt_s == 0.5
     with pytest.raises(TypeError, match="expected a MekfConfig, a preset name .*vehicle.* or a YAML path, got dict"):
         Mekf({"gyro_noise_rad_s_sqrt_hz": 1e-3})
 

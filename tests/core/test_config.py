@@ -58,3 +58,27 @@ def test_presets_are_installed_and_valid_yaml():
     for name in names:
         data, where = read_yaml(name)
         assert isinstance(data, dict) and name in where
+
+
+def test_a_renamed_key_is_one_line_naming_the_file_and_the_new_key(tmp_path):
+    """Every key the EKF or the smoother has renamed, in a preset-style file or in a run config's section,
+    is refused with the file and the new name; never read as an alias."""
+    from uareme_fusion.backends.mekf.config import MekfConfig
+    from uareme_fusion.backends.smoother import SmootherConfig
+    from uareme_fusion.pipeline.config import RunConfig
+
+    path = tmp_path / "mine.yaml"
+    for model, section in ((MekfConfig, "mekf"), (SmootherConfig, "smoother")):
+        assert model.renamed_keys, model  # each backend has renamed keys to check
+        for old, new in model.renamed_keys.items():
+            assert new in model.model_fields and old not in model.model_fields
+            path.write_text(f"{old}: 0.5\n")
+            with pytest.raises(ConfigError) as caught:
+                load_config(path, model)
+            assert str(caught.value) == f"{path}: '{old}' is now '{new}': rename the key"
+            path.write_text(f"{section}:\n  {old}: 0.5\n")
+            with pytest.raises(ConfigError) as caught:
+                load_config(path, RunConfig)
+            message = str(caught.value)
+            assert message.startswith(f"{path}: {section}: ") and f"'{old}' is now '{new}'" in message
+            assert "\n" not in message

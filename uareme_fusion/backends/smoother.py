@@ -40,11 +40,12 @@ from __future__ import annotations
 
 import enum
 import logging
+from typing import ClassVar
 
 import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import M, X
-from pydantic import AliasChoices, ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field, field_validator
 
 from ..rotations import is_rotation, manhattan_symmetries
 from ..types import Estimate, Status, VisualRotation, visual_R_wc_covariance
@@ -75,14 +76,19 @@ class SmootherConfig(GyroNoiseConfig):
     """Parameters of `Smoother`; defaults are the paper's values (configs/paper.yaml, section `smoother`)."""
 
     model_config = ConfigDict(extra="forbid")
+    renamed_keys: ClassVar[dict[str, str]] = {
+        "huber_k": "visual_huber_sigma",
+        "gyro_bias_walk_rad_s2_sqrt_hz": "gyro_bias_rw_rad_s2_sqrt_hz",
+        "gyro_bias_prior_sigma_rad_s": "gyro_bias_initial_std_rad_s",
+    }
+    """Old key -> new key: an old key in a configuration file is an error naming the new one."""
 
     mode: SmootherMode = SmootherMode.PAPER
     window_frames: int = Field(30, ge=2, le=10000)
     """Frames kept in the sliding window (the paper's n)."""
-    visual_huber_sigma: float | None = Field(0.1, ge=1e-3, le=1e6,
-                                             validation_alias=AliasChoices("visual_huber_sigma", "huber_k"))
+    visual_huber_sigma: float | None = Field(0.1, ge=1e-3, le=1e6)
     """Huber threshold on the whitened visual residual (the Mahalanobis distance, as `MekfConfig`'s);
-    None for a plain Gaussian prior. The old key `huber_k` is accepted."""
+    None for a plain Gaussian prior."""
     between_sigma_rad: float = Field(0.1, ge=1e-6, le=10.0)
     """Isotropic sigma of the identity smoothness factor (paper's lambda = sigma^2)."""
     missing_variance_rad2: float = Field(1.0, ge=1e-12, le=100.0)
@@ -94,12 +100,10 @@ class SmootherConfig(GyroNoiseConfig):
     `single`'s 2.141 (NEES 2.90 -> 3.13); ICL kt3 0.289 unchanged; simulated walks without IMU
     1.966 / 1.920 -> 1.959 / 1.913."""
     # Gyro-aided mode: gyro noise from `GyroNoiseConfig`; the smoother's bias prior default is wider.
-    gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-4, ge=1e-9, le=1.0, validation_alias=AliasChoices(
-        "gyro_bias_rw_rad_s2_sqrt_hz", "gyro_bias_walk_rad_s2_sqrt_hz"))
-    """Gyro bias random-walk density, rad/s^2/sqrt(Hz) (> 0: a gtsam sigma; old key accepted)."""
-    gyro_bias_initial_std_rad_s: float = Field(0.02, ge=1e-6, le=10.0, validation_alias=AliasChoices(
-        "gyro_bias_initial_std_rad_s", "gyro_bias_prior_sigma_rad_s"))
-    """Prior sigma of the gyro bias on the first frame, rad/s (old key accepted)."""
+    gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-4, ge=1e-9, le=1.0)
+    """Gyro bias random-walk density, rad/s^2/sqrt(Hz) (> 0: a gtsam sigma)."""
+    gyro_bias_initial_std_rad_s: float = Field(0.02, ge=1e-6, le=10.0)
+    """Prior std of the gyro bias on the first frame, rad/s."""
     accel_sigma_rad: float = Field(0.03, ge=1e-6, le=10.0)
     """Sigma of the gravity direction from the mean accelerometer reading when the camera is still."""
     accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0, le=100.0)

@@ -82,8 +82,8 @@ def parameter_vector(filt, defer: bool) -> np.ndarray:
     p[kernels.P_REST_MIN_S], p[kernels.P_REST_STD] = cfg.rest_min_duration_s, cfg.rest_rate_std_rad_s
     p[kernels.P_MF_INIT] = float(filt.manhattan_initialised)
     walks = filt.manhattan_walks
-    p[kernels.P_MF_YAW_RW] = cfg.manhattan_yaw_rw_rad_sqrt_s if walks else 0.0
-    p[kernels.P_MF_TILT_RW] = cfg.manhattan_tilt_rw_rad_sqrt_s if walks else 0.0
+    p[kernels.P_MF_YAW_RW] = cfg.manhattan_yaw_rw_rad_per_sqrt_s if walks else 0.0
+    p[kernels.P_MF_TILT_RW] = cfg.manhattan_tilt_rw_rad_per_sqrt_s if walks else 0.0
     p[kernels.P_ORTHO_EVERY] = ORTHONORMALISE_EVERY
     p[kernels.P_RECORD] = float(cfg.record_imu_estimates)
     p[kernels.P_GAP_LIMIT] = cfg.imu_gap_limit_s

@@ -6,6 +6,7 @@ Presets are YAML files in `uareme_fusion/configs/` (`load_config("vehicle", Mekf
 from __future__ import annotations
 
 import enum
+from typing import ClassVar
 
 import numpy as np
 from pydantic import ConfigDict, Field, field_validator
@@ -38,6 +39,11 @@ class MekfConfig(GyroNoiseConfig):
     `gyro_bias_initial_std_rad_s`) come from `GyroNoiseConfig`, shared with the smoother."""
 
     model_config = ConfigDict(extra="forbid")
+    renamed_keys: ClassVar[dict[str, str]] = {
+        "manhattan_yaw_rw_rad_sqrt_s": "manhattan_yaw_rw_rad_per_sqrt_s",
+        "manhattan_tilt_rw_rad_sqrt_s": "manhattan_tilt_rw_rad_per_sqrt_s",
+    }
+    """Old key -> new key: an old key in a configuration file is an error naming the new one."""
 
     mode: MekfMode = MekfMode.AUTO
     gyro_rate_noise_sqrt_s: float = Field(0.0, ge=0, le=1.0)
@@ -88,10 +94,10 @@ class MekfConfig(GyroNoiseConfig):
     """Tilt std after initialisation from the first accelerometer samples, rad."""
     init_accel_window_s: float = Field(0.05, ge=1e-4, le=60.0)
     """Accelerometer samples averaged for the initial tilt, s."""
-    manhattan_yaw_rw_rad_sqrt_s: float = Field(0.0, ge=0, le=10.0)
+    manhattan_yaw_rw_rad_per_sqrt_s: float = Field(0.0, ge=0, le=10.0)
     """Random walk of the Manhattan frame's yaw about world up, rad/sqrt(s) (0 in a building; a
     vehicle's turns need about 0.5)."""
-    manhattan_tilt_rw_rad_sqrt_s: float = Field(0.0, ge=0, le=10.0)
+    manhattan_tilt_rw_rad_per_sqrt_s: float = Field(0.0, ge=0, le=10.0)
     """Random walk of the Manhattan frame's tilt, rad/sqrt(s) (vehicle body sway)."""
     manhattan_vertical_std_rad: float = Field(0.02, ge=1e-6, le=10.0)
     """How far the Manhattan z axis may lean from world up (std, rad): a pseudo-measurement applied

@@ -120,7 +120,7 @@ class Mekf(Backend):
         self.q_gyro = cfg.gyro_noise_rad_s_sqrt_hz**2
         self.q_bias = cfg.gyro_bias_rw_rad_s2_sqrt_hz**2
         self.q_rate = cfg.gyro_rate_noise_sqrt_s**2
-        self.manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_sqrt_s or cfg.manhattan_tilt_rw_rad_sqrt_s)
+        self.manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_per_sqrt_s or cfg.manhattan_tilt_rw_rad_per_sqrt_s)
         self.trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
         self.compiled = cfg.compiled and kernels_available()
         self._stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
