@@ -91,7 +91,7 @@ def test_visual_covariance_is_rotated_to_the_right_error_of_R_wc():
 
 def test_paper_preset_holds_the_paper_values_and_rejects_unknown_keys(tmp_path):
     cfg = load_config("paper", SmootherConfig, section="smoother")
-    assert (cfg.mode, cfg.window_frames, cfg.visual_huber_sigma, cfg.between_sigma_rad) == (SmootherMode.PAPER, 30, 0.1, 0.1)
+    assert (cfg.mode, cfg.window_frames, cfg.visual_huber_sigma, cfg.between_std_rad) == (SmootherMode.PAPER, 30, 0.1, 0.1)
     bad = tmp_path / "bad.yaml"
     bad.write_text("smoother:\n  window_frame: 30\n")
     with pytest.raises(ConfigError, match="window_frame"):

@@ -56,7 +56,7 @@ def test_deeply_nested_scene_json_is_one_line(tmp_path):
 @pytest.mark.parametrize("text, key, bound", [
     ("mekf:\n  gyro_noise_rad_s_sqrt_hz: 1.0e+300\n", "mekf.gyro_noise_rad_s_sqrt_hz", "less than or equal to 1"),
     ("mekf:\n  gravity_m_s2: 1.0e-300\n", "mekf.gravity_m_s2", "greater than or equal to 1"),
-    ("backend: smoother\nsmoother:\n  between_sigma_rad: 1.0e-300\n", "smoother.between_sigma_rad",
+    ("backend: smoother\nsmoother:\n  between_std_rad: 1.0e-300\n", "smoother.between_std_rad",
      "greater than or equal to 0.000001"),
 ], ids=["noise_density", "gravity", "between_sigma"])
 def test_values_outside_physical_ranges_name_the_key(tmp_path, text, key, bound):

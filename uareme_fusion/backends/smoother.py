@@ -15,7 +15,7 @@ covariance of `R_wc`, as docs/design.md requires.
 Paper mode (`mode: paper`), exactly the paper's graph: `BatchFixedLagSmoother` over the last
 `window_frames` frames; per frame a `PriorFactorRot3` on `X(k)` at `R_cm^T` with the visual
 covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`visual_huber_sigma`) kernel (paper eq. 9, f^z); an
-identity `BetweenFactorRot3` with isotropic `between_sigma_rad` between consecutive frames (f^s); the
+identity `BetweenFactorRot3` with isotropic `between_std_rad` between consecutive frames (f^s); the
 oldest frame's marginal prior (f^p) is what the fixed-lag smoother leaves when it marginalises.
 The world is the Manhattan frame as labelled on the first frame: `R_wm = I`.
 
@@ -80,6 +80,9 @@ class SmootherConfig(GyroNoiseConfig):
         "huber_k": "visual_huber_sigma",
         "gyro_bias_walk_rad_s2_sqrt_hz": "gyro_bias_rw_rad_s2_sqrt_hz",
         "gyro_bias_prior_sigma_rad_s": "gyro_bias_initial_std_rad_s",
+        "between_sigma_rad": "between_std_rad",
+        "accel_sigma_rad": "accel_std_rad",
+        "world_yaw_sigma_rad": "world_yaw_std_rad",
     }
     """Old key -> new key: an old key in a configuration file is an error naming the new one."""
 
@@ -89,8 +92,8 @@ class SmootherConfig(GyroNoiseConfig):
     visual_huber_sigma: float | None = Field(0.1, ge=1e-3, le=1e6)
     """Huber threshold on the whitened visual residual (the Mahalanobis distance, as `MekfConfig`'s);
     None for a plain Gaussian prior."""
-    between_sigma_rad: float = Field(0.1, ge=1e-6, le=10.0)
-    """Isotropic sigma of the identity smoothness factor (paper's lambda = sigma^2)."""
+    between_std_rad: float = Field(0.1, ge=1e-6, le=10.0)
+    """Isotropic std of the identity smoothness factor, rad (the paper's lambda = std^2)."""
     missing_variance_rad2: float = Field(1.0, ge=1e-12, le=100.0)
     """Variance reported per axis before the first visual rotation."""
     visual_noise_share_frames: float = Field(30.0, ge=0, le=1e6)
@@ -104,17 +107,17 @@ class SmootherConfig(GyroNoiseConfig):
     """Gyro bias random-walk density, rad/s^2/sqrt(Hz) (> 0: a gtsam sigma)."""
     gyro_bias_initial_std_rad_s: float = Field(0.02, ge=1e-6, le=10.0)
     """Prior std of the gyro bias on the first frame, rad/s."""
-    accel_sigma_rad: float = Field(0.03, ge=1e-6, le=10.0)
-    """Sigma of the gravity direction from the mean accelerometer reading when the camera is still."""
+    accel_std_rad: float = Field(0.03, ge=1e-6, le=10.0)
+    """Std of the gravity direction from the mean accelerometer reading when the camera is still, rad."""
     accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0, le=100.0)
-    """Added to `accel_sigma_rad` per m/s^2 of | |a_mean| - g | plus the RMS spread of the samples."""
+    """Added to `accel_std_rad` per m/s^2 of | |a_mean| - g | plus the RMS spread of the samples."""
     gravity_huber_k: float | None = Field(1.345, ge=1e-3, le=1e6)
     """Huber threshold on the whitened gravity residual; None for Gaussian."""
     gravity_m_s2: float = Field(9.81, ge=1.0, le=100.0)
     manhattan_tilt_sigma_rad: float = Field(0.02, ge=1e-6, le=10.0)
     """Prior sigma of the Manhattan frame's tilt away from vertical (gyro mode)."""
-    world_yaw_sigma_rad: float = Field(1e-3, ge=1e-6, le=10.0)
-    """Prior sigma fixing the world's yaw (a gauge) through `R_wm` (gyro mode)."""
+    world_yaw_std_rad: float = Field(1e-3, ge=1e-6, le=10.0)
+    """Prior std fixing the world's yaw (a gauge) through `R_wm` (gyro mode), rad."""
     R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
     """Camera-from-IMU rotation (3x3): `gyro_c = R_ci @ gyro_i`."""
     imu_time_offset_s: float = Field(0.0, ge=-3600.0, le=3600.0)
@@ -172,7 +175,7 @@ class Smoother(Backend):
     def __init__(self, config: SmootherConfig | None = None):
         self.config = config or SmootherConfig()
         self._R_ci = np.asarray(self.config.R_ci, dtype=float)
-        self._between_noise = gtsam.noiseModel.Isotropic.Sigma(3, self.config.between_sigma_rad)
+        self._between_noise = gtsam.noiseModel.Isotropic.Sigma(3, self.config.between_std_rad)
         self._smoother: BatchFixedLagSmoother | None = None
         self._k = -1  # index of the latest frame in the graph
         self._t_frame = float("nan")
@@ -298,7 +301,7 @@ class Smoother(Backend):
         """After a failure: a fresh window holding X(k) at the last good estimate (propagated by the
         gyro in gyro mode) with its covariance; this frame's measurements are dropped."""
         last = self._last
-        cov = last.cov + self.config.between_sigma_rad**2 * np.eye(3)
+        cov = last.cov + self.config.between_std_rad**2 * np.eye(3)
         self._smoother = self._new_smoother()
         graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
         graph.add(gtsam.PriorFactorRot3(X(k), gtsam.Rot3(R_wc_pred), gtsam.noiseModel.Gaussian.Covariance(cov)))
