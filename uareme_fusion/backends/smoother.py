@@ -27,7 +27,7 @@ gravity aligned, so `R_wm` is no longer the identity: it is a variable `M` kept 
 (its timestamp is refreshed every frame), and each visual rotation enters as a
 `BetweenFactorRot3(M, X(k), R_cm^T)` (the measurement `R_mc = R_wm^T R_wc`). `R_wm` gets a prior at
 the identity that pins the world's yaw (a gauge: world x is the Manhattan x axis) and lets its tilt
-move by `manhattan_tilt_sigma_rad` (in a building the Manhattan axis nearest up is vertical). On the
+move by `manhattan_vertical_std_rad` (in a building the Manhattan axis nearest up is vertical). On the
 first frame the visual rotation is relabelled so that its z axis is the Manhattan axis nearest the
 measured up. The Manhattan frame is constant (a building), not a vehicle.
 
@@ -83,6 +83,7 @@ class SmootherConfig(GyroNoiseConfig):
         "between_sigma_rad": "between_std_rad",
         "accel_sigma_rad": "accel_std_rad",
         "world_yaw_sigma_rad": "world_yaw_std_rad",
+        "manhattan_tilt_sigma_rad": "manhattan_vertical_std_rad",
     }
     """Old key -> new key: an old key in a configuration file is an error naming the new one."""
 
@@ -114,8 +115,8 @@ class SmootherConfig(GyroNoiseConfig):
     gravity_huber_k: float | None = Field(1.345, ge=1e-3, le=1e6)
     """Huber threshold on the whitened gravity residual; None for Gaussian."""
     gravity_m_s2: float = Field(9.81, ge=1.0, le=100.0)
-    manhattan_tilt_sigma_rad: float = Field(0.02, ge=1e-6, le=10.0)
-    """Prior sigma of the Manhattan frame's tilt away from vertical (gyro mode)."""
+    manhattan_vertical_std_rad: float = Field(0.02, ge=1e-6, le=10.0)
+    """How far the Manhattan z axis may lean from world up (std, rad; gyro mode): the EKF's key of the same name."""
     world_yaw_std_rad: float = Field(1e-3, ge=1e-6, le=10.0)
     """Prior std fixing the world's yaw (a gauge) through `R_wm` (gyro mode), rad."""
     R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())

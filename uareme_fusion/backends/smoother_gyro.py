@@ -125,7 +125,7 @@ class GyroSmoother(Smoother):
                           bias_cov: np.ndarray) -> None:
         """R_wm (gauge on yaw, loose tilt) and the gyro bias B(k)."""
         cfg = self.config
-        sig = [cfg.manhattan_tilt_sigma_rad, cfg.manhattan_tilt_sigma_rad, cfg.world_yaw_std_rad]
+        sig = [cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_std_rad, cfg.world_yaw_std_rad]
         graph.add(gtsam.PriorFactorRot3(MANHATTAN_KEY, gtsam.Rot3(R_wm), gtsam.noiseModel.Diagonal.Sigmas(sig)))
         graph.add(gtsam.PriorFactorVector(B(k), bias, gtsam.noiseModel.Gaussian.Covariance(bias_cov)))
         values.insert(MANHATTAN_KEY, gtsam.Rot3(R_wm))
