@@ -91,7 +91,7 @@ def test_visual_covariance_is_rotated_to_the_right_error_of_R_wc():
 
 def test_paper_preset_holds_the_paper_values_and_rejects_unknown_keys(tmp_path):
     cfg = load_config("paper", SmootherConfig, section="smoother")
-    assert (cfg.mode, cfg.window_frames, cfg.visual_huber_sigma, cfg.between_std_rad) == (SmootherMode.PAPER, 30, 0.1, 0.1)
+    assert (cfg.mode, cfg.window_frames, cfg.visual_huber_k, cfg.between_std_rad) == (SmootherMode.PAPER, 30, 0.1, 0.1)
     bad = tmp_path / "bad.yaml"
     bad.write_text("smoother:\n  window_frame: 30\n")
     with pytest.raises(ConfigError, match="window_frame"):
@@ -118,7 +118,7 @@ def test_single_prior_marginal_equals_the_visual_covariance_without_kernel():
     rng = np.random.default_rng(2)
     R_cm = exp_so3(rng.normal(size=3))
     cov = np.diag([1e-4, 4e-4, 9e-4])
-    sm = Smoother(SmootherConfig(visual_huber_sigma=None))
+    sm = Smoother(SmootherConfig(visual_huber_k=None))
     est = sm.process_frame(0.0, VisualRotation(R_cm=R_cm, cov=cov, cost=0.0, iterations=1, n_valid=1))
     np.testing.assert_allclose(est.R_wc, R_cm.T, atol=1e-9)
     np.testing.assert_allclose(est.cov, R_cm @ cov @ R_cm.T, rtol=1e-6, atol=1e-12)
@@ -275,7 +275,7 @@ def test_seeded_nees_of_the_marginal_covariance_is_consistent_without_kernel():
     values, unrotated = [], []
     for seed in range(8):
         rng = np.random.default_rng(100 + seed)
-        sm = Smoother(SmootherConfig(visual_huber_sigma=None))
+        sm = Smoother(SmootherConfig(visual_huber_k=None))
         for k in range(40):
             delta = rng.multivariate_normal(np.zeros(3), cov_cm)
             vis = VisualRotation(R_cm=R_true.T @ exp_so3(-delta), cov=cov_cm, cost=0.0, iterations=1, n_valid=1)

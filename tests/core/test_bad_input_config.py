@@ -67,7 +67,7 @@ SECTION_CASES = [
     ("section_is_scalar", "smoother: 3\n", "must hold a mapping of keys to values, got int"),
     ("unknown_key_in_section", "smoother:\n  window: 3\n", r"\[smoother\]: window: Extra inputs"),
     ("bad_mode_in_section", "smoother:\n  mode: imu\n", r"\[smoother\]: mode: Input should be"),
-    ("nan_in_section", "smoother:\n  visual_huber_sigma: .nan\n", r"smoother.visual_huber_sigma: NaN and infinity"),
+    ("nan_in_section", "smoother:\n  visual_huber_k: .nan\n", r"smoother.visual_huber_k: NaN and infinity"),
 ]
 
 

@@ -14,7 +14,7 @@ covariance of `R_wc`, as docs/design.md requires.
 
 Paper mode (`mode: paper`), exactly the paper's graph: `BatchFixedLagSmoother` over the last
 `window_frames` frames; per frame a `PriorFactorRot3` on `X(k)` at `R_cm^T` with the visual
-covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`visual_huber_sigma`) kernel (paper eq. 9, f^z); an
+covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`visual_huber_k`) kernel (paper eq. 9, f^z); an
 identity `BetweenFactorRot3` with isotropic `between_std_rad` between consecutive frames (f^s); the
 oldest frame's marginal prior (f^p) is what the fixed-lag smoother leaves when it marginalises.
 The world is the Manhattan frame as labelled on the first frame: `R_wm = I`.
@@ -77,22 +77,24 @@ class SmootherConfig(GyroNoiseConfig):
 
     model_config = ConfigDict(extra="forbid")
     renamed_keys: ClassVar[dict[str, str]] = {
-        "huber_k": "visual_huber_sigma",
+        "huber_k": "visual_huber_k",
         "gyro_bias_walk_rad_s2_sqrt_hz": "gyro_bias_rw_rad_s2_sqrt_hz",
         "gyro_bias_prior_sigma_rad_s": "gyro_bias_initial_std_rad_s",
         "between_sigma_rad": "between_std_rad",
         "accel_sigma_rad": "accel_std_rad",
         "world_yaw_sigma_rad": "world_yaw_std_rad",
         "manhattan_tilt_sigma_rad": "manhattan_vertical_std_rad",
+        "visual_huber_sigma": "visual_huber_k",
     }
     """Old key -> new key: an old key in a configuration file is an error naming the new one."""
 
     mode: SmootherMode = SmootherMode.PAPER
     window_frames: int = Field(30, ge=2, le=10000)
     """Frames kept in the sliding window (the paper's n)."""
-    visual_huber_sigma: float | None = Field(0.1, ge=1e-3, le=1e6)
-    """Huber threshold on the whitened visual residual (the Mahalanobis distance, as `MekfConfig`'s);
-    None for a plain Gaussian prior."""
+    visual_huber_k: float | None = Field(0.1, ge=1e-3, le=1e6)
+    """Huber threshold k on the Mahalanobis distance d of the visual residual (GTSAM's Huber on the
+    whitened residual's norm; the EKF's key of the same name and meaning: weight k/d beyond k); None for a
+    plain Gaussian prior. The paper's 0.1 (the EKF's default is 2.0) down-weights nearly every frame."""
     between_std_rad: float = Field(0.1, ge=1e-6, le=10.0)
     """Isotropic std of the identity smoothness factor, rad (the paper's lambda = std^2)."""
     missing_variance_rad2: float = Field(1.0, ge=1e-12, le=100.0)
@@ -227,7 +229,7 @@ class Smoother(Backend):
         (`visual_noise_share.py`; nothing in gyro mode)."""
         R_wc_cov = visual_R_wc_covariance(visual)
         noise = gtsam.noiseModel.Gaussian.Covariance(self._noise_share.share * R_wc_cov)
-        graph.add(self._visual_factor(k, visual, _robust(self.config.visual_huber_sigma, noise)))
+        graph.add(self._visual_factor(k, visual, _robust(self.config.visual_huber_k, noise)))
         if self._noise_share.enabled:
             self._noise_share.take(t_s, visual, R_wc_cov)
 

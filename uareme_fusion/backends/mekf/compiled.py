@@ -87,7 +87,7 @@ def parameter_vector(filt, defer: bool) -> np.ndarray:
     p[kernels.P_ORTHO_EVERY] = ORTHONORMALISE_EVERY
     p[kernels.P_RECORD] = float(cfg.record_imu_estimates)
     p[kernels.P_GAP_LIMIT] = cfg.imu_gap_limit_s
-    p[kernels.P_GATE_CHI2], p[kernels.P_HUBER] = cfg.visual_gate_chi2, cfg.visual_huber_sigma
+    p[kernels.P_GATE_CHI2], p[kernels.P_HUBER] = cfg.visual_gate_chi2, cfg.visual_huber_k
     p[kernels.P_VERTICAL_STD], p[kernels.P_VERTICAL_MAX] = cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad
     p[kernels.P_VISUAL_CORRELATION] = cfg.visual_error_correlation_s
     p[kernels.P_TRUST_FRAMES], p[kernels.P_TRUST_MIN_SHARE] = cfg.visual_trust_frames, cfg.visual_trust_min_share

@@ -42,6 +42,7 @@ class MekfConfig(GyroNoiseConfig):
     renamed_keys: ClassVar[dict[str, str]] = {
         "manhattan_yaw_rw_rad_sqrt_s": "manhattan_yaw_rw_rad_per_sqrt_s",
         "manhattan_tilt_rw_rad_sqrt_s": "manhattan_tilt_rw_rad_per_sqrt_s",
+        "visual_huber_sigma": "visual_huber_k",
     }
     """Old key -> new key: an old key in a configuration file is an error naming the new one."""
 
@@ -133,8 +134,10 @@ class MekfConfig(GyroNoiseConfig):
     """Floor of the independent share of the visual covariance that is fused (dimensionless)."""
     visual_gate_chi2: float = Field(16.27, gt=0, le=1e6)
     """Mahalanobis gate on the 3-dof visual residual (16.27 = chi-square 99.9 %)."""
-    visual_huber_sigma: float = Field(2.0, ge=1e-3, le=1e6)
-    """Huber threshold on the Mahalanobis distance: beyond it the visual covariance is scaled by d/k."""
+    visual_huber_k: float = Field(2.0, ge=1e-3, le=1e6)
+    """Huber threshold k on the Mahalanobis distance d of the visual residual (dimensionless; the
+    smoother's key of the same name and meaning): beyond it the visual covariance is scaled by d/k (the
+    Huber weight k/d)."""
     reinit_after_rejections: int = Field(8, ge=1, le=1000000)
     """Consecutive gated-out frames after which the Manhattan frame is re-initialised."""
     reinit_after_disagreement_s: float = Field(1.0, ge=0.0, le=3600.0)

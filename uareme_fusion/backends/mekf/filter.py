@@ -449,8 +449,8 @@ class Mekf(Backend):
             R_vis = R_vis * self.noise_share.share
             self.noise_share.take(t_s, visual.symmetric_to(self.R_wc.T @ self.R_wm))
         d = np.sqrt(d2)
-        if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
-            R_vis = R_vis * (d / cfg.visual_huber_sigma)
+        if d > cfg.visual_huber_k:  # Huber weight w = k / d  ->  covariance / w
+            R_vis = R_vis * (d / cfg.visual_huber_k)
         if trust != 1.0:  # the independent share of the frame's error (gated on the full one)
             R_vis = R_vis * trust
         # "m's z is up" only where the world is not the Manhattan frame itself (visual only).
