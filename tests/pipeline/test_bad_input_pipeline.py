@@ -346,10 +346,10 @@ def test_config_yaml_syntax_error_is_one_line(world, tmp_path):
 
 
 BENCH_CASES = [
-    ("soak_minutes_zero", ["soak", "--minutes", "0"], "Invalid value for '--minutes'"),
+    ("soak_duration_zero", ["soak", "--duration-s", "0"], "Invalid value for '--duration-s'"),
     ("soak_noise_above_90", ["soak", "--normals-noise-deg", "120"], "Invalid value for '--normals-noise-deg'"),
-    ("pipeline_seconds_zero", ["pipeline", "--seconds", "0"], "Invalid value for '--seconds'"),
-    ("pipeline_memory_negative", ["pipeline", "--memory-minutes", "-1"], "Invalid value for '--memory-minutes'"),
+    ("pipeline_duration_zero", ["pipeline", "--duration-s", "0"], "Invalid value for '--duration-s'"),
+    ("pipeline_memory_negative", ["pipeline", "--memory-duration-s", "-1"], "Invalid value for '--memory-duration-s'"),
     ("horizon_without_data", ["horizon", "--data", "/nonexistent"], "--data /nonexistent: no eurasian_cities/ folder"),
 ]
 
