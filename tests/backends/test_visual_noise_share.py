@@ -91,7 +91,7 @@ def test_real_icsl_stream_rgb_only_filters_no_worse_than_single(shared_data, tmp
     import shutil
 
     from uareme_fusion.benchmarks.horizon import chained_reference, icsl_depth_reference, rgb_sequence
-    from uareme_fusion.pipeline import cues
+    from uareme_fusion.solver import cues
 
     monkeypatch.setattr(cues, "pool_before_run", lambda *recording: None)  # as a live camera
 

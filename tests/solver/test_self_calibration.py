@@ -158,7 +158,8 @@ class _LiveFolder(Source):
 def test_a_stream_without_intrinsics_runs_on_the_K_pooled_over_its_first_frames(tmp_path, monkeypatch):
     """A live stream without K pools one over its first `FOCAL_ATTEMPTS` frames with segments, then
     keeps it (`pooled_from` says from which frame and what it replaced)."""
-    from uareme_fusion.pipeline import RunConfig, cues
+    from uareme_fusion.pipeline import RunConfig
+    from uareme_fusion.solver import cues
     from uareme_fusion.pipeline.session import run_source
 
     FOCAL_ATTEMPTS = 12  # the default 30 behaves the same, at 2.5x the test's time
@@ -182,7 +183,8 @@ def test_a_stream_without_intrinsics_runs_on_the_K_pooled_over_its_first_frames(
 def test_a_recording_without_intrinsics_runs_every_frame_on_a_K_pooled_before_the_run(tmp_path, monkeypatch):
     """A recording (an image folder) has its K pooled over `FOCAL_ATTEMPTS` frames spread over it before
     the run: every frame is solved with that K, and it never changes mid-stream (no `pooled_from`)."""
-    from uareme_fusion.pipeline import RunConfig, cues
+    from uareme_fusion.pipeline import RunConfig
+    from uareme_fusion.solver import cues
     from uareme_fusion.pipeline.session import run_to_folder
 
     monkeypatch.setattr(cues, "FOCAL_ATTEMPTS", 8)
@@ -206,7 +208,8 @@ def test_a_recording_without_intrinsics_runs_every_frame_on_a_K_pooled_before_th
 
 def test_ctrl_c_while_K_is_pooled_before_the_run_still_leaves_a_summary(tmp_path, monkeypatch):
     """The pre-pass runs inside the pipeline's run: a Ctrl-C there ends the run as one at frame 0 does."""
-    from uareme_fusion.pipeline import RunConfig, cues
+    from uareme_fusion.pipeline import RunConfig
+    from uareme_fusion.solver import cues
     from uareme_fusion.pipeline.session import run_to_folder
 
     frames = tmp_path / "frames"
@@ -238,7 +241,7 @@ def test_exact_normals_hold_the_rotations_and_pin_an_off_centre_principal_point(
 
 @pytest.mark.slow
 def test_a_stream_pools_K_even_when_no_frame_alone_tells_the_focal_length(tmp_path, monkeypatch):
-    from uareme_fusion.pipeline import cues
+    from uareme_fusion.solver import cues
     from uareme_fusion.solver.focal import FocalEstimate
     from uareme_fusion.types import Frame
 
