@@ -135,18 +135,27 @@ def read_associations(path: Path) -> tuple[np.ndarray, list[str], list[str]]:
 
 
 def associate(t_a: np.ndarray, t_b: np.ndarray, max_dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Indices (ia, ib) pairing each time in t_a with the nearest in t_b within max_dt_s
-    (both sorted ascending); each b is used at most once."""
+    """Indices (ia, ib), ia ascending, pairing times of t_a with times of t_b (both sorted ascending)
+    within max_dt_s, each used at most once, as TUM's `associate.py` pairs them: every pair within the
+    tolerance, closest first (a greedy matching). Two rgb images nearest the same depth image thus both
+    get one when a second depth image is within the tolerance of either (fr1 rpy train split: 488 of
+    516 rgb images paired, 474 taking only each one's nearest)."""
     t_a, t_b = np.asarray(t_a, float), np.asarray(t_b, float)
     if len(t_a) == 0 or len(t_b) == 0:
         return np.zeros(0, int), np.zeros(0, int)
-    right = np.searchsorted(t_b, t_a)
-    lo, hi = np.clip(right - 1, 0, len(t_b) - 1), np.clip(right, 0, len(t_b) - 1)
-    j = np.where(np.abs(t_b[lo] - t_a) <= np.abs(t_b[hi] - t_a), lo, hi)
-    ok = np.abs(t_b[j] - t_a) <= max_dt_s
-    ia, ib = np.flatnonzero(ok), j[ok]
-    _, first = np.unique(ib, return_index=True)
-    return ia[first], ib[first]
+    lo, hi = np.searchsorted(t_b, t_a - max_dt_s, "left"), np.searchsorted(t_b, t_a + max_dt_s, "right")
+    ia = np.repeat(np.arange(len(t_a)), hi - lo)
+    ib = np.concatenate([np.arange(a, b) for a, b in zip(lo, hi)]).astype(int) if len(ia) else np.zeros(0, int)
+    keep = np.abs(t_b[ib] - t_a[ia]) <= max_dt_s
+    ia, ib = ia[keep], ib[keep]
+    used_a, used_b, pairs = set(), set(), []
+    for k in np.lexsort((ia, np.abs(t_b[ib] - t_a[ia]))):  # closest first, ties in t_a's order
+        if ia[k] not in used_a and ib[k] not in used_b:
+            used_a.add(int(ia[k]))
+            used_b.add(int(ib[k]))
+            pairs.append((int(ia[k]), int(ib[k])))
+    pairs.sort()
+    return np.array([a for a, _ in pairs], int), np.array([b for _, b in pairs], int)
 
 
 @dataclass(frozen=True)
