@@ -46,6 +46,7 @@ def test_estimate_recovers_the_offset_through_noise_relabelling_and_outliers(off
     est = estimate_time_offset(t, R_est, _mocap(offset_s))
     assert est.offset_s == pytest.approx(offset_s, abs=0.003)
     assert est.frames >= len(t) - 10
+    assert est.low_s <= est.offset_s <= est.high_s and est.high_s - est.low_s < 0.02
     if offset_s:
         assert est.are_deg_at_offset < est.are_deg_at_zero - 0.2
 
@@ -88,7 +89,8 @@ def test_tum_rgbd_folders_get_the_default_offset_with_a_note_and_others_none(tmp
     with TumSource(tum) as source:
         assert source.info.gt_time_offset_s == TUM_RGBD_GT_TIME_OFFSET_S
         np.testing.assert_allclose(source.ground_truth().t_s, t_gt + TUM_RGBD_GT_TIME_OFFSET_S)
-        assert any("TUM RGB-D default" in note and "+22 ms" in note for note in source.notes)
+        assert any("TUM RGB-D default" in note and f"{TUM_RGBD_GT_TIME_OFFSET_S * 1000:+.0f} ms" in note
+                   for note in source.notes)
     for name, scene in (("my_desk_sequence", False), ("rgbd_dataset_freiburg1_sim", True)):
         other, t_gt = _folder(tmp_path, name, scene_json=scene)
         with TumSource(other) as source:

@@ -19,5 +19,5 @@ def test_depth_on_the_tum_evaluation_frames_reaches_the_goal(tmp_path):
     summary = run_to_folder(folder, tmp_path / "run", RunConfig(normals="depth", backend="single"), evaluate=True)
     assert summary["frames_scored"] >= 200
     assert any(f"{TUM_RGBD_GT_TIME_OFFSET_S * 1000:+.0f} ms" in note for note in summary["notes"])
-    assert summary["are_deg"]["mean"] <= 4.0  # 4.72 with the mocap stamps as recorded; 3.82 on their clock
+    assert summary["are_deg"]["mean"] <= 4.0  # 4.72 with the mocap stamps as recorded
     assert 1.0 <= summary["nees"]["mean"] <= 6.0

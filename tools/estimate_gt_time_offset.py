@@ -43,7 +43,8 @@ def main(argv=None) -> int:
     n = len(t_s)
     for part, sel in (("all frames", slice(None)), ("first half", slice(0, n // 2)), ("second half", slice(n // 2, None))):
         est = estimate_time_offset(t_s[sel], R_wc[sel], truth)
-        print(f"{part}: offset {est.offset_s * 1000:+.1f} ms over {est.frames} frames, "
+        print(f"{part}: offset {est.offset_s * 1000:+.1f} ms (95 % {est.low_s * 1000:+.1f} .. {est.high_s * 1000:+.1f}) "
+              f"over {est.frames} frames, "
               f"mean ARE {est.are_deg_at_zero:.3f} at 0 -> {est.are_deg_at_offset:.3f} deg")
         if part == "all frames":
             curve = est

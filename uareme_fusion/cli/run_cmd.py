@@ -236,7 +236,7 @@ def eval_command(
     gt_time_offset_s: Optional[float] = typer.Option(
         None, "--gt-time-offset-s", help="Seconds added to the ground truth's stamps to put them on the source's "
                                          "clock: of --gt (default 0), else of the source's own (default: TUM RGB-D "
-                                         "+0.022, others 0)."),
+                                         "+0.027, others 0)."),
     mcap: Optional[Path] = _o["mcap"],
     image_topic: Optional[str] = _o["image_topic"], imu_topic: Optional[str] = _o["imu_topic"],
     depth_topic: Optional[str] = _o["depth_topic"], camera_info_topic: Optional[str] = _o["camera_info_topic"],

@@ -73,22 +73,51 @@ class TimeOffsetEstimate:
     """(K,) mean ARE at each grid offset (NaN where the shifted reference does not cover the frames)."""
     frames: int
     """Frames used (the relabelled inliers)."""
+    low_s: float = float("nan")
+    high_s: float = float("nan")
+    """The 95 % moving-block bootstrap interval of `offset_s`."""
 
 
-def mean_are_at_offset(t_s: np.ndarray, R_wc_est: np.ndarray, truth, offset_s: float) -> float:
-    """Mean ARE (deg, constant alignment) of `R_wc_est` (N, 3, 3) at camera times `t_s` (N,) against
-    `truth` (a `GroundTruth`) with `offset_s` added to its stamps; NaN unless it covers every frame."""
+def are_at_offset(t_s: np.ndarray, R_wc_est: np.ndarray, truth, offset_s: float) -> np.ndarray:
+    """Per-frame ARE (deg, one constant alignment) of `R_wc_est` (N, 3, 3) at camera times `t_s` (N,)
+    against `truth` (a `GroundTruth`) with `offset_s` added to its stamps; NaN unless it covers every frame."""
     R_true, covered = truth.at(np.asarray(t_s, float) - offset_s)
     if not covered.all():
-        return float("nan")
-    return float(np.mean(are_deg(R_wc_est, R_true, align=True)))
+        return np.full(len(t_s), np.nan)
+    return are_deg(R_wc_est, R_true, align=True)
+
+
+def _minimum(offsets: np.ndarray, curve: np.ndarray) -> float:
+    """The grid minimum of `curve`, refined by the parabola through it and its neighbours."""
+    k = int(np.nanargmin(curve))
+    best = float(offsets[k])
+    if 0 < k < len(offsets) - 1 and np.isfinite(curve[k - 1]) and np.isfinite(curve[k + 1]):
+        bend = curve[k - 1] - 2 * curve[k] + curve[k + 1]
+        if bend > 0:
+            best += 0.5 * (offsets[1] - offsets[0]) * (curve[k - 1] - curve[k + 1]) / bend
+    return best
+
+
+def _block_bootstrap(offsets: np.ndarray, are: np.ndarray, block: int, resamples: int, level: float,
+                     seed: int) -> tuple[float, float]:
+    """(low, high) of the offset over moving-block resamples of the frames (columns of `are` (K, N))."""
+    rng = np.random.default_rng(seed)
+    n = are.shape[1]
+    block = max(1, min(block, n))
+    starts = rng.integers(0, n - block + 1, (resamples, -(-n // block)))
+    picks = (starts[:, :, None] + np.arange(block)).reshape(resamples, -1)[:, :n]
+    found = [_minimum(offsets, are[:, idx].mean(axis=1)) for idx in picks]
+    tail = 50.0 * (1.0 - level)
+    return float(np.percentile(found, tail)), float(np.percentile(found, 100.0 - tail))
 
 
 def estimate_time_offset(t_s, R_wc_est, truth, search_s: float = DEFAULT_SEARCH_S,
-                         step_s: float = DEFAULT_STEP_S, outlier_deg: float = OUTLIER_DEG) -> TimeOffsetEstimate:
+                         step_s: float = DEFAULT_STEP_S, outlier_deg: float = OUTLIER_DEG,
+                         block_s: float = 1.0, resamples: int = 400, level: float = 0.95) -> TimeOffsetEstimate:
     """The offset in [-search_s, search_s] minimising the mean ARE of the relabelled inlier frames
-    (module docstring). `InputError` with fewer than 3 frames (or inliers), a bad grid, or a reference that
-    covers the frames at no candidate."""
+    (module docstring), with a moving-block bootstrap interval (`level`, blocks of `block_s` of frames:
+    neighbouring frames' errors are correlated). `InputError` with fewer than 3 frames (or inliers), a bad
+    grid, or a reference that covers the frames at no candidate."""
     t_s, R_wc_est = np.asarray(t_s, float), np.asarray(R_wc_est, float)
     if len(t_s) < 3 or R_wc_est.shape != (len(t_s), 3, 3):
         raise InputError(f"a time offset needs at least 3 frames with (N, 3, 3) rotations, got {len(t_s)} "
@@ -105,14 +134,15 @@ def estimate_time_offset(t_s, R_wc_est, truth, search_s: float = DEFAULT_SEARCH_
     t_s, R_wc_est = t_s[keep], R_rel[keep]
     n = int(round(search_s / step_s))
     offsets = np.arange(-n, n + 1) * step_s
-    curve = np.array([mean_are_at_offset(t_s, R_wc_est, truth, d) for d in offsets])
-    if not np.isfinite(curve).any():
+    are = np.array([are_at_offset(t_s, R_wc_est, truth, d) for d in offsets])  # (K, N)
+    curve = are.mean(axis=1)
+    covering = np.isfinite(curve)
+    if not covering.any():
         raise InputError("the ground truth covers the frames at no candidate offset")
-    k = int(np.nanargmin(curve))
-    best = float(offsets[k])
-    if 0 < k < len(offsets) - 1 and np.isfinite(curve[k - 1]) and np.isfinite(curve[k + 1]):
-        bend = curve[k - 1] - 2 * curve[k] + curve[k + 1]
-        if bend > 0:
-            best += 0.5 * step_s * (curve[k - 1] - curve[k + 1]) / bend
-    return TimeOffsetEstimate(best, mean_are_at_offset(t_s, R_wc_est, truth, best),
-                              mean_are_at_offset(t_s, R_wc_est, truth, 0.0), offsets, curve, len(t_s))
+    best = _minimum(offsets, curve)
+    frame_s = float(np.median(np.diff(t_s))) if len(t_s) > 1 else 1.0
+    low, high = _block_bootstrap(offsets[covering], are[covering], int(round(block_s / max(frame_s, 1e-9))),
+                                 resamples, level, seed=0)
+    return TimeOffsetEstimate(best, float(np.mean(are_at_offset(t_s, R_wc_est, truth, best))),
+                              float(np.mean(are_at_offset(t_s, R_wc_est, truth, 0.0))), offsets, curve,
+                              len(t_s), low, high)

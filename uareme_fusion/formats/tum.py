@@ -46,17 +46,18 @@ TUM_LIST_COLUMNS = ("timestamp [s]", "filename")
 TUM_TRAJECTORY_COLUMNS = ("timestamp [s]", "tx [m]", "ty [m]", "tz [m]", "qx", "qy", "qz", "qw")
 TUM_ACCELEROMETER_COLUMNS = ("timestamp [s]", "ax [m/s^2]", "ay [m/s^2]", "az [m/s^2]")
 ASSOCIATION_COLUMNS = ("timestamp [s]", "filename", "timestamp [s]", "filename")
-TUM_RGBD_GT_TIME_OFFSET_S = 0.022
+TUM_RGBD_GT_TIME_OFFSET_S = 0.027
 """Seconds added to a TUM RGB-D `groundtruth.txt`'s stamps to put them on the Kinect's clock (the
-`--gt-time-offset-s` convention): the frame stamped t was seen at mocap time t - 0.022 s. The benchmark
+`--gt-time-offset-s` convention): the frame stamped t was seen at mocap time t - 0.027 s. The benchmark
 stamps both streams with the recording computer's clock as they arrive (`rgb.txt`: "seconds since the
-Unix epoch"), the Kinect's images after their capture and USB transfer, the motion capture's poses
-after its own, shorter pipeline; its tools (`associate.py`, `evaluate_ate.py`) take an `--offset` for
-the difference and leave it 0. Estimated here from the data, on the fr1 rpy TRAIN frames only
-(`evaluation.time_offset.estimate_time_offset` on the depth-normal rotations, `tools/estimate_gt_time_offset.py`):
-+22 ms (first half of the train frames +11, second half +28); mean ARE 4.75 -> 4.53 deg there. Applied by
-`drivers.tum.TumSource` to folders named as TUM RGB-D sequences without scene.json or source.json, with a
-note; no other dataset is shifted."""
+Unix epoch"), the Kinect's images after their exposure and USB transfer, the motion capture's poses
+after its own pipeline; its tools (`associate.py`, `evaluate_ate.py`) take an `--offset` for such a
+difference and leave it 0. Estimated here from the data, on the fr1 rpy TRAIN frames only
+(`evaluation.time_offset.estimate_time_offset` on the depth-normal rotations of `eval --normals depth
+--backend single --gt-time-offset-s 0`, `tools/estimate_gt_time_offset.py`): +26.8 ms, 95 % block-bootstrap
+interval +14.6 .. +36.7 over 422 frames (first half +8.7, second half +37.3; +26.3 with the frames timed
+at their depth images); mean ARE 4.86 -> 4.55 deg there. Applied by `drivers.tum.TumSource` to folders
+named as TUM RGB-D sequences without scene.json or source.json, with a note; no other dataset is shifted."""
 QUATERNION_NORM_TOLERANCE = 1e-2
 """Stored quaternions may deviate this much from unit length (rounding); more is a broken file."""
 
