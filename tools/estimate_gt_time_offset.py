@@ -6,7 +6,8 @@
     python tools/estimate_gt_time_offset.py /tmp/train_run $D
 
 Prints the offset (s added to groundtruth.txt's stamps, `evaluation.time_offset.estimate_time_offset`)
-over the frames with a depth image (as the driver pairs them) and over each half (a check that it is one constant, not drift), the mean ARE at 0 and
+over the frames with a depth image (as the driver pairs them) and over each half (a check that it is
+one constant, not drift), the mean ARE at 0 and
 at the offset, and the ARE curve every 10 ms. With `--depth-stamps` each estimate is timed at its depth
 image's stamp (`depth.txt`) instead of the rgb image's.
 """

@@ -11,8 +11,9 @@ the shifted times, over a grid of `step_s`, refined by a parabola through the be
 two neighbours. Frames whose Manhattan labelling differs from the others' (a stream that switched axes:
 a constant error of 90 or 120 deg that no offset changes) are first relabelled to the labelling nearest
 the reference (`relabel_to_reference`), and frames still wrong by more than `outlier_deg` at offset 0
-are left out, so that the figure measures the clock, not the labelling. A camera turning at w rad/s whose reference is late by dt is wrong by about w dt, so
-on a fast sequence (TUM fr1 rpy: 0.5-1.5 rad/s) a few tens of ms show as degrees.
+are left out, so that the figure measures the clock, not the labelling. A camera turning at w rad/s
+whose reference is late by dt is wrong by about w dt, so on a fast sequence (TUM fr1 rpy: 0.5-1.5
+rad/s) a few tens of ms show as degrees. The interval is a moving-block bootstrap over the frames.
 
 Estimate it on frames kept for training only (TUM fr1 rpy: the train split), and use it elsewhere as a
 fixed dataset default (`formats.tum.TUM_RGBD_GT_TIME_OFFSET_S`).

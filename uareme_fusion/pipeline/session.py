@@ -177,8 +177,8 @@ def open_for_run(source_spec: str, cfg: RunConfig, imu: str | Path | None = None
                  gt: Path | None = None, gt_time_offset_s: float | None = None, topics: dict | None = None) -> Source:
     """The source as `run` opens it: `imu` merged, the configuration's K, camera-IMU rotation and time
     offset, a ground-truth file `gt` in place of its own (its stamps + `gt_time_offset_s`, 0 when None),
-    or without `gt` its own ground truth shifted by `gt_time_offset_s` in place of its default, and a ROS bag's `topics` (`image_topic`, ...
-    as `open_source` takes them; None values are left to the bag)."""
+    or without `gt` its own ground truth shifted by `gt_time_offset_s` in place of its default, and a ROS
+    bag's `topics` (`image_topic`, ... as `open_source` takes them; None values are left to the bag)."""
     from ..drivers import open_source
 
     opened = configure_imu(open_source(str(source_spec), imu=None if imu is None else str(imu), fps=fps,
