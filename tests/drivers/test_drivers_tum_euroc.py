@@ -68,6 +68,19 @@ def test_associate_pairs_nearest_within_tolerance():
     np.testing.assert_array_equal(ib, [0, 2])
 
 
+def test_associate_matches_closest_pairs_first_as_tum_does():
+    """Two rgb stamps nearest the same depth stamp: the closer pair is made first and the other rgb takes
+    its second-nearest depth within the tolerance (TUM associate.py), instead of going without."""
+    t_rgb = np.array([0.000, 0.030])
+    t_depth = np.array([0.014, 0.048])  # both rgb are nearest 0.014 (14, 16 ms); 0.030 is 18 ms from 0.048
+    ia, ib = associate(t_rgb, t_depth, 0.02)
+    np.testing.assert_array_equal(ia, [0, 1])
+    np.testing.assert_array_equal(ib, [0, 1])
+    ia, ib = associate(t_rgb, np.array([0.017]), 0.02)  # one depth, 17 and 13 ms away: the closer rgb gets it
+    np.testing.assert_array_equal(ia, [1])
+    np.testing.assert_array_equal(ib, [0])
+
+
 def test_bad_files_raise_input_error(tmp_path):
     with pytest.raises(InputError, match="does not exist"):
         load_tum_rgbd(tmp_path / "nope")

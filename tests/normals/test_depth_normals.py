@@ -269,14 +269,14 @@ def test_icl_nuim_rotation_from_depth_normals(icl_rotations):
 
 @pytest.mark.slow
 def test_icl_nuim_covariance_is_conservative_but_same_order(icl_rotations):
-    """Measured NEES 0.47: non-Manhattan clutter raises the residual more than the error. The
-    covariance must stay on the safe side without being useless (it was 0.026 before depth normals
-    stated their own error correlation)."""
+    """Measured NEES 1.04 (0.47 with one independent error per fit window, 0.026 before depth normals
+    stated their own error correlation): rendered depth's per-pixel noise averages over the frame, and
+    non-Manhattan clutter raises the residual more than the error. Inside the goal range [1, 6]."""
     R_wc_est, R_wc_published, cov = icl_rotations
     R_gt = flip_y_rotation(R_wc_published)
     A = align_constant(R_wc_est, R_gt)
     mean_nees = nees(A @ R_wc_est, R_gt, cov).mean()
-    assert 0.2 < mean_nees < 4.5
+    assert 1.0 <= mean_nees <= 6.0
 
 
 @pytest.mark.slow
@@ -306,3 +306,23 @@ def test_icsl_corridor_millimetre_depth(shared_data):
         backend.process_frame(float(k), visual)
         if previous is not None:  # a hand-held camera at 30 Hz turns by a degree or two per frame
             assert np.degrees(angle_between(backend.predicted_R_cm(k), previous)) < 3.0
+
+
+def test_per_pixel_noise_averages_better_than_one_error_per_window():
+    """Why rendered depth counts more errors per window area (`RENDERED_DEPTH.errors_per_window_area`): on a
+    plane with per-pixel depth noise only, the kappa-weighted mean of the window normals is closer to the
+    truth than one independent error per window predicts (the windows' slope errors telescope across the
+    plane): measured variance ratio 7.6 with 7-pixel windows, 20 with 9 (kappa at its cap)."""
+    n_true = np.array([0.3, -0.2, -1.0]) / np.linalg.norm([0.3, -0.2, -1.0])
+    clean = render_planes(K, [n_true], [-1.5])[0]
+    for window_px, ratio_low in ((7, 5.0), (9, 0.75 * RENDERED_DEPTH.errors_per_window_area)):
+        errors = []
+        for seed in range(12):
+            noisy = clean + np.random.default_rng(seed).normal(0.0, 3e-3, clean.shape) * clean**2
+            nm = DepthNormals(DepthNormalsConfig(window_px=window_px)).estimate(noisy.astype(np.float32), K)
+            w = nm.kappa[nm.kappa > 0]
+            mean = (nm.normals[nm.kappa > 0] * w[:, None]).sum(0)
+            errors.append(np.arccos(np.clip(mean @ n_true / np.linalg.norm(mean), -1, 1)))
+        per_window_var = np.mean(2.0 / w) / nm.independent_regions  # 2 tangent axes of 1/kappa each
+        ratio = per_window_var / np.mean(np.square(errors))
+        assert ratio_low < ratio < 2 * ratio_low

@@ -69,19 +69,21 @@ def test_eval_says_when_tilt_is_after_the_alignment_and_shows_the_unaligned_tilt
     assert summary["tilt_deg"]["mean"] <= summary["tilt_unaligned_deg"]["mean"] + 0.5
 
 
-def _depth_regions_cap(folder) -> float:
+def _depth_config(folder):
     from uareme_fusion.drivers.tum import TumSource
     from uareme_fusion.pipeline.stages import make_normal_estimator
 
     with TumSource(folder) as source:
-        return make_normal_estimator("depth", source.info).estimator.config.max_independent_regions
+        return make_normal_estimator("depth", source.info).estimator.config
 
 
-def test_rendered_depth_counts_every_window_and_a_real_sensor_folder_is_capped(rgbd_folder, tmp_path):
-    """A simulated folder (scene.json) has rendered depth: one independent error per window (no cap).
+def test_rendered_depth_counts_more_errors_per_window_and_a_real_sensor_folder_is_capped(rgbd_folder, tmp_path):
+    """A simulated folder (scene.json) has rendered depth: 20 independent errors per window area (no cap).
     The same files in a TUM-named folder without scene.json are a real sensor's: the 60-region cap."""
-    assert _depth_regions_cap(rgbd_folder) == float("inf")
+    rendered = _depth_config(rgbd_folder)
+    assert rendered.max_independent_regions == float("inf") and rendered.errors_per_window_area == 20.0
     real = tmp_path / "rgbd_dataset_freiburg1_copy"
     shutil.copytree(rgbd_folder, real)
     (real / "scene.json").unlink()
-    assert _depth_regions_cap(real) == 60.0
+    sensor = _depth_config(real)
+    assert sensor.max_independent_regions == 60.0 and sensor.errors_per_window_area == 1.0

@@ -174,10 +174,11 @@ def configure_imu(source: Source, cfg: RunConfig) -> Source:
 
 
 def open_for_run(source_spec: str, cfg: RunConfig, imu: str | Path | None = None, fps: float | None = None,
-                 gt: Path | None = None, gt_time_offset_s: float = 0.0, topics: dict | None = None) -> Source:
+                 gt: Path | None = None, gt_time_offset_s: float | None = None, topics: dict | None = None) -> Source:
     """The source as `run` opens it: `imu` merged, the configuration's K, camera-IMU rotation and time
-    offset, a ground-truth file `gt` in place of its own, and a ROS bag's `topics` (`image_topic`, ...
-    as `open_source` takes them; None values are left to the bag)."""
+    offset, a ground-truth file `gt` in place of its own (its stamps + `gt_time_offset_s`, 0 when None),
+    or without `gt` its own ground truth shifted by `gt_time_offset_s` in place of its default, and a ROS
+    bag's `topics` (`image_topic`, ... as `open_source` takes them; None values are left to the bag)."""
     from ..drivers import open_source
 
     opened = configure_imu(open_source(str(source_spec), imu=None if imu is None else str(imu), fps=fps,
@@ -185,7 +186,11 @@ def open_for_run(source_spec: str, cfg: RunConfig, imu: str | Path | None = None
     if gt is not None:
         from ..drivers.ground_truth_file import with_ground_truth_file
 
-        with_ground_truth_file(opened, gt, gt_time_offset_s)
+        with_ground_truth_file(opened, gt, gt_time_offset_s or 0.0)
+    elif gt_time_offset_s is not None:
+        from ..drivers.ground_truth_file import with_ground_truth_time_offset
+
+        with_ground_truth_time_offset(opened, gt_time_offset_s)
     return opened
 
 
