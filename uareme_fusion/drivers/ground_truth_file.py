@@ -13,9 +13,13 @@ convention as `--imu-time-offset-s`). The file is read by `formats.ground_truth`
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
+import numpy as np
+
 from ..formats.ground_truth import read_ground_truth_file
+from ..errors import InputError
 from .base import GroundTruth
 
 
