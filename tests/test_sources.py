@@ -234,7 +234,9 @@ def test_tum_accelerometer_only_is_exposed_not_yielded(sim_dir, tmp_path):
     with open_source(str(tmp_path)) as src:
         assert not src.info.has_imu and src.info.K is None and not src.info.has_depth
         assert src.accelerometer[1].shape[1] == 3 and len(src.accelerometer[0]) > 50
-        assert any("no gyro" in note for note in src.notes)
+        # no name that identifies the dataset: the Kinect's axes, said in the run's note
+        np.testing.assert_array_equal(src.info.R_ci, np.diag([-1.0, -1.0, 1.0]))
+        assert "Kinect" in src.accelerometer_axes_from
         assert not any(isinstance(e, ImuBatch) for e in src.events())
         assert src.ground_truth() is None
 
