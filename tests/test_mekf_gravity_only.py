@@ -224,3 +224,28 @@ def test_real_tum_tilt_with_the_kinect_accelerometer_is_no_worse(tum_eval_folder
         tilt[used] = summary["tilt_deg"]["mean"], summary["tilt_unaligned_deg"]["mean"]
     assert tilt[True][0] <= tilt[False][0] + 0.2, tilt
     assert tilt[True][1] < 5.0, tilt
+
+
+def test_accelerometer_only_csv_beside_a_camera_is_gravity_only(tmp_path):
+    """A phone's or board's log of 4 columns (t, a_x, a_y, a_z: no gyro) merged into an image folder is
+    `source.accelerometer`, not an IMU: the run feeds it to the EKF as gravity; alone it is refused."""
+    from uareme_fusion.drivers import open_source
+    from uareme_fusion.drivers.imu_csv import ImuCsvSource
+    from uareme_fusion.errors import InputError
+    from uareme_fusion.pipeline import RunConfig
+    from uareme_fusion.pipeline.session import build_pipeline, run_notes
+
+    images = tmp_path / "images"
+    images.mkdir()
+    for k in range(3):
+        cv2.imwrite(str(images / f"{k:03d}.png"), np.full((48, 64, 3), 40 * k, np.uint8))
+    log = tmp_path / "accel.csv"
+    t = np.arange(0.0, 0.2, 0.005)
+    log.write_text("t_s,ax,ay,az\n" + "".join(f"{x:.3f},0.1,-9.8,0.2\n" for x in t))
+    with open_source(str(images), imu=str(log)) as src:
+        assert not src.info.has_imu and src.accelerometer[1].shape == (len(t), 3)
+        np.testing.assert_allclose(src.accelerometer[0], t, atol=1e-9)
+        assert any("used as gravity only" in n for n in run_notes(src, RunConfig())[0])
+        assert build_pipeline(src, RunConfig(cues="lines")).accelerometer is not None
+    with pytest.raises(InputError, match="accelerometer without gyro, which gives tilt only beside a camera"):
+        list(ImuCsvSource(log).events())
