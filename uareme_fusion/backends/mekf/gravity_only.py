@@ -2,20 +2,22 @@
 `Mekf`'s visual-only model.
 
 Without a gyro nothing integrates between frames: the constant-rate model (`motion.ConstantRateMotion`)
-carries the attitude, and each frame the accelerometer samples of the trailing
-`accel_only_window_s` are averaged into one direction that measures up in the camera frame, through
-the same model as with a gyro (`measurements.gravity_model`: gated by its own norm, inflated by its
-innovation). The samples are turned to the frame's time with the model's rate (`omega_c`), since the
+carries the attitude, and at each frame the accelerometer samples of a window around it
+(`accel_only_window_s`, ending `accel_only_lookahead_s` after the frame) are averaged into one
+direction that measures up in the camera frame, through the same model as with a gyro
+(`measurements.gravity_model`: gated by its own norm, inflated by its innovation). The samples are
+turned to the frame's time with the model's rate (`omega_c`; the rate's error enters H), since the
 camera turns within the window. What a gyro's common frame would cancel (a handheld camera's
-shaking) is left in the mean here, so the update is also inflated by the samples' rms deviation from
-their mean (`accel_only_shake_m_s2`: rest against motion), by the overlap of successive windows
-(`correlated_noise_scale`), and skipped when a sample is at the range (`accel_range_m_s2`: saturated)
-or when the stream stopped (newest sample older than `imu_gap_limit_s`: flagged `IMU_GAP`).
+shaking) is averaged here, and the update is also inflated by the samples' rms deviation from their
+mean (`accel_only_shake_m_s2`: rest against motion) and by the overlap of successive windows
+(`correlated_noise_scale`). It is skipped when a sample is at the range (`accel_range_m_s2`:
+saturated, flagged `ACCEL_DOWNWEIGHTED`) or when the stream stopped (no sample within
+`imu_gap_limit_s` of the window's end: flagged `IMU_GAP`); the camera carries on alone.
 
-The visual-only world is the first Manhattan frame; gravity makes it gravity-aligned: the first
-gravity update gives the Manhattan frame a tilt prior (`manhattan_vertical_std_rad`, "walls are
-vertical") shared with the camera attitude (`world_tilt_prior`), after which the world's z is up.
-"""
+The visual-only world is the first Manhattan frame, its z the axis nearest image up. The first gravity
+update relabels it so that z is the Manhattan axis nearest the measured up (`gravity_world`) and gives
+the Manhattan frame a tilt prior (`manhattan_vertical_std_rad`, "walls are vertical") shared with the
+camera attitude (`world_tilt_prior`): from then on the world's z is up."""
 
 from __future__ import annotations
 
@@ -45,8 +47,9 @@ class GravityOnly:
     """Accelerometer samples without gyro (camera frame, camera clock), and the per-frame gravity rows.
 
     `add(t_s, accel_m_s2)` takes samples on the IMU clock and in the IMU frame (`MekfConfig.R_ci`,
-    `imu_time_offset_s`); `update_rows(filt)` gives a frame's measurement. `counts`: samples dropped (non-finite, out of order), updates
-    made, skipped for free fall or saturation, and frames with the stream stopped.
+    `imu_time_offset_s`); `update_rows(filt)` gives a frame's measurement. `counts`: samples dropped
+    (non-finite, out of order), updates made, skipped (free fall), saturated windows, and frames with
+    the stream stopped.
     """
 
     def __init__(self, cfg):
