@@ -221,6 +221,7 @@ def test_real_tum_tilt_with_the_kinect_accelerometer_is_no_worse(tum_eval_folder
         cfg = RunConfig(normals="depth", max_frames=60, accelerometer=used)
         summary = run_to_folder(str(tum_eval_folder), tmp_path / str(used), cfg, evaluate=True, command="eval")
         assert summary["source_info"]["accelerometer_used"] is used
+        assert not used or summary["accelerometer_counts"]["accel_only_updates"] >= 55
         tilt[used] = summary["tilt_deg"]["mean"], summary["tilt_unaligned_deg"]["mean"]
     assert tilt[True][0] <= tilt[False][0] + 0.2, tilt
     assert tilt[True][1] < 5.0, tilt

@@ -166,6 +166,9 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
         if normals_note:
             summary["notes"].append(normals_note)
             summary["normals_note"] = normals_note
+        if pipeline.accelerometer is not None:  # an accelerometer without gyro: what became of its updates
+            summary["accelerometer_counts"] = {k: v for k, v in getattr(pipeline.backend, "counters", {}).items()
+                                               if k.startswith("accel_only")}
         if pipeline.cues is not None and pipeline.cues.focal is not None:  # K given, estimated or assumed
             summary["intrinsics"] = pipeline.cues.intrinsics_summary()
         for sink in extra_sinks:
