@@ -250,3 +250,12 @@ def test_accelerometer_only_csv_beside_a_camera_is_gravity_only(tmp_path):
         assert build_pipeline(src, RunConfig(cues="lines")).accelerometer is not None
     with pytest.raises(InputError, match="accelerometer without gyro, which gives tilt only beside a camera"):
         list(ImuCsvSource(log).events())
+
+
+def test_non_finite_and_backward_samples_are_dropped_and_counted():
+    filt = Mekf(config())
+    accel = np.tile([0.0, 9.81, 0.0], (5, 1))
+    accel[1, 2] = np.nan
+    filt.process_accel(np.array([0.00, 0.01, 0.02, 0.015, 0.03]), accel)  # NaN at 0.01, 0.015 steps back
+    np.testing.assert_allclose(filt.gravity_only.t_s, [0.00, 0.02, 0.03])
+    assert filt.counters["accel_only_dropped"] == 2
