@@ -249,7 +249,9 @@ def test_accelerometer_only_csv_beside_a_camera_is_gravity_only(tmp_path):
         assert any("used as gravity only" in n for n in run_notes(src, RunConfig())[0])
         assert build_pipeline(src, RunConfig(cues="lines")).accelerometer is not None
     with pytest.raises(InputError, match="accelerometer without gyro, which gives tilt only beside a camera"):
-        list(ImuCsvSource(log).events())
+        ImuCsvSource(log)
+    with pytest.raises(InputError, match="accelerometer without gyro, which gives tilt only beside a camera"):
+        list(ImuCsvSource(log, accelerometer_only=True).events())
 
 
 def test_non_finite_and_backward_samples_are_dropped_and_counted():

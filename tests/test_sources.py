@@ -275,8 +275,11 @@ def test_imu_csv_source_and_wrong_columns(tmp_path):
     np.testing.assert_allclose(t_all, t, atol=1e-9)
     np.testing.assert_array_equal(g_all, gyro)
     bad = tmp_path / "bad.csv"
-    bad.write_text("#t,x,y,z\n1,0.1,0.2,0.3\n2,0.1,0.2,0.3\n")
+    bad.write_text("#t,x,y\n1,0.1,0.2\n2,0.1,0.2\n")
     with pytest.raises(InputError, match="bad.csv.*7 comma-separated columns"):
+        open_source(str(bad))
+    bad.write_text("#t,x,y,z\n1,0.1,0.2,0.3\n2,0.1,0.2,0.3\n")  # an accelerometer without gyro: beside a camera only
+    with pytest.raises(InputError, match="bad.csv: 4 columns .* accelerometer without gyro, which gives tilt only beside"):
         open_source(str(bad))
 
 

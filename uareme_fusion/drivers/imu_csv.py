@@ -54,13 +54,21 @@ def non_increasing_note(imu: EurocImu) -> list[str]:
             "and counts them)"]
 
 
+ACCELEROMETER_ALONE = ("{path}: 4 columns (timestamp, a_x, a_y, a_z) are an accelerometer without gyro, which gives "
+                       "tilt only beside a camera: pass it with --imu to a video or image folder")
+
+
 class ImuCsvSource(Source):
     """An EuRoC-format IMU CSV as an IMU-only source (`has_frames` False)."""
 
-    def __init__(self, path: str | Path, batch_s: float = IMU_ONLY_BATCH_S, R_ci: np.ndarray | None = None):
+    def __init__(self, path: str | Path, batch_s: float = IMU_ONLY_BATCH_S, R_ci: np.ndarray | None = None,
+                 accelerometer_only: bool = False):
+        """`accelerometer_only`: a 4-column log (no gyro) is taken, to be merged beside a camera; else refused."""
         self.path = Path(path)
         self.accelerometer = (read_accelerometer_table(self.path, sniff_delimiter(self.path))
                               if self.path.is_file() else None)
+        if self.accelerometer is not None and not accelerometer_only:
+            raise InputError(ACCELEROMETER_ALONE.format(path=self.path))
         self.imu, self.fixes = (None, []) if self.accelerometer is not None else read_imu_log(path)
         self.batch_s = float(batch_s)
         self.notes = non_increasing_note(self.imu) if self.imu is not None else []
@@ -75,8 +83,7 @@ class ImuCsvSource(Source):
 
     def batches(self) -> Iterator[ImuBatch]:
         if self.imu is None:
-            raise InputError(f"{self.path}: 4 columns (timestamp, a_x, a_y, a_z) are an accelerometer without gyro, "
-                             "which gives tilt only beside a camera: pass it with --imu to a video or image folder")
+            raise InputError(ACCELEROMETER_ALONE.format(path=self.path))
         yield from split_by_span(self.imu.t_s, self.imu.gyro_rad_s, self.imu.accel_m_s2, self.batch_s)
 
     @property
