@@ -92,3 +92,22 @@ def test_quick_bench_on_real_kt3_prints_the_runs_figures(shared_data, tmp_path):
     for text in (printed, out_md.read_text()):
         assert f"{summary['are_deg']['mean']:.2f} / {summary['nees']['mean']:.2f}" in text
         assert f"{joint['mean']:+.2f} ({joint['low']:+.2f} .. {joint['high']:+.2f})" in text
+
+
+def test_accelerometer_rows_pair_the_tilt_with_and_without():
+    """TUM's rows: each normals' `eval --no-accel` and with the Kinect accelerometer, the tilt paired (goal:
+    no worse beyond the interval), the ARE beside it; a run that did not use it says why."""
+    from uareme_fusion.benchmarks.realdata import figure_rows
+
+    def figures(tilt, are):
+        return {"normals": "depth", "backend": "mekf", "frames": 207, "are_mean_deg": are, "tilt_mean_deg": tilt,
+                "nees_mean": 2.5, "tilt_note": "reference is not gravity-aligned: tilt after the constant alignment"}
+
+    with_acc = {**figures(2.06, 3.61), "tilt_vs_without_deg": {"mean": -1.45, "low": -1.8, "high": -1.1, "frames": 207},
+                "are_vs_without_deg": {"mean": -1.1, "low": -1.5, "high": -0.7, "frames": 207}}
+    fig = {"cue_sets": {}, "accelerometer": {"depth": {"without": figures(3.51, 4.71), "with": with_acc},
+                                             "learned": {"without": figures(28.1, 34.7), "with": {"note": "n/a: --no-accel"}}}}
+    rows = figure_rows("TUM fr1 rpy eval", fig)
+    assert [r["verdict"] for r in rows] == ["", "ok", "", "", ""]
+    assert rows[1]["measured"] == "2.06 / 3.61 / 2.50" and rows[1]["paired_95"] == "-1.45 (-1.80 .. -1.10)"
+    assert rows[0]["versus"] == "tilt after the alignment" and rows[4]["measured"] == "n/a: --no-accel"

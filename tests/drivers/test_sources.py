@@ -234,7 +234,9 @@ def test_tum_accelerometer_only_is_exposed_not_yielded(sim_dir, tmp_path):
     with open_source(str(tmp_path)) as src:
         assert not src.info.has_imu and src.info.K is None and not src.info.has_depth
         assert src.accelerometer[1].shape[1] == 3 and len(src.accelerometer[0]) > 50
-        assert any("no gyro" in note for note in src.notes)
+        # no name that identifies the dataset: the Kinect's axes, said in the run's note
+        np.testing.assert_array_equal(src.info.R_ci, np.diag([-1.0, -1.0, 1.0]))
+        assert "Kinect" in src.accelerometer_axes_from
         assert not any(isinstance(e, ImuBatch) for e in src.events())
         assert src.ground_truth() is None
 
@@ -273,8 +275,11 @@ def test_imu_csv_source_and_wrong_columns(tmp_path):
     np.testing.assert_allclose(t_all, t, atol=1e-9)
     np.testing.assert_array_equal(g_all, gyro)
     bad = tmp_path / "bad.csv"
-    bad.write_text("#t,x,y,z\n1,0.1,0.2,0.3\n2,0.1,0.2,0.3\n")
+    bad.write_text("#t,x,y\n1,0.1,0.2\n2,0.1,0.2\n")
     with pytest.raises(InputError, match="bad.csv.*7 comma-separated columns"):
+        open_source(str(bad))
+    bad.write_text("#t,x,y,z\n1,0.1,0.2,0.3\n2,0.1,0.2,0.3\n")  # an accelerometer without gyro: beside a camera only
+    with pytest.raises(InputError, match="bad.csv: 4 columns .* accelerometer without gyro, which gives tilt only beside"):
         open_source(str(bad))
 
 

@@ -27,6 +27,13 @@ class Backend(ABC):
         Backends without IMU support ignore them.
         """
 
+    accelerometer_lookahead_s: float = 0.0
+    """How far past a frame's time `process_accel` wants samples before the frame, s (a replay feeds them)."""
+
+    def process_accel(self, t_s: np.ndarray, accel_m_s2: np.ndarray) -> None:
+        """Feed samples of an accelerometer without gyro: `t_s` (N,) s, `accel_m_s2` (N, 3) m/s^2 in the
+        IMU frame (TUM's Kinect). Only the EKF's visual-only model uses them (as gravity); others ignore them."""
+
     @abstractmethod
     def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
         """Fuse one frame's visual rotation (None when the frame gave none) and return the estimate

@@ -15,7 +15,8 @@ Two ways of running, both the library's own:
   `pipeline.stages.backend_for_run`), so a paired per-frame difference isolates the backend or the cue;
 - `eval` runs: what a user's `uareme-fusion eval` gives (`pipeline.session.run_source`): ICL kt3 with
   default options (no --normals), EuRoC micro with default options against the IMU log alone
-  (`eval mav0/imu0/data.csv --gt ...`) over the same frames, TUM with and without its accelerometer.
+  (`eval mav0/imu0/data.csv --gt ...`) over the same frames, TUM with and without its accelerometer
+  (`--no-accel`), with depth and with learned normals.
   A run's solver starts each frame from the backend's prediction, the cue-set rows' from the previous
   frame's rotation, so the two differ where the backend's prediction does (EuRoC micro, mekf: visual
   rotations 5.9 deg apart on average; fused tilt 3.94 in `eval` against 2.32 on the cue-set rotations,
@@ -336,28 +337,35 @@ def sequence_figures(seq: RealSequence, steps: Steps, max_frames: int | None, tm
     return out
 
 
-def accelerometer_figures(seq: RealSequence, steps: Steps, max_frames: int | None, tmp: Path) -> dict:
-    """`eval` (default options) of a TUM folder with its accelerometer.txt and of a copy without it, the
-    tilt (after the alignment, as eval reports it) paired per frame; n/a with the reason when the folder
-    gives no IMU input."""
-    import shutil
+ACCELEROMETER_NORMALS = ("depth", "learned")
+"""The normals of the `eval` runs of a TUM folder with and without its accelerometer (`--no-accel`)."""
 
+
+def accelerometer_figures(seq: RealSequence, steps: Steps, max_frames: int | None, tmp: Path) -> dict:
+    """`eval --normals N` of a TUM folder with its accelerometer without gyro (gravity only) and with
+    `--no-accel`, for each of `ACCELEROMETER_NORMALS`: tilt (after the alignment, as eval reports it)
+    and ARE, the tilt paired per frame; n/a with the reason when the run did not use the accelerometer."""
     from ..pipeline import RunConfig
 
-    folder = Path(seq.spec)
-    without = tmp / "without_accelerometer" / folder.name
-    shutil.copytree(folder, without, symlinks=True)
-    (without / "accelerometer.txt").unlink(missing_ok=True)
-    cfg = RunConfig(max_frames=max_frames)
-    base = eval_run(str(without), cfg, steps.step(f"{seq.name}: eval without accelerometer", max_frames))
-    out = {"without": _eval_figures(base)}
-    with_acc = eval_run(str(folder), cfg, steps.step(f"{seq.name}: eval with accelerometer", max_frames))
-    if not with_acc["has_imu"]:
-        why = [n for n in with_acc["notes"] if "accelerometer" in n]
-        out["with"] = {"note": "n/a: " + (why[0].rsplit("/", 1)[-1] if why else "the folder gives no IMU input")}
-        return out
-    out["with"] = _eval_figures(with_acc)
-    out["with"]["tilt_vs_without_deg"] = paired_difference(with_acc["errors"]["tilt_deg"], base["errors"]["tilt_deg"])
+    out = {}
+    for normals in ACCELEROMETER_NORMALS:
+        runs = {}
+        for used in (False, True):
+            cfg = RunConfig(max_frames=max_frames, normals=normals, accelerometer=used)
+            label = f"{seq.name}: eval --normals {normals}" + ("" if used else " --no-accel")
+            runs[used] = eval_run(seq.spec, cfg, steps.step(label, max_frames))
+        base, with_acc = runs[False], runs[True]
+        figures = {"without": _eval_figures(base)}
+        if not with_acc["summary"]["source_info"].get("accelerometer_used"):
+            why = [n for n in with_acc["notes"] if "accelerometer" in n]
+            figures["with"] = {"note": "n/a: " + (why[0].rsplit(": ", 1)[-1] if why else "no accelerometer without gyro")}
+        else:
+            figures["with"] = _eval_figures(with_acc)
+            figures["with"]["tilt_vs_without_deg"] = paired_difference(with_acc["errors"]["tilt_deg"],
+                                                                       base["errors"]["tilt_deg"])
+            figures["with"]["are_vs_without_deg"] = paired_difference(with_acc["errors"]["are_deg"],
+                                                                      base["errors"]["are_deg"])
+        out[normals] = figures
     return out
 
 

@@ -162,6 +162,8 @@ def _options():
         fps=typer.Option(None, "--fps", help="Frame rate of an image folder without timestamps (default 30)."),
         offline=typer.Option(None, "--offline", help="A recorded IMU-only file: smooth it forward and backward "
                              "(more accurate than the streaming filter)."),
+        no_accel=typer.Option(False, "--no-accel", help="Leave out an accelerometer without gyro (TUM's "
+                              "accelerometer.txt), which the EKF otherwise uses as gravity only."),
         cues=typer.Option(None, "--cues", help="Visual cues: normals, lines, sky (comma-separated; default all three)."),
         record=typer.Option(None, "--record", help="Also write the source's frames and IMU to this folder "
                                                      "(replay it later with 'run FOLDER')."),
@@ -207,14 +209,15 @@ def run_command(
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"],
     record: Optional[Path] = _o["record"], rerun: Optional[Path] = _o["rerun"], force: bool = _o["force"],
     intrinsics: Optional[str] = _o["intrinsics"], offline: Optional[bool] = _o["offline"],
-    cues: Optional[str] = _o["cues"], mcap: Optional[Path] = _o["mcap"],
+    cues: Optional[str] = _o["cues"], no_accel: bool = _o["no_accel"], mcap: Optional[Path] = _o["mcap"],
     image_topic: Optional[str] = _o["image_topic"], imu_topic: Optional[str] = _o["imu_topic"],
     depth_topic: Optional[str] = _o["depth_topic"], camera_info_topic: Optional[str] = _o["camera_info_topic"],
 ) -> None:
     """Estimate the camera orientation over a source; write trajectory.tum, estimates.csv, summary.json."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
-                     imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues)
+                     imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues,
+                     accelerometer=False if no_accel else None)
     execute(source, out, cfg, imu, fps, evaluate=False, command="run", record_dir=record,
             extra_sinks_factory=viewer_sinks(rerun, mcap, source), force=force,
             topics=bag_topics(image_topic, imu_topic, depth_topic, camera_info_topic))
@@ -230,7 +233,7 @@ def eval_command(
     threads: Optional[int] = _o["threads"], imu_rotation: Optional[str] = _o["imu_rotation"],
     imu_time_offset_s: Optional[float] = _o["imu_time_offset_s"], rerun: Optional[Path] = _o["rerun"],
     intrinsics: Optional[str] = _o["intrinsics"], offline: Optional[bool] = _o["offline"],
-    cues: Optional[str] = _o["cues"],
+    cues: Optional[str] = _o["cues"], no_accel: bool = _o["no_accel"],
     gt: Optional[Path] = typer.Option(None, "--gt", help="Ground-truth trajectory (TUM 'timestamp tx ty tz qx qy qz "
                                                          "qw', or EuRoC gt0/data.csv) in place of the source's own."),
     gt_time_offset_s: Optional[float] = typer.Option(
@@ -245,7 +248,8 @@ def eval_command(
     """As 'run', then score against the source's ground truth: ARE, tilt, NEES, per-stage ms, fps."""
     cfg = run_config(config, backend=backend, normals=normals, mekf_preset=preset, max_frames=max_frames,
                      intrinsics=intrinsics, threads=threads, imu_rotation=imu_rotation,
-                     imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues)
+                     imu_time_offset_s=imu_time_offset_s, offline=offline, cues=cues,
+                     accelerometer=False if no_accel else None)
     execute(source, out, cfg, imu, fps, evaluate=True, command="eval",
             extra_sinks_factory=viewer_sinks(rerun, mcap, source),
             gt=gt, gt_time_offset_s=gt_time_offset_s, force=force,

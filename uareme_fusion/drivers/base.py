@@ -101,6 +101,10 @@ class Source(ABC):
     """What the driver left out or did not use (printed and put in summary.json); sources set it."""
     fixes: list[str]
     """Automatic repairs of the input (e.g. IMU units), printed as warnings and put in summary.json."""
+    accelerometer: tuple[np.ndarray, np.ndarray] | None = None
+    """Samples of an accelerometer without gyro, `(t_s (N,) IMU clock, accel_m_s2 (N, 3) IMU frame)`
+    (`info.R_ci`, `info.imu_time_offset_s`), not in `events`: a run feeds them to the backend up to each
+    frame (`Backend.process_accel`); None when there are none (or the source has a full IMU)."""
 
     def sample_frames(self, n: int, limit: int | None = None) -> list[Frame] | None:
         """Up to `n` frames spread evenly over a recording (over its first `limit` frames when given: a

@@ -30,6 +30,7 @@ class CalibratedSource(Source):
                              "(IMU only)")
         self.source, self.camera = source, check_camera(camera, camera.origin, source.info.image_size)
         self.notes, self.fixes = source.report()
+        self.accelerometer = source.accelerometer
         K_before = source.info.K
         if K_before is not None and not np.allclose(K_before, camera.K):
             self.notes.append(f"{camera.origin} replaces the source's own K "

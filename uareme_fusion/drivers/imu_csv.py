@@ -10,6 +10,10 @@ other columns is refused with an `InputError` naming the file, line and column.
 `read_imu_log` then checks the data for wrong units, column order and time running backwards
 (`imu_checks.check_imu_log`): the source's `fixes` list what it repaired.
 
+A table of 4 columns (`timestamp, a_x, a_y, a_z`: a phone's or board's accelerometer without gyro) is
+not an IMU (`has_imu` False): it is `source.accelerometer`, which a run feeds to the EKF as gravity only
+beside a camera (`--imu`); alone it is refused.
+
 `merge_imu` puts the log's samples between the camera source's frames by camera time: a sample
 stamped `t` (IMU clock, kept as written) happened at camera time `t + time_offset_s`, which becomes
 `info.imu_time_offset_s`. The camera source must not carry an IMU of its own. A log whose samples
@@ -29,7 +33,7 @@ from uareme_fusion.errors import InputError
 from uareme_fusion.io.text_tables import sniff_delimiter
 from uareme_fusion.types import ImuBatch
 
-from ..formats.euroc import EurocImu, read_euroc_imu
+from ..formats.euroc import EurocImu, read_accelerometer_table, read_euroc_imu
 from .base import GroundTruth, Source, SourceInfo
 from .imu_checks import check_imu_log
 from .interleave import IMU_ONLY_BATCH_S, count_spans, interleave, split_by_span
@@ -50,28 +54,42 @@ def non_increasing_note(imu: EurocImu) -> list[str]:
             "and counts them)"]
 
 
+ACCELEROMETER_ALONE = ("{path}: 4 columns (timestamp, a_x, a_y, a_z) are an accelerometer without gyro, which gives "
+                       "tilt only beside a camera: pass it with --imu to a video or image folder")
+
+
 class ImuCsvSource(Source):
     """An EuRoC-format IMU CSV as an IMU-only source (`has_frames` False)."""
 
-    def __init__(self, path: str | Path, batch_s: float = IMU_ONLY_BATCH_S, R_ci: np.ndarray | None = None):
-        self.imu, self.fixes = read_imu_log(path)
+    def __init__(self, path: str | Path, batch_s: float = IMU_ONLY_BATCH_S, R_ci: np.ndarray | None = None,
+                 accelerometer_only: bool = False):
+        """`accelerometer_only`: a 4-column log (no gyro) is taken, to be merged beside a camera; else refused."""
+        self.path = Path(path)
+        self.accelerometer = (read_accelerometer_table(self.path, sniff_delimiter(self.path))
+                              if self.path.is_file() else None)
+        if self.accelerometer is not None and not accelerometer_only:
+            raise InputError(ACCELEROMETER_ALONE.format(path=self.path))
+        self.imu, self.fixes = (None, []) if self.accelerometer is not None else read_imu_log(path)
         self.batch_s = float(batch_s)
-        self.notes = non_increasing_note(self.imu)
-        self.info = SourceInfo(name=str(path), n_frames=0, has_frames=False, has_imu=True,
+        self.notes = non_increasing_note(self.imu) if self.imu is not None else []
+        self.info = SourceInfo(name=str(path), n_frames=0, has_frames=False, has_imu=self.imu is not None,
                                R_ci=np.eye(3) if R_ci is None else np.asarray(R_ci, float))
 
     @property
     def span_s(self) -> tuple[float, float]:
         """First and last timestamp of the log (IMU clock), s."""
-        return float(self.imu.t_s.min()), float(self.imu.t_s.max())
+        t_s = self.imu.t_s if self.imu is not None else self.accelerometer[0]
+        return float(t_s.min()), float(t_s.max())
 
     def batches(self) -> Iterator[ImuBatch]:
+        if self.imu is None:
+            raise InputError(ACCELEROMETER_ALONE.format(path=self.path))
         yield from split_by_span(self.imu.t_s, self.imu.gyro_rad_s, self.imu.accel_m_s2, self.batch_s)
 
     @property
     def n_batches(self) -> int:
         """Batches (so estimates) the run will give: the progress bar's length."""
-        return count_spans(self.imu.t_s, self.batch_s)
+        return count_spans(self.imu.t_s, self.batch_s) if self.imu is not None else 0
 
     def events(self) -> Iterator[ImuBatch]:
         yield from self.batches()
@@ -93,17 +111,20 @@ class MergedSource(Source):
     def __init__(self, camera: Source, imu: Source, time_offset_s: float = 0.0):
         if camera.info.has_imu:
             raise InputError(f"{camera.info.name} already has an IMU; cannot merge the IMU of {imu.info.name}")
-        if not imu.info.has_imu:
+        if not imu.info.has_imu and imu.accelerometer is None:
             raise InputError(f"{imu.info.name} holds no IMU samples to merge")
         if not np.isfinite(time_offset_s):
             raise InputError(f"IMU time offset must be a finite number of seconds, got {time_offset_s}")
         self.camera, self.imu = camera, imu
         (camera_notes, camera_fixes), (imu_notes, imu_fixes) = camera.report(), imu.report()
         self.notes, self.fixes = camera_notes + imu_notes, camera_fixes + imu_fixes
-        self.info = dataclasses.replace(camera.info, has_imu=True, R_ci=imu.info.R_ci,
+        self.accelerometer = imu.accelerometer  # an accelerometer without gyro: fed beside the events
+        self.info = dataclasses.replace(camera.info, has_imu=imu.info.has_imu, R_ci=imu.info.R_ci,
                                         imu_time_offset_s=float(time_offset_s))
 
     def _imu_batches(self) -> Iterator[ImuBatch]:
+        if not self.imu.info.has_imu:
+            return
         for event in self.imu.events():
             if isinstance(event, ImuBatch):
                 yield event

@@ -66,6 +66,22 @@ def release_until(pending: list[ImuBatch], t_s: float) -> tuple[ImuBatch | None,
     return (held[:cut] if cut else None), ([held[cut:]] if cut < len(held) else [])
 
 
+class AccelerometerFeed:
+    """Samples of an accelerometer without gyro (`Source.accelerometer`, IMU clock) handed out up to each
+    frame's time (camera clock: a sample stamped `t` happened at `t + time_offset_s`)."""
+
+    def __init__(self, t_s: np.ndarray, accel_m_s2: np.ndarray, time_offset_s: float = 0.0):
+        self.t_s, self.accel_m_s2 = np.asarray(t_s, float), np.asarray(accel_m_s2, float)
+        self.time_offset_s = float(time_offset_s)
+        self._next = 0
+
+    def until(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """The samples not handed out yet that happened no later than camera time `t_s`: (t_s (n,), accel (n, 3))."""
+        end = max(int(np.searchsorted(self.t_s, t_s - self.time_offset_s, side="right")), self._next)
+        start, self._next = self._next, end
+        return self.t_s[start:end], self.accel_m_s2[start:end]
+
+
 class ImuInterleaver:
     """Hands out IMU samples in camera-time order, pulling batches from an iterator only as far as
     needed (a live IMU is never read ahead by more than one batch)."""

@@ -40,7 +40,7 @@ import numpy as np
 import yaml
 
 from uareme_fusion.errors import ConfigError, InputError
-from uareme_fusion.formats.datasets import PUBLISHED_INTRINSICS
+from uareme_fusion.formats.datasets import PUBLISHED_ACCELEROMETER_R_CI, PUBLISHED_INTRINSICS
 from uareme_fusion.pinhole import pinhole
 from uareme_fusion.types import Frame
 
@@ -107,6 +107,17 @@ def published_camera(folder: Path) -> CameraModel | None:
         return None
     key, name = found
     return replace(PUBLISHED[key], origin=f"published {key} intrinsics (folder name {name})")
+
+
+def published_accelerometer_rotation(folder: Path) -> tuple[np.ndarray, str] | None:
+    """(camera-from-accelerometer `R_ci` (3, 3), where it comes from) of the dataset a folder's name
+    identifies, for an accelerometer without gyro (`formats.datasets.PUBLISHED_ACCELEROMETER_R_CI`); None
+    when the name identifies none with one."""
+    found = published_dataset(folder)
+    if found is None or found[0] not in PUBLISHED_ACCELEROMETER_R_CI:
+        return None
+    key, name = found
+    return PUBLISHED_ACCELEROMETER_R_CI[key].copy(), f"published {key} accelerometer axes (folder name {name})"
 
 
 def parse_intrinsics(value: str) -> CameraModel:

@@ -131,7 +131,7 @@ def open_source(spec: str, imu: str | None = None, fps: float | None = None, int
     if imu is None:
         return source
     try:
-        return merge_imu(source, ImuCsvSource(imu), imu_offset_s)
+        return merge_imu(source, ImuCsvSource(imu, accelerometer_only=True), imu_offset_s)
     except BaseException:
         source.close()
         raise

@@ -6,9 +6,12 @@
 What is read (built on `formats.tum.load_tum_rgbd` and `formats.euroc.read_euroc_imu`):
 - `rgb.txt` + `depth.txt` (or `associations.txt`): RGB uint8 frames and depth in metres (0 = none).
 - `imu0/data.csv` (EuRoC format): gyro + accelerometer batches between frames; `has_imu` True.
-- `accelerometer.txt` alone (the TUM Kinect's accelerometer, no gyro): NOT yielded, because the
-  backends integrate gyro and drop samples without it; `has_imu` stays False and the samples are
-  exposed as `source.accelerometer = (t_s (N,), accel_m_s2 (N, 3))`.
+- `accelerometer.txt` alone (the TUM Kinect's accelerometer, no gyro): not an IMU (`has_imu` stays
+  False, no batches are yielded); the samples are `source.accelerometer = (t_s (N,), accel_m_s2 (N, 3))`,
+  which a run feeds to the backend as gravity only (`Backend.process_accel`). `info.R_ci` is then the
+  camera-from-accelerometer rotation: scene.json / source.json's, else the published one of the dataset
+  the folder's name identifies (`intrinsics.published_accelerometer_rotation`; TUM fr1: fitted on its
+  training frames), else the Kinect's axes (x, y negated); `accelerometer_axes_from` says which.
 - `groundtruth.txt`: `ground_truth()` with `R_wc` per line (camera to world, TUM order x y z w).
 - `normals/<index:06d>.npz` (simulator): exact normals in `Frame.normals` (kappa as stored; a
   dropped frame's map has kappa 0 everywhere: no usable pixel).
@@ -40,12 +43,13 @@ from uareme_fusion.errors import InputError, SourceError
 from uareme_fusion.rotations import is_rotation
 from uareme_fusion.types import Frame, ImuBatch, NormalMap
 
-from ..formats.datasets import RENDERED_DEPTH_DATASETS
+from ..formats.datasets import KINECT_ACCELEROMETER_AXES, RENDERED_DEPTH_DATASETS
 from ..formats.tum import TUM_RGBD_GT_TIME_OFFSET_S, TumSequence, load_tum_rgbd, read_json_object, read_tum_list
 from .base import PLATFORMS, GroundTruth, Source, SourceInfo
 from .imu_csv import non_increasing_note, read_imu_log
 from .interleave import interleave
-from .intrinsics import CameraModel, Undistorter, published_camera, published_dataset
+from .intrinsics import (CameraModel, Undistorter, published_accelerometer_rotation, published_camera,
+                         published_dataset)
 
 SIM_META = "scene.json"
 RECORD_META = "source.json"
@@ -164,10 +168,10 @@ class TumSource(Source):
         if use_imu and imu_csv.is_file():
             self.imu, self.fixes = read_imu_log(imu_csv)
             self.notes += non_increasing_note(self.imu)
-        self.accelerometer = self.seq.accelerometer
-        if self.imu is None and self.accelerometer is not None:
-            self.notes.append(f"{self.root}/accelerometer.txt has no gyro: not used as IMU input "
-                              "(available as source.accelerometer)")
+        self.accelerometer = self.seq.accelerometer if self.imu is None else None
+        R_ci, self.accelerometer_axes_from = self.meta.get("R_ci"), None
+        if self.accelerometer is not None:
+            R_ci, self.accelerometer_axes_from = self._accelerometer_axes(R_ci)
         self.normal_files = self._normal_files() if use_normals else None
         fps = self.meta.get("fps")
         if fps is None and len(self.t_s) > 1:
@@ -182,7 +186,7 @@ class TumSource(Source):
             name=str(root), n_frames=len(self.seq), fps=fps, K=self.seq.K,
             K_origin=None if self.camera is None else self.camera.origin,
             has_depth=any(p is not None for p in self.seq.depth_paths), has_imu=self.imu is not None,
-            R_ci=self.meta.get("R_ci") if self.meta.get("R_ci") is not None else np.eye(3),
+            R_ci=R_ci if R_ci is not None else np.eye(3),
             imu_time_offset_s=self.meta.get("imu_time_offset_s", 0.0), platform=self.meta.get("platform"),
             image_size=None if first is None else first.rgb.shape[:2],
             depth_rendered=rendered, gt_time_offset_s=self._gt_offset_s,
@@ -195,6 +199,15 @@ class TumSource(Source):
         self.notes.append(f"{self.root / 'groundtruth.txt'}: stamps {TUM_RGBD_GT_TIME_OFFSET_S * 1000:+.0f} ms onto "
                           f"the Kinect's clock (the TUM RGB-D default; --gt-time-offset-s to change)")
         return TUM_RGBD_GT_TIME_OFFSET_S
+
+    def _accelerometer_axes(self, R_ci: np.ndarray | None) -> tuple[np.ndarray, str]:
+        """(R_ci, where it comes from) of an accelerometer without gyro; see the module docstring."""
+        if R_ci is not None:
+            return R_ci, str(self.meta["path"])
+        published = published_accelerometer_rotation(self.root)
+        if published is not None:
+            return published
+        return KINECT_ACCELEROMETER_AXES.copy(), "the Kinect's accelerometer axes (x, y negated; not verified here)"
 
     def _camera(self) -> CameraModel | None:
         """K from source.json / scene.json, else the published intrinsics the folder's name identifies

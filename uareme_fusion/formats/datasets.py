@@ -9,6 +9,7 @@ rotations need `flip_y_rotation` to match it.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ..pinhole import pinhole
 from .depth_png import MILLIMETRE_DEPTH_UNIT_M, read_depth_png
@@ -31,6 +32,19 @@ PUBLISHED_INTRINSICS: dict[str, tuple[np.ndarray, np.ndarray]] = {
     "ICL-NUIM": (ICL_NUIM_K_OPENCV, np.zeros(0)),
 }
 """(K, distortion) that datasets publish, by dataset name (ICL-NUIM in OpenCV axes)."""
+
+KINECT_ACCELEROMETER_AXES = np.diag([-1.0, -1.0, 1.0])
+"""A Kinect's accelerometer axes seen from its RGB camera: x and y negated (`v_c = R_ci v_i`)."""
+
+PUBLISHED_ACCELEROMETER_R_CI: dict[str, np.ndarray] = {
+    # Fitted on the fr1 rpy training frames (the first 516; tools/fit_accelerometer_rotation.py): the
+    # 0.05 s mean accelerometer direction against the mocap's up at 646 quiet instants, median residual
+    # 1.53 deg (4.18 with the Kinect's bare axes, 4.63 deg away); the two halves fit 1.3 deg apart.
+    "TUM RGB-D freiburg1": Rotation.from_rotvec([0.09384, -0.08265, -3.12684]).as_matrix(),
+    "TUM RGB-D freiburg2": KINECT_ACCELEROMETER_AXES,  # the Kinect's axes, not fitted (no fr2 data here)
+}
+"""Camera-from-accelerometer rotation `R_ci` of the datasets whose `accelerometer.txt` has no gyro, by
+dataset name (as `PUBLISHED_INTRINSICS`)."""
 
 RENDERED_DEPTH_DATASETS = frozenset({"ICL-NUIM"})
 """Datasets of `PUBLISHED_INTRINSICS` whose depth maps are rendered, not measured (`SourceInfo.depth_rendered`)."""

@@ -115,6 +115,31 @@ def read_euroc_imu(path: str | Path, delimiter: str | None = ",", exports: bool 
     return EurocImu(path, t_ns, t_ns * 1e-9, values[:, :3], values[:, 3:], from_float_s)
 
 
+ACCELEROMETER_COLUMNS = ("timestamp [ns]", "a_x [m s^-2]", "a_y [m s^-2]", "a_z [m s^-2]")
+"""An accelerometer log without gyro: the EuRoC columns less the gyro's."""
+
+
+def read_accelerometer_table(path: str | Path, delimiter: str | None = ",") -> tuple[np.ndarray, np.ndarray] | None:
+    """An IMU table of exactly 4 columns (`ACCELEROMETER_COLUMNS`: an accelerometer without gyro; the
+    timestamps and a line of names as `read_euroc_imu(exports=True)` takes them) as `(t_s (N,),
+    accel_m_s2 (N, 3))`; None for a table of any other width (or no table: `read_euroc_imu` says why)."""
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            first = next((line for line in fh if line.strip() and not line.lstrip().startswith("#")), "")
+    except (OSError, UnicodeDecodeError):
+        return None
+    if len(first.split(delimiter)) != len(ACCELEROMETER_COLUMNS):
+        return None
+    table = _without_names_row(read_table(path, ACCELEROMETER_COLUMNS, delimiter=delimiter,
+                                          kind="an accelerometer log"))
+    if len(table) == 0:
+        raise InputError(f"{path} holds no accelerometer samples (only comments or blank lines)")
+    t_ns, _ = _timestamps_ns(table, True)
+    values = table.floats(slice(1, 4))
+    table.require_finite(values, "accel value")
+    return t_ns * 1e-9, values
+
+
 def _is_number(cell: str) -> bool:
     try:
         float(cell)

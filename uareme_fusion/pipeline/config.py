@@ -44,6 +44,9 @@ class RunConfig(BaseModel):
     offline: bool = False
     """A recorded IMU-only file: estimates from the EKF run forward and backward over the whole log
     (`backends.mekf.offline`) instead of the streaming filter."""
+    accelerometer: bool = True
+    """Feed an accelerometer without gyro (TUM's `accelerometer.txt`: `Source.accelerometer`) to the EKF
+    as gravity only (`backends.mekf.gravity_only`); False (`--no-accel`): leave it out."""
     max_frames: int | None = Field(None, gt=0)
     """Stop after this many frames (None: the whole source)."""
     threads: int = Field(1, ge=1, le=256)

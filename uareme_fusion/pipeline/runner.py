@@ -123,6 +123,8 @@ class Pipeline:
         """A `cues.CueSolver` (normals and/or lines); None: the normals-only solver."""
         self._R_cm_prev = None
         self.stats = RunStats(backend=backend.name)
+        self.accelerometer = None
+        """An `interleave.AccelerometerFeed` of an accelerometer without gyro, fed up to each frame; None: none."""
 
     def process_imu(self, batch: ImuBatch) -> None:
         t0 = time.perf_counter()
@@ -144,6 +146,8 @@ class Pipeline:
         times = self.stats.times
         t0 = time.perf_counter()
         normal_map = self.normals.estimate_frame(frame) if self.normals is not None else None
+        if self.accelerometer is not None:
+            self.backend.process_accel(*self.accelerometer.until(frame.t_s + self.backend.accelerometer_lookahead_s))
         t1 = time.perf_counter()
         visual = self.visual_rotation(normal_map, frame.t_s, frame)
         t2 = time.perf_counter()

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..drivers.base import GroundTruth, Source
 from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
+from ..drivers.interleave import AccelerometerFeed
 from ..errors import InputError, OutputError
 from ..backends.factory import backend_kind, knows_gravity
 from ..scoring.metrics import attitude_errors, error_summary
@@ -106,7 +107,27 @@ def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipe
         if cfg.backend != "mekf":
             raise InputError(f"--offline smooths with the mekf backend, not {cfg.backend}")
         backend = offline_backend(backend.config, source)
-    return Pipeline(normals, backend, sinks, cues)
+    pipeline = Pipeline(normals, backend, sinks, cues)
+    if accelerometer_used(source, cfg):
+        pipeline.accelerometer = AccelerometerFeed(*source.accelerometer, source.info.imu_time_offset_s)
+    return pipeline
+
+
+def accelerometer_used(source: Source, cfg: RunConfig) -> bool:
+    """Whether a run feeds the source's accelerometer without gyro to its backend (the EKF only)."""
+    return source.accelerometer is not None and cfg.accelerometer and cfg.backend == "mekf" and not cfg.offline
+
+
+def accelerometer_note(source: Source, cfg: RunConfig) -> str | None:
+    """The `note:` line on an accelerometer without gyro: used as gravity only, or why not."""
+    if source.accelerometer is None:
+        return None
+    what = f"{source.info.name}: accelerometer without gyro"
+    if accelerometer_used(source, cfg):
+        axes = getattr(source, "accelerometer_axes_from", None) or "the source's R_ci"
+        return f"{what}: used as gravity only (axes: {axes}; --imu-rotation overrides, --no-accel leaves it out)"
+    why = "--no-accel" if not cfg.accelerometer else f"the {cfg.backend} backend takes none"
+    return f"{what}: not used ({why})"
 
 
 def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False, extra_sinks: Iterable = (),
@@ -145,6 +166,9 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
         if normals_note:
             summary["notes"].append(normals_note)
             summary["normals_note"] = normals_note
+        if pipeline.accelerometer is not None:  # an accelerometer without gyro: what became of its updates
+            summary["accelerometer_counts"] = {k: v for k, v in getattr(pipeline.backend, "counters", {}).items()
+                                               if k.startswith("accel_only")}
         if pipeline.cues is not None and pipeline.cues.focal is not None:  # K given, estimated or assumed
             summary["intrinsics"] = pipeline.cues.intrinsics_summary()
         for sink in extra_sinks:
@@ -217,6 +241,7 @@ def run_to_folder(source_spec: str, out_dir: str | Path, cfg: RunConfig | None =
 def run_notes(source: Source, cfg: RunConfig) -> tuple[list[str], list[str]]:
     """(notes, fixes) of a run: what the source's driver left out or repaired, and the preset choice."""
     notes, fixes = source.report()
+    notes += [note for note in [accelerometer_note(source, cfg)] if note]
     if cfg.backend == "mekf":
         _, preset_note = mekf_preset_for(cfg.mekf_preset, source.info)
         notes += [preset_note] if preset_note else []
@@ -229,6 +254,7 @@ def summary_document(stats: RunStats, cfg: RunConfig, command: str, source: Sour
     doc = {"command": command, **stats.as_dict(),
            "source_info": {"frames_known": info.n_frames, "fps": info.fps, "has_frames": info.has_frames,
                            "has_imu": info.has_imu, "has_depth": info.has_depth,
+                           "accelerometer_used": accelerometer_used(source, cfg),
                            "intrinsics_known": info.K is not None, "intrinsics_from": info.K_origin},
            "mekf_preset": mekf_preset_for(cfg.mekf_preset, info)[0] if cfg.backend == "mekf" else None,
            "notes": notes, "input_fixes": fixes,

@@ -80,6 +80,28 @@ class MekfConfig(GyroNoiseConfig):
     variance factor `1 + (angle / this)^2` (continuous, no timeouts)."""
     accel_downweight_flag_ratio: float = Field(2.0, gt=1, le=1e6)
     """ACCEL_DOWNWEIGHTED is set when the inflated std exceeds this many times the nominal one."""
+    accel_only_window_s: float = Field(0.2, ge=1e-3, le=10.0)
+    """An accelerometer without gyro (visual-only model, `gravity_only.py`): each frame averages its
+    samples over this window (handheld shaking averages out), turned to the frame's time with the
+    model's rate, s. Tuned on the TUM fr1 rpy training frames (mekf, depth normals: tilt 2.96 deg
+    without, 1.86 with; learned normals 7.09 -> 1.85; a 0.1 s window ending at the frame: 2.52)."""
+    accel_only_lookahead_s: float = Field(0.1, ge=0, le=10.0)
+    """...the window ends this long after the frame: a run feeds the samples that far ahead (a replay
+    of a recording; live, the estimate would wait this long), s. 0: the window ends at the frame."""
+    accel_only_turn_samples: bool = True
+    """...turn each sample to the frame's time with the model's rate (the rate error enters H)."""
+    accel_only_noise_rad_sqrt_s: float = Field(0.001, ge=1e-6, le=10.0)
+    """...its direction noise density, rad*sqrt(s): std `this / sqrt(window)` per tilt axis before
+    inflation (and times `sqrt(window / frame step)` for the overlap of successive windows)."""
+    accel_only_innovation_scale_rad: float = Field(0.3, ge=1e-4, le=10.0)
+    """...angle between measured and predicted up at which its variance doubles, rad (without a gyro
+    the prediction is the camera's, which errs more than a gyro-carried one)."""
+    accel_only_shake_m_s2: float = Field(3.0, gt=0, le=100.0)
+    """...rms deviation of the window's samples from their mean at which its variance doubles, m/s^2
+    (a shaking camera: variance factor `1 + (rms / this)^2`)."""
+    accel_range_m_s2: float = Field(156.9, gt=1.0, le=10000.0)
+    """Accelerometer full scale per axis, m/s^2 (156.9 = 16 g): a window holding a sample at or beyond
+    it gives no gravity update (accelerometer without gyro)."""
     rest_gyro_max_rad_s: float = Field(0.0, ge=0, le=10.0)
     """Rest detection for the zero-rate bias update (0 = off): an accelerometer-update period is at
     rest when its mean gyro reading and the rms deviation of its gyro samples from that mean are both

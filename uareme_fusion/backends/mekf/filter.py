@@ -23,6 +23,7 @@ from .accel import AccelPeriod
 from .compiled import (STAGE_ROWS, accel_update_compiled, harvest_kernel_counters, integrate_staged_compiled,
                        kernels_available, stage_compiled, to_reference_path, visual_update_compiled)
 from .config import GyroSampling, MekfConfig, MekfMode
+from .gravity_only import GravityOnly
 from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
                            visual_model)
 from .motion import ConstantRateMotion, GyroMotion
@@ -150,6 +151,8 @@ class Mekf(Backend):
         self.noise_share = VisualNoiseShare(cfg.visual_noise_share_frames)  # visual only (its `persistent_cov`)
         self._dropped_reported = 0
         self.accel = AccelPeriod(self.x)
+        self.gravity_only = GravityOnly(cfg)  # an accelerometer without gyro (visual only: `process_accel`)
+        self.accelerometer_lookahead_s = cfg.accel_only_lookahead_s
         self.record_t: list[np.ndarray] = []
         self.record_R: list[np.ndarray] = []
         self.record_P: list[np.ndarray] = []
@@ -159,6 +162,8 @@ class Mekf(Backend):
         """What happened so far, by name (updates applied, skipped, rejected, ...); the compiled
         kernels' counts (kept in `x`) are added in when read."""
         harvest_kernel_counters(self.x, self._counters)
+        if self.gravity_only.active:
+            self._counters.update(self.gravity_only.counts)
         return self._counters
 
     @property
@@ -202,6 +207,30 @@ class Mekf(Backend):
                 return
             t_s, gyro_rad_s, accel_m_s2 = t, gyro, accel  # checked: `ImuStream.add` takes them as they are
         self._add(t_s, gyro_rad_s, accel_m_s2)
+
+    def process_accel(self, t_s, accel_m_s2) -> None:
+        """Feed accelerometer samples of a sensor without gyro: `t_s` (N,) s on the IMU clock,
+        `accel_m_s2` (N, 3) m/s^2 in the IMU frame (`R_ci`). The visual-only model uses them as a
+        gravity measurement at each frame (`gravity_only.py`); a gyro-driven mode ignores them."""
+        if self._mode_resolved and self.motion.uses_imu:
+            self.counters["imu_ignored"] += int(np.size(t_s))
+            return
+        self.gravity_only.add(t_s, accel_m_s2)
+
+    def _gravity_rows(self):
+        """Visual only, with an accelerometer without gyro: its gravity rows `(residual, R, H)` at the
+        state time, or None (`gravity_only.py`: the first makes the world gravity-aligned)."""
+        if self.motion.uses_imu or not self.initialised or not self.gravity_only.active:
+            return None
+        rows, bits = self.gravity_only.update_rows(self)
+        self.flags |= bits
+        return rows
+
+    def _gravity_update(self) -> None:
+        """`_gravity_rows` alone, for a frame without a visual update."""
+        rows = self._gravity_rows()
+        if rows is not None:
+            self._kalman_update(*rows)
 
     def _add(self, t_s, gyro_rad_s, accel_m_s2) -> None:
         """`process_imu`'s samples into the reorder buffer, released once they span an update period."""
@@ -281,9 +310,11 @@ class Mekf(Backend):
                 self.t_visual_s = t_s
             if self.accel.due:
                 self.accel_update()
+            self._gravity_update()
             return self._estimate(t_s)
         if self.accel.due:
             self.accel_update()
+        self._gravity_update()
         if visual is None or not fuses_visual:
             if fuses_visual:
                 self.flags |= status_bits.VISUAL_MISSING
@@ -294,6 +325,7 @@ class Mekf(Backend):
             self.counters["visual_nonfinite"] += 1
         elif not self.initialised:
             self.motion.start_from_visual(self, t_s, visual)
+            self._gravity_update()  # (visual only) the first frame's world is gravity's
         elif not self.initialise_manhattan(visual):
             self._count_rejection()
         return self._estimate(t_s)
@@ -426,6 +458,8 @@ class Mekf(Backend):
             accel_rows = self._take_accel_rows()
             if self.counters["rest_updates"] > rest_before:  # the zero-rate update moved the state
                 r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
+        else:
+            accel_rows = self._gravity_rows()  # an accelerometer without gyro (visual only)
         if t_prev_s is not None:
             R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
         S = H @ self.P @ H.T + R_vis  # the gate and Huber weigh the frame's full error

@@ -1,0 +1,148 @@
+"""An accelerometer without a gyro (TUM's Kinect, some phones and boards) as a gravity measurement of
+`Mekf`'s visual-only model.
+
+Without a gyro nothing integrates between frames: the constant-rate model (`motion.ConstantRateMotion`)
+carries the attitude, and at each frame the accelerometer samples of a window around it
+(`accel_only_window_s`, ending `accel_only_lookahead_s` after the frame) are averaged into one
+direction that measures up in the camera frame, through the same model as with a gyro
+(`measurements.gravity_model`: gated by its own norm, inflated by its innovation). The samples are
+turned to the frame's time with the model's rate (`omega_c`; the rate's error enters H), since the
+camera turns within the window. What a gyro's common frame would cancel (a handheld camera's
+shaking) is averaged here, and the update is also inflated by the samples' rms deviation from their
+mean (`accel_only_shake_m_s2`: rest against motion) and by the overlap of successive windows
+(`correlated_noise_scale`). It is skipped when a sample is at the range (`accel_range_m_s2`:
+saturated, flagged `ACCEL_DOWNWEIGHTED`) or when the stream stopped (no sample within
+`imu_gap_limit_s` of the window's end: flagged `IMU_GAP`); the camera carries on alone.
+
+The visual-only world is the first Manhattan frame, its z the axis nearest image up. The first gravity
+update relabels it so that z is the Manhattan axis nearest the measured up (`gravity_world`) and gives
+the Manhattan frame a tilt prior (`manhattan_vertical_std_rad`, "walls are vertical") shared with the
+camera attitude (`world_tilt_prior`): from then on the world's z is up."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ...rotations import manhattan_symmetries, skew
+from . import status_bits
+from .measurements import correlated_noise_scale, gravity_model
+from .state import I3, MF, N_STATE, RATE, TH
+
+KEEP_S = 1.0
+"""Samples older than the window by this much are dropped from the buffer, s."""
+
+
+def world_tilt_prior(P: np.ndarray, R_wc: np.ndarray, R_wm: np.ndarray, std_rad: float) -> np.ndarray:
+    """The error covariance (12, 12) with the world's tilt made uncertain by `std_rad` (rad, about world
+    x and y): a world rotation `Exp(delta)` moves both `R_wc` and `R_wm`, whose right perturbations
+    take `R_wc^T delta` and `R_wm^T delta`."""
+    J = np.zeros((N_STATE, 3))
+    J[TH], J[MF] = R_wc.T, R_wm.T
+    P = P + std_rad**2 * J[:, :2] @ J[:, :2].T
+    return 0.5 * (P + P.T)
+
+
+class GravityOnly:
+    """Accelerometer samples without gyro (camera frame, camera clock), and the per-frame gravity rows.
+
+    `add(t_s, accel_m_s2)` takes samples on the IMU clock and in the IMU frame (`MekfConfig.R_ci`,
+    `imu_time_offset_s`); `update_rows(filt)` gives a frame's measurement. `counts`: samples dropped
+    (non-finite, out of order), updates made, skipped (free fall), saturated windows, and frames with
+    the stream stopped.
+    """
+
+    def __init__(self, cfg):
+        self.R_ci = np.asarray(cfg.R_ci, float)
+        self.offset_s = float(cfg.imu_time_offset_s)
+        self.t_s = np.zeros(0)
+        self.accel_c = np.zeros((0, 3))
+        self.counts = dict(accel_only_dropped=0, accel_only_updates=0, accel_only_skipped=0,
+                           accel_only_saturated=0, accel_only_stopped=0)
+        self._t_update_s: float | None = None
+        self.world_aligned = False
+        """Whether the world was relabelled to gravity (`update_rows`, once)."""
+
+    @property
+    def active(self) -> bool:
+        """Whether samples ever came (a run without them never looks here)."""
+        return self.t_s.size > 0 or self._t_update_s is not None or self.counts["accel_only_dropped"] > 0
+
+    def add(self, t_s, accel_m_s2) -> None:
+        t = np.asarray(t_s, float).reshape(-1) + self.offset_s
+        a = np.asarray(accel_m_s2, float).reshape(-1, 3)
+        newest = self.t_s[-1] if self.t_s.size else -np.inf
+        keep = np.isfinite(t) & np.isfinite(a).all(axis=1)
+        keep[keep] &= t[keep] > np.maximum.accumulate(np.concatenate([[newest], t[keep][:-1]]))
+        self.counts["accel_only_dropped"] += int((~keep).sum())
+        self.t_s = np.concatenate([self.t_s, t[keep]])
+        self.accel_c = np.concatenate([self.accel_c, a[keep] @ self.R_ci.T])
+
+    def update_rows(self, filt):
+        """The gravity measurement of filter `filt` (a visual-only `Mekf`) at its state time from the
+        samples of the trailing window: `((residual (3,), R (3, 3), H (3, 12)) or None, status bits)`.
+        The first one relabels the world so that its z is the Manhattan axis nearest the measured up
+        (`gravity_world`); whenever the Manhattan frame is certain (first, and after a re-initialisation)
+        the world's tilt gets its prior (`world_tilt_prior`)."""
+        cfg, t_s = filt.config, filt.t_state
+        mean, dmean_domega, covered_s, shake2, bits = self.window_mean(t_s, filt.omega_c, cfg)
+        if mean is None:
+            return None, bits
+        if not np.linalg.norm(mean) > 0.1 * cfg.gravity_m_s2:  # free fall: no direction
+            self.counts["accel_only_skipped"] += 1
+            return None, bits
+        if not self.world_aligned:
+            S = gravity_world(filt.R_wc @ mean)
+            filt.R_wc, filt.R_wm = S @ filt.R_wc, S @ filt.R_wm
+            self.world_aligned = True
+        if not filt.P[MF, MF].any():
+            filt.P = world_tilt_prior(filt.P, filt.R_wc, filt.R_wm, cfg.manhattan_vertical_std_rad)
+        _, r, var, H, downweighted = gravity_model(
+            mean, covered_s, filt.R_wc, np.zeros((3, 3)), False, cfg.gravity_m_s2, cfg.accel_only_noise_rad_sqrt_s,
+            cfg.accel_norm_scale, cfg.accel_only_innovation_scale_rad, cfg.accel_downweight_flag_ratio)
+        z = mean / np.linalg.norm(mean)
+        H[:, RATE] = -(I3 - np.outer(z, z)) @ dmean_domega / np.linalg.norm(mean)  # z = normalise(mean(omega))
+        shake_factor = 1.0 + shake2 / cfg.accel_only_shake_m_s2**2
+        dt = np.inf if self._t_update_s is None else t_s - self._t_update_s
+        var *= shake_factor * correlated_noise_scale(dt, cfg.accel_only_window_s)
+        self._t_update_s = t_s
+        self.counts["accel_only_updates"] += 1
+        if downweighted or shake_factor > cfg.accel_downweight_flag_ratio**2:
+            bits |= status_bits.ACCEL_DOWNWEIGHTED
+        return (r, var * I3, H), bits
+
+    def window_mean(self, t_s: float, omega_c: np.ndarray, cfg):
+        """`(mean specific force (3,) m/s^2 or None, its derivative by the rate (3, 3) s*m/s^2, time it
+        covers s, mean squared deviation of the samples from it (m/s^2)^2, status bits)` of the samples
+        in the trailing window before `t_s` (s), each turned to `t_s` with the rate `omega_c` (3,) rad/s:
+        `v_c(t_s) = Exp(omega (t_k - t_s)) v_c(t_k)`, whose derivative by omega is about
+        `-(t_k - t_s) skew(v_c)`. None when the stream stopped (`IMU_GAP`) or a sample is saturated
+        (`ACCEL_DOWNWEIGHTED`)."""
+        window = cfg.accel_only_window_s
+        old = int(np.searchsorted(self.t_s, t_s - window - KEEP_S))
+        if old:
+            self.t_s, self.accel_c = self.t_s[old:], self.accel_c[old:]
+        ahead = cfg.accel_only_lookahead_s
+        lo, hi = np.searchsorted(self.t_s, [t_s + ahead - window, t_s + ahead], side="right")
+        if hi == 0 or t_s + ahead - self.t_s[hi - 1] > cfg.imu_gap_limit_s:  # the stream stopped (or not started)
+            self.counts["accel_only_stopped"] += 1
+            return None, None, 0.0, 0.0, status_bits.IMU_GAP
+        t, a = self.t_s[lo:hi], self.accel_c[lo:hi]
+        if (np.abs(a) >= cfg.accel_range_m_s2).any():
+            self.counts["accel_only_saturated"] += 1
+            return None, None, 0.0, 0.0, status_bits.ACCEL_DOWNWEIGHTED
+        tau = t - t_s
+        if not cfg.accel_only_turn_samples:
+            tau = np.zeros_like(tau)
+        a_s = Rotation.from_rotvec(np.outer(tau, omega_c)).apply(a)
+        mean = a_s.mean(axis=0)
+        covered_s = max(min(window, t[-1] - t[0]), window / 2 if t.size == 1 else 1e-3)
+        return (mean, -skew((tau[:, None] * a_s).mean(axis=0)), covered_s,
+                float(((a_s - mean) ** 2).sum(axis=1).mean()), status_bits.OK)
+
+
+def gravity_world(up_w: np.ndarray) -> np.ndarray:
+    """The Manhattan relabelling `S` (3, 3; one of the 24, nearest identity) of a world that is a
+    Manhattan frame, whose z is the axis nearest the measured up `up_w` (3,): the new world is `S` times the old."""
+    G = manhattan_symmetries()
+    return G[int(np.argmax(G[:, 2] @ up_w))].copy()
