@@ -26,11 +26,10 @@ import argparse
 import pickle
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-from uareme_fusion.rotations import manhattan_symmetries, nearest_symmetric, project_to_so3
+from uareme_fusion.rotations import nearest_symmetric, project_to_so3
 
 
 def cache(data: str, out: str, model: str | None, max_frames: int | None) -> None:
