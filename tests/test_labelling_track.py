@@ -127,3 +127,20 @@ def test_single_backend_reports_each_frames_own_rotation_in_the_tracks_labelling
         if predicted is not None:
             assert np.allclose(R_cm, nearest_symmetric(v.R_cm, predicted)[0])  # the one nearest the track
     assert backend.track.rejected == 0
+
+
+def test_confident_frames_that_keep_disagreeing_restart_the_track():
+    """Image rotations that drifted (a biased focal length) must not lock the frames' evidence out."""
+    config = LabellingTrackConfig(rate_std_rad_s=0.0, restart_after_rejected=5)  # a track that does not widen
+    track = LabellingTrack(config)
+    R = np.eye(3)
+    track.label(0.0, _visual(R, 1.0, 0.0))
+    off = exp_so3(np.radians([0.0, 20.0, 0.0]))
+    for k in range(1, 5):
+        track.label(k / FPS, _visual(off, 1.0, k / FPS))
+    assert track.rejected == 4 and track.restarts == 0
+    assert np.degrees(angle_between(track.R_cm, R)) == pytest.approx(0.0, abs=1e-9)
+    track.label(5 / FPS, _visual(off, 1.0, 5 / FPS))  # the fifth in a row: the evidence wins
+    assert track.restarts == 1 and np.degrees(angle_between(track.R_cm, off)) == pytest.approx(0.0, abs=1e-9)
+    out = track.label(6 / FPS, _visual(off, 1.0, 6 / FPS))
+    assert track.rejected == 5 and np.degrees(angle_between(out.R_cm, off)) == pytest.approx(0.0, abs=1e-9)

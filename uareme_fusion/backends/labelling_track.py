@@ -38,6 +38,10 @@ class LabellingTrackConfig:
     gate_chi2: float = 16.27
     """A frame whose Mahalanobis distance squared to the track (with both covariances) exceeds this does
     not move the track (chi-square, 3 degrees of freedom, 99.9 %)."""
+    restart_after_rejected: int = 5
+    """After this many consecutive frames beyond the gate the track restarts at the frame (in the labelling
+    nearest it, with the frame's covariance): evidence that keeps disagreeing wins over a track whose
+    image rotations drifted (an image rotation biased by a focal length estimated from the scene)."""
     max_gap_s: float = 1.0
     """Frames further apart than this (a stream that stopped) predict over this at most: the labelling
     is kept, the track is as wide as a second of turning allows."""
@@ -54,6 +58,9 @@ class LabellingTrack:
         self.t_s = float("nan")
         self.rejected = 0
         """Frames that disagreed with the track beyond the gate (labelled, not fused)."""
+        self.restarts = 0
+        """Times the track restarted at a frame after `restart_after_rejected` consecutive rejections."""
+        self._rejected_run = 0
 
     def predicted(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
         """The track's (R_cm, cov) predicted to `t_s`; None before the first frame."""
@@ -71,7 +78,8 @@ class LabellingTrack:
 
     def label(self, t_s: float, visual: VisualRotation) -> VisualRotation:
         """`visual` with the labelling nearest the track; the track then takes it in (first frame: it
-        starts there), unless it is beyond the gate or its covariance is not finite."""
+        starts there), unless it is beyond the gate (then, the `restart_after_rejected`-th such frame in a
+        row restarts it there) or its covariance is not finite."""
         prediction = self.predicted(t_s)
         if prediction is None:
             self.R_cm, self.cov, self.t_s = visual.R_cm, np.asarray(visual.cov, float), t_s
@@ -86,7 +94,12 @@ class LabellingTrack:
         S = P + C
         if float(r @ np.linalg.solve(S, r)) > self.config.gate_chi2:
             self.rejected += 1
+            self._rejected_run += 1
+            if self._rejected_run >= self.config.restart_after_rejected:
+                self.R_cm, self.cov, self._rejected_run = visual.R_cm, C, 0
+                self.restarts += 1
             return visual
+        self._rejected_run = 0
         gain = np.linalg.solve(S, P).T  # P S^-1 (P and S symmetric)
         self.R_cm = R_pred @ exp_so3(gain @ r)
         I_KH = np.eye(3) - gain
