@@ -140,6 +140,12 @@ class VisualRotation:
     reason: str = ""
     """Why the covariance is wide, when the frame has no usable evidence (e.g. "no valid normals, too few
     segments"); empty otherwise."""
+    R_cp: np.ndarray | None = None
+    """In a stream: the camera's rotation since the previous frame from the image motion
+    (`solver.frame_motion`), mapping the previous frame's camera coordinates to this frame's; None when
+    unknown (the first frame, a single image, too few tracks). Independent of the Manhattan labelling."""
+    R_cp_std_rad: float = float("nan")
+    """Its std per axis (rad) of the left perturbation `R_cp_true = Exp(eps) R_cp`."""
 
     def symmetric_to(self, R_cm_ref: np.ndarray) -> "VisualRotation":
         """The same measurement expressed with the Manhattan labelling nearest `R_cm_ref`.

@@ -1,4 +1,9 @@
-"""The paper's single-frame ablation: each frame solved alone, initialised from the last one.
+"""The paper's single-frame ablation: each frame solved alone, initialised from the stream's track.
+
+Each frame's estimate is its own visual rotation; only its Manhattan labelling (one of 24) comes from the
+stream: the one nearest a covariance-weighted track of the frames (`labelling_track.LabellingTrack`), so
+that a few wrong frames do not walk the labelling to a neighbouring one. The track's rotation also
+starts the next frame's solve (a start, not an anchor: the solver's `jump_margin`).
 
 There is no gravity here: the world frame is the Manhattan frame as labelled on the first frame
 (`R_wm = I`, so `R_wc = R_cm^T`), z up when the first view was roughly upright.
@@ -10,6 +15,7 @@ import numpy as np
 
 from ..types import Estimate, Status, VisualRotation, visual_R_wc_covariance
 from .base import Backend
+from .labelling_track import LabellingTrack, LabellingTrackConfig
 
 
 class SingleFrame(Backend):
@@ -17,9 +23,10 @@ class SingleFrame(Backend):
 
     name = "single"
 
-    def __init__(self, missing_variance_rad2: float = 1.0):
+    def __init__(self, missing_variance_rad2: float = 1.0, labelling: LabellingTrackConfig | None = None):
         self.missing_variance_rad2 = missing_variance_rad2
         self._last: Estimate | None = None
+        self.track = LabellingTrack(labelling)
 
     def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
         if visual is None:
@@ -29,13 +36,12 @@ class SingleFrame(Backend):
             else:
                 est = Estimate(t_s, self._last.R_wc, self._last.cov, Status.VISUAL_MISSING, R_wm=np.eye(3))
         else:
-            if self._last is not None:
-                # Keep the labelling nearest the last frame (the solver was initialised from it).
-                visual = visual.symmetric_to(self._last.R_wc.T)
+            visual = self.track.label(t_s, visual)
             # (R_cm Exp(delta))^T = R_cm^T Exp(-R_cm delta): the right error of R_wc is -R_cm delta.
             est = Estimate(t_s, visual.R_cm.T, visual_R_wc_covariance(visual), R_wm=np.eye(3))
         self._last = est
         return est
 
     def predicted_R_cm(self, t_s: float) -> np.ndarray | None:
-        return None if self._last is None else self._last.R_wc.T
+        prediction = self.track.predicted(t_s)
+        return None if prediction is None else prediction[0]

@@ -25,6 +25,7 @@ from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K
                             unknown_centre_floor)
 from ..solver.horizon_estimate import sky_and_segments
 from ..solver.evidence import no_evidence_reason, without_evidence
+from ..solver.frame_motion import FrameMotion
 from ..solver.joint import JointSolver
 from ..solver.manhattan import up_candidate
 from ..solver.sky_horizon import SkyDetector
@@ -66,7 +67,8 @@ class CueSolver:
     """
 
     def __init__(self, lines: bool = True, assumed_fov_deg: float = DEFAULT_FOV_DEG,
-                 detector: SegmentDetector | None = None, sky: bool = False, image_normals: bool = True):
+                 detector: SegmentDetector | None = None, sky: bool = False, image_normals: bool = True,
+                 motion: bool = True):
         self.detector = (detector or SegmentDetector()) if lines else None
         self.sky = SkyDetector() if sky else None
         """The sky boundary cue (`solver/sky_horizon.py`), None without it."""
@@ -75,6 +77,9 @@ class CueSolver:
         self.image_normals = image_normals
         """Whether the normals come from the image (a network): then a frame without image evidence
         (`solver.evidence`) reports the capped covariance and why; depth normals are not judged so."""
+        self.motion = FrameMotion() if motion else None
+        """The camera's rotation since the previous frame from the image motion (`VisualRotation.R_cp`:
+        the stream's labelling follows it, `backends/labelling_track.py`); None: not measured."""
         self.solver = JointSolver()
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.focal: FocalEstimate | None = None
@@ -107,7 +112,16 @@ class CueSolver:
         except InputError:
             return None
         reason = no_evidence_reason(frame.rgb) if self.image_normals and normal_map is not None else ""
-        return without_evidence(visual, reason, self.solver.config.max_variance_rad2) if reason else visual
+        visual = without_evidence(visual, reason, self.solver.config.max_variance_rad2) if reason else visual
+        return self._with_motion(frame, visual)
+
+    def _with_motion(self, frame: Frame, visual: VisualRotation) -> VisualRotation:
+        """`visual` with the image rotation since the previous frame (`FrameMotion`, at the K in use)."""
+        if self.motion is None:
+            return visual
+        K = frame.K if frame.K is not None else (self.focal.K if self.focal is not None else None)
+        step = self.motion.step(frame.t_s, frame.rgb, K)
+        return visual if step is None else dataclasses.replace(visual, R_cp=step.R_cp, R_cp_std_rad=step.std_rad)
 
     def _other_size(self, frame: Frame) -> bool:
         """Whether a frame without K differs in size from the stream's camera (the first such frame's);
