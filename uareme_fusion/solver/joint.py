@@ -294,10 +294,17 @@ class JointSolver:
         """The robust minimum of J (module docstring): (R_cm, the cues as reweighted there, iterations,
         converged, the other minima found as (R, robust score above the best's), the angle (rad) from the
         prior's own minimum to the one kept, 0 when it is the prior's)."""
-        starts = [] if R_init is None else [(_check_rotation(R_init), False)]
-        starts += self._global_starts(cues, R_init)
         minima, first, iterations = [], [], 0
-        for R, plain_first in starts:
+        if R_init is not None:  # the prior's own minima: reweighted at the fine scale first, and at the coarse
+            R_init = _check_rotation(R_init)  # scale first (a fast turn); the robust score chooses between them
+            first.append(R_init)
+            for coarse in (False, True):
+                R, found, its, converged = self._reweighted_minimum(cues, R_init, coarse_first=coarse)
+                iterations += its
+                if not any(_angle_rad(R, m[0]) < _SAME_MINIMUM_RAD for m in minima):
+                    minima.append((R, found, converged))
+        n_prior = len(minima)
+        for R, plain_first in self._global_starts(cues, R_init):
             if plain_first:
                 R, its, _, converged = self._refine(cues, R)
                 iterations += its
@@ -308,15 +315,17 @@ class JointSolver:
             minima.append((R, found, converged))
             iterations += its
         scores = _robust_scores(cues, minima)
-        best = int(np.argmin(scores))
-        if R_init is not None and scores[0] - scores[best] < self.config.jump_margin:
-            best = 0  # the prior's own minimum stays unless the frame's evidence is clearly elsewhere
+        best = own = int(np.argmin(scores))
+        if n_prior:
+            own = int(np.argmin(scores[:n_prior]))
+            if scores[own] - scores[best] < self.config.jump_margin:
+                best = own  # the prior's own minimum stays unless the frame's evidence is clearly elsewhere
         R_cm, cues, converged = minima[best]
         if R_init is None:
             R_cm, _ = nearest_symmetric(R_cm, R_CM_UPRIGHT)
         else:
             R_cm, _ = nearest_symmetric(R_cm, R_init)
-        jump_rad = _angle_rad(minima[best][0], minima[0][0]) if best != 0 and R_init is not None else 0.0
+        jump_rad = _angle_rad(minima[best][0], minima[own][0]) if best >= n_prior > 0 else 0.0
         others = [(m[0], scores[i] - scores[best]) for i, m in enumerate(minima) if i != best]
         return R_cm, cues, iterations, converged, others, jump_rad
 
