@@ -24,6 +24,7 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
 from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
                             unknown_centre_floor)
 from ..solver.horizon_estimate import sky_and_segments
+from ..solver.cue_offset import CueOffset
 from ..solver.evidence import no_evidence_reason, without_evidence
 from ..solver.joint import JointSolver
 from ..solver.manhattan import up_candidate
@@ -76,6 +77,8 @@ class CueSolver:
         """Whether the normals come from the image (a network): then a frame without image evidence
         (`solver.evidence`) reports the capped covariance and why; depth normals are not judged so."""
         self.solver = JointSolver()
+        self.offset = CueOffset()
+        """The stream's steady normals-to-segments offset (`solver/cue_offset.py`)."""
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.focal: FocalEstimate | None = None
         self._attempts = 0
@@ -106,6 +109,7 @@ class CueSolver:
                 visual = self._solve(frame, normal_map, segments, R_init)
         except InputError:
             return None
+        visual = self.offset.update(visual)
         reason = no_evidence_reason(frame.rgb) if self.image_normals and normal_map is not None else ""
         return without_evidence(visual, reason, self.solver.config.max_variance_rad2) if reason else visual
 
