@@ -258,7 +258,7 @@ class JointSolver:
         visual = self._result(cues, R_cm, cov, iterations, converged, t_s, {"moments": 1e3 * (t1 - t0),
                                                                            "optimise": 1e3 * (t2 - t1)})
         for c, offset in zip(cues, disagreement[2] if disagreement is not None else ()):
-            visual.cues[c.name]["own_offset_rad"] = offset  # `cue_offset.CueOffset` keeps a stream's steady part
+            visual.cues[c.name]["own_offset_rad"] = [float(x) for x in offset]  # for `cue_offset.CueOffset`
         return dataclasses.replace(visual, jump_deg=float(np.degrees(jump_rad)))
 
     def rotation(self, normal_map: NormalMap | None, lines: LineMoments | None, R_init=None,
