@@ -107,6 +107,10 @@ class NormalMap:
     """How many independent errors a fully valid map of this source carries (errors are spatially
     correlated); the solver's covariance shrinks with it. None: the solver's default, fitted for
     network-like errors. Depth normals set it from their plane-fitting window."""
+    regions_cost: float | None = None
+    """For a network's normals: the solver's residual cost E (its normalised quartic) up to which
+    `independent_regions` holds; above it, a map explained that badly is wrong by whole surfaces, and its
+    independent errors shrink as regions_cost / E (`manhattan.surface_regions`). None: they do not."""
 
 
 @dataclass(frozen=True)

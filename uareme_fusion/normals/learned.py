@@ -72,6 +72,9 @@ class LearnedNormalsConfig:
     over whole surfaces (a wall slightly mis-oriented as a block), so few. Sets the solver's covariance
     scale; fitted so that the median NEES of single-frame rotations on held-out synthetic views is the
     chi-square(3) median 2.37 (tools/bench_normals.py; the mean is dominated by a few gross failures)."""
+    regions_cost: float = 0.03
+    """`NormalMap.regions_cost`: above this residual the independent errors shrink as regions_cost / E (real
+    frames: the rotation error grows about as E, not as sqrt(E)); fitted on the TUM fr1 rpy training frames."""
     threads: int | None = DEFAULT_THREADS
     """torch CPU threads (None: leave torch's setting). One by default: beside another CPU-bound
     process, torch's default of one thread per core makes its threads wait on each other and a
@@ -308,7 +311,8 @@ class LearnedNormals:
         ok = np.isfinite(norm[..., 0]) & (norm[..., 0] > 1e-6) & np.isfinite(kappa)
         normals = np.where(ok[..., None], normals / np.where(ok[..., None], norm, 1.0), 0.0).astype(np.float32)
         kappa = np.where(ok, np.clip(kappa, 0.0, self.config.kappa_cap), 0.0).astype(np.float32)
-        return NormalMap(normals, kappa, independent_regions=self.config.independent_regions)
+        return NormalMap(normals, kappa, independent_regions=self.config.independent_regions,
+                         regions_cost=self.config.regions_cost)
 
 
 def _check_rgb(rgb, source: str) -> np.ndarray:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -78,7 +79,7 @@ class CappedNormals:
         if nm is None:
             return None
         if nm.kappa is not None and np.nanmax(nm.kappa, initial=0.0) > self.cap:
-            nm = NormalMap(nm.normals, np.minimum(nm.kappa, self.cap), nm.t_s, nm.independent_regions)
+            nm = dataclasses.replace(nm, kappa=np.minimum(nm.kappa, self.cap))
         return nm
 
 

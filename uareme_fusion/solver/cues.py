@@ -24,6 +24,7 @@ from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K
 from ..solver.focal import (FocalConfig, FocalEstimate, centred_K, solve_given_K, solve_with_focal,
                             unknown_centre_floor)
 from ..solver.horizon_estimate import sky_and_segments
+from ..solver.cue_offset import CueOffset
 from ..solver.evidence import no_evidence_reason, without_evidence
 from ..solver.frame_motion import FrameMotion
 from ..solver.joint import JointSolver
@@ -81,6 +82,8 @@ class CueSolver:
         """The camera's rotation since the previous frame from the image motion (`VisualRotation.R_cp`:
         the stream's labelling follows it, `backends/labelling_track.py`); None: not measured."""
         self.solver = JointSolver()
+        self.offset = CueOffset()
+        """The stream's steady normals-to-segments offset (`solver/cue_offset.py`)."""
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.focal: FocalEstimate | None = None
         self._attempts = 0
@@ -111,6 +114,7 @@ class CueSolver:
                 visual = self._solve(frame, normal_map, segments, R_init)
         except InputError:
             return None
+        visual = self.offset.update(visual)
         reason = no_evidence_reason(frame.rgb) if self.image_normals and normal_map is not None else ""
         visual = without_evidence(visual, reason, self.solver.config.max_variance_rad2) if reason else visual
         return self._with_motion(frame, visual)

@@ -76,11 +76,12 @@ class ManhattanSolver:
     def solve(self, normal_map: NormalMap, R_init: np.ndarray | None = None) -> VisualRotation:
         """Rotation and covariance for one normal map; `R_init` (3, 3) is an `R_cm` guess or None."""
         return self.solve_arrays(normal_map.normals, normal_map.kappa, R_init, t_s=normal_map.t_s,
-                                 independent_regions=normal_map.independent_regions)
+                                 independent_regions=normal_map.independent_regions,
+                                 regions_cost=normal_map.regions_cost)
 
     def solve_arrays(self, normals, kappa=None, R_init=None, t_s: float = float("nan"),
-                     independent_regions: float | None = None) -> VisualRotation:
-        """As `solve`, on arrays; `independent_regions` overrides the config's (see NormalMap)."""
+                     independent_regions: float | None = None, regions_cost: float | None = None) -> VisualRotation:
+        """As `solve`, on arrays; `independent_regions` and `regions_cost` as in NormalMap."""
         t0 = time.perf_counter()
         with np.errstate(over="ignore", invalid="ignore"):
             moments = normal_moments(normals, kappa)
@@ -98,7 +99,8 @@ class ManhattanSolver:
         else:
             R_cm, iterations, _, converged = self._refine(moments, _check_rotation(R_init))
         cost = float(np.clip(normalised_cost(moments.G, moments.total_weight, R_cm), 0.0, 1.0))
-        cov = self._covariance(moments, R_cm, cost, n_pixels, independent_regions or self.config.independent_regions)
+        cov = self._covariance(moments, R_cm, cost, n_pixels, independent_regions or self.config.independent_regions,
+                               regions_cost)
         t2 = time.perf_counter()
         return VisualRotation(
             R_cm=R_cm,
@@ -135,7 +137,7 @@ class ManhattanSolver:
                                        R0, self.config.max_iterations, self.config.step_tolerance_rad)
 
     def _covariance(self, moments: NormalMoments, R_cm: np.ndarray, cost: float, n_pixels: int,
-                    independent_regions: float) -> np.ndarray:
+                    independent_regions: float, regions_cost: float | None = None) -> np.ndarray:
         """Absolute covariance of delta: scale * residual / N_eff * H^-1 plus a floor, eigenvalues capped.
 
         Treating the cost as sum_i w_i theta_i^2 with errors of variance proportional to 1/w_i gives
@@ -146,12 +148,22 @@ class ManhattanSolver:
         _, hess = gradient_hessian(moments.tensor(), moments.total_weight, R_cm)
         valid_fraction = moments.n_valid / max(n_pixels, 1)
         n_eff = min(float(moments.n_valid), independent_regions * valid_fraction)
-        n_eff = max(n_eff, 1.0)
+        n_eff = surface_regions(max(n_eff, 1.0), cost, regions_cost)
         eigval, eigvec = np.linalg.eigh(0.5 * (hess + hess.T))
         residual = cfg.covariance_scale * cost / n_eff
         var = np.divide(residual, eigval, out=np.full(3, np.inf), where=eigval > 0) + cfg.floor_std_rad**2
         var = np.minimum(var, cfg.max_variance_rad2)
         return (eigvec * var) @ eigvec.T
+
+
+def surface_regions(n_eff: float, cost: float, regions_cost: float | None) -> float:
+    """A network map's independent errors at residual `cost`: `n_eff` up to `regions_cost`, then
+    n_eff * regions_cost / cost (`NormalMap.regions_cost`: a map that badly explained is wrong by whole
+    surfaces, and the rotation error grows as the residual rather than as its square root); `n_eff` when
+    `regions_cost` is None."""
+    if regions_cost is None or not cost > regions_cost:
+        return n_eff
+    return n_eff * regions_cost / cost
 
 
 def _scaled_kappa(kappa) -> np.ndarray:
