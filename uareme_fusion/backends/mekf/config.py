@@ -136,6 +136,9 @@ class MekfConfig(GyroNoiseConfig):
     (`disagreement_chi2`: rejected, or accepted only with a small Huber weight) after which the filter
     re-initialises from the frame's rotation. Each such frame carries `Status.VISUAL_IGNORED`, so no
     estimate drifts away from the camera while every flag is clear."""
+    visual_only_reinit_after_s: float = Field(0.0, ge=0.0, le=3600.0)
+    """Without an IMU, `reinit_after_disagreement_s`: the filter coasts on its constant-rate model
+    while it ignores the camera, so it re-initialises sooner (a handheld camera turns 10 deg in 0.1 s)."""
     disagreement_chi2: float = Field(25.0, gt=0.0, le=1e12)
     """A frame disagrees when the Mahalanobis d^2 of predicted against visual `R_cm` (after the
     24-fold symmetry), with the prediction's and the visual covariance (no correlation or

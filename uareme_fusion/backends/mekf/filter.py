@@ -17,6 +17,7 @@ from ...errors import InputError
 from ...types import Estimate, Estimates, ImuBatch, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
+from ..visual_chain import VisualLabelChain
 from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
@@ -148,6 +149,7 @@ class Mekf(Backend):
         self.pending_span_s = 0.0
         self.init_samples: list[ImuBatch] = []
         self.noise_share = VisualNoiseShare(cfg.visual_noise_share_frames)  # visual only (its `persistent_cov`)
+        self.visual_chain = VisualLabelChain()  # visual only: each frame labelled nearest the previous one
         self._dropped_reported = 0
         self.accel = AccelPeriod(self.x)
         self.record_t: list[np.ndarray] = []
@@ -271,6 +273,8 @@ class Mekf(Backend):
             seen_imu = self.initialised or self.pending or self.stream.newest_s > -np.inf or self.init_samples
             self.resolve_mode(MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY)
         self.propagate_to(t_s)
+        if visual is not None and self.initialised and not self.motion.uses_imu:
+            visual = self.visual_chain.label(visual)  # `visual_chain.py`: not nearest a prediction that may drift
         fuses_visual = self.motion.fuses_visual
         if visual is not None and self.manhattan_initialised and fuses_visual:
             ignored = self._ignored_too_long(t_s, visual)
@@ -415,7 +419,7 @@ class Mekf(Backend):
         (`source_trust.py`), stacked with the vertical pseudo-measurement and a due accelerometer
         update (`_accel_rows`) into one update; past the gate, the accelerometer rows alone."""
         cfg = self.config
-        r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
+        r, R_vis, H = self._visual_model(visual)
         t_s, t_prev_s = self.t_state, self.t_visual_s
         self.t_visual_s = t_s
         trust, var_v = (self._visual_trust(r, R_vis, t_s, t_prev_s) if self.motion.uses_imu
@@ -425,7 +429,7 @@ class Mekf(Backend):
             rest_before = self.counters["rest_updates"]
             accel_rows = self._take_accel_rows()
             if self.counters["rest_updates"] > rest_before:  # the zero-rate update moved the state
-                r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
+                r, R_vis, H = self._visual_model(visual)
         if t_prev_s is not None:
             R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
         S = H @ self.P @ H.T + R_vis  # the gate and Huber weigh the frame's full error
@@ -447,7 +451,7 @@ class Mekf(Backend):
         shared = not self.motion.uses_imu and self.noise_share.enabled
         if shared:  # fuse the independent share only (as estimated over the previous frames)
             R_vis = R_vis * self.noise_share.share
-            self.noise_share.take(t_s, visual.symmetric_to(self.R_wc.T @ self.R_wm))
+            self.noise_share.take(t_s, visual)  # labelled by the chain
         d = np.sqrt(d2)
         if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_sigma)
@@ -458,6 +462,11 @@ class Mekf(Backend):
                     if self.motion.uses_imu and var_v < np.inf else None)
         self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
         self.counters["visual_updates"] += 1
+
+    def _visual_model(self, visual: VisualRotation):
+        """`measurements.visual_model` of the frame: labelled nearest the prediction with an IMU, as the
+        chain labelled it without (`visual_chain.py`)."""
+        return visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov, relabel=self.motion.uses_imu)
 
     def _visual_trust(self, r: np.ndarray, R_vis: np.ndarray, t_s: float, t_prev_s: float | None):
         """The camera's vertical against a quiet accelerometer's, taken into the running trust
@@ -488,7 +497,7 @@ class Mekf(Backend):
         if not _finite(visual):
             return None
         cfg = self.config
-        r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
+        r, R_vis, H = self._visual_model(visual)
         angle = float(np.linalg.norm(r))
         try:
             # During a run, the covariance of its start: coasting grows P, and must not let the wrong
@@ -497,14 +506,17 @@ class Mekf(Backend):
             d2 = float(r @ np.linalg.solve(H @ P @ H.T + R_vis, r))
         except np.linalg.LinAlgError:
             d2 = np.inf
-        if not (angle > np.radians(cfg.disagreement_min_deg) and not d2 <= cfg.disagreement_chi2):
+        # Without an IMU a gated-out frame is a disagreement too: the filter coasts through both alike.
+        chi2 = cfg.disagreement_chi2 if self.motion.uses_imu else min(cfg.disagreement_chi2, cfg.visual_gate_chi2)
+        if not (angle > np.radians(cfg.disagreement_min_deg) and not d2 <= chi2):
             self.disagree_since_s = None
             return None
         self.flags |= status_bits.VISUAL_IGNORED
         self._counters["visual_ignored"] += 1
         if self.disagree_since_s is None:
             self.disagree_since_s, self._disagree_P = t_s, self.P.copy()
-        if t_s - self.disagree_since_s >= cfg.reinit_after_disagreement_s:
+        limit_s = cfg.reinit_after_disagreement_s if self.motion.uses_imu else cfg.visual_only_reinit_after_s
+        if t_s - self.disagree_since_s >= limit_s:
             return True
         return None if self.motion.uses_imu else False
 
