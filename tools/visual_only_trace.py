@@ -86,7 +86,9 @@ def replay(path: Path, rows: int | None) -> None:
             R_vis[k] = VisualRotation(R_cm[k], np.eye(3), 0.0, 0, 1).symmetric_to(R_wc[k].T).R_cm.T
     e_est = aligned_errors_deg(R_wc, R_true)
     e_vis = aligned_errors_deg(R_vis, R_true)
-    innov = np.degrees(angle_between(R_wc, R_vis))
+    innov = np.full(len(R_wc), np.nan)
+    seen = np.isfinite(R_vis).all(axis=(1, 2))
+    innov[seen] = np.degrees(angle_between(R_wc[seen], R_vis[seen]))
     speed = np.r_[np.nan, np.degrees(angle_between(R_true[:-1], R_true[1:])) / np.diff(z["t_s"])]
     print(f"ARE mean: estimate {np.nanmean(e_est):.2f}, visual labelled at the estimate {np.nanmean(e_vis):.2f}")
     print(" k     t_s  speed_dps  err_est  err_vis  innov_deg  std_deg  flags")
