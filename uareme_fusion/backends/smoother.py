@@ -50,7 +50,6 @@ from ..rotations import is_rotation, manhattan_symmetries
 from ..types import Estimate, Status, VisualRotation, visual_R_wc_covariance
 from .base import Backend
 from .imu_noise import GyroNoiseConfig
-from .visual_chain import VisualLabelChain
 from .visual_noise_share import VisualNoiseShare
 
 try:  # BatchFixedLagSmoother moved from gtsam_unstable into gtsam in 4.3/5.0.
@@ -179,7 +178,6 @@ class Smoother(Backend):
         self._dropped_imu = 0
         self._noise_share = VisualNoiseShare(self.config.visual_noise_share_frames
                                              if self.config.mode is SmootherMode.PAPER else 0.0)
-        self._chain = VisualLabelChain()  # paper mode: each frame labelled nearest the previous one
         self._reset_interval()
 
     # ----------------------------------------------------------------------------- variant hooks
@@ -189,11 +187,6 @@ class Smoother(Backend):
     def _predicted_R_wc(self) -> np.ndarray:
         """`R_wc` (3, 3) predicted at the next frame: the last estimate (paper)."""
         return self._last.R_wc
-
-    def _labelled(self, visual: VisualRotation, R_wc_pred: np.ndarray) -> VisualRotation:
-        """The frame's rotation in the labelling it is fused with: nearest the previous frame's (paper:
-        `visual_chain.py`; the smoothed estimate lags a fast turn and would pick the labelling)."""
-        return self._chain.label(visual)
 
     def _visual_factor(self, k: int, visual: VisualRotation, noise) -> gtsam.NonlinearFactor:
         """f^z of paper eq. 9: the single-frame rotation as a robust prior on X(k) (`noise`: `_add_visual`)."""
@@ -209,7 +202,6 @@ class Smoother(Backend):
     def _start_priors(self, graph, values, stamps, visual: VisualRotation) -> VisualRotation:
         """Priors of the first frame besides its visual factor; returns the visual rotation as labelled
         for it (the paper's: as the solver gave it; the world is that Manhattan frame)."""
-        self._chain.start(visual)
         return visual
 
     def _restart_priors(self, graph, values, stamps, k: int) -> None:
@@ -262,7 +254,7 @@ class Smoother(Backend):
         R_wc_pred = self._predicted_R_wc()
         try:
             if visual is not None:
-                visual = self._labelled(visual, R_wc_pred)
+                visual = visual.symmetric_to(R_wc_pred.T @ self._R_wm)
                 self._add_visual(graph, k, t_s, visual)
             self._add_motion_factors(graph, values, stamps, k, t_s)
             values.insert(X(k), gtsam.Rot3(R_wc_pred))

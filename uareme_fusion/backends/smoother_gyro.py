@@ -78,10 +78,6 @@ class GyroSmoother(Smoother):
             R_wc = R_wc @ self._pim.deltaRij().matrix()
         return R_wc
 
-    def _labelled(self, visual: VisualRotation, R_wc_pred: np.ndarray) -> VisualRotation:
-        """The frame's rotation labelled nearest the gyro's prediction."""
-        return visual.symmetric_to(R_wc_pred.T @ self._R_wm)
-
     def _visual_factor(self, k: int, visual: VisualRotation, noise) -> gtsam.NonlinearFactor:
         """f^z as a measurement of `R_mc = R_wm^T R_wc`, relative to the Manhattan variable M."""
         return gtsam.BetweenFactorRot3(MANHATTAN_KEY, X(k), gtsam.Rot3(visual.R_cm.T), noise)

@@ -11,7 +11,7 @@ degrees per frame there, so the labelling nearest the previous frame's rotation 
 was the right one. Labelled by the chain (and re-initialised from the first frame that disagrees),
 `eval` there gives 23.86 (`single` 24.44) and ICSL corridor_more lines 2.77 (3.30).
 
-`VisualLabelChain` labels each frame's rotation nearest the previous frame's, as labelled: the
+`VisualLabelChain` labels each frame's rotation nearest the last one the filter trusted: the
 filter's innovation is then measured against a labelling the filter's own error cannot change, and
 a filter that drifts shows it as a growing innovation (the disagreement that re-initialises it), not
 as a silent relabelling.
@@ -36,11 +36,13 @@ class VisualLabelChain:
         self.R_cm = np.array(visual.R_cm, float)
 
     def label(self, visual: VisualRotation) -> VisualRotation:
-        """`visual` labelled nearest the previous frame's rotation (as given for the first frame), and
-        taken as the chain's new end; a non-finite rotation is returned as it is and not taken."""
-        if not np.isfinite(visual.R_cm).all():
+        """`visual` labelled nearest the chain's end (as given before the first); a non-finite rotation
+        is returned as it is. The caller `take`s the frames it trusts (a frame off by far more than its
+        covariance, a solver's wrong minimum, must not become the reference of the next)."""
+        if self.R_cm is None or not np.isfinite(visual.R_cm).all():
             return visual
-        if self.R_cm is not None:
-            visual = visual.symmetric_to(self.R_cm)
+        return visual.symmetric_to(self.R_cm)
+
+    def take(self, visual: VisualRotation) -> None:
+        """`visual` (labelled by `label`) as the chain's new end."""
         self.R_cm = np.array(visual.R_cm, float)
-        return visual

@@ -9,11 +9,14 @@ pseudo-measurement and a due accelerometer update are fused in one stacked filte
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from filterpy.kalman import update as kf_update
 
 from ...config import load_config, preset_names
 from ...errors import InputError
+from ...rotations import angle_between
 from ...types import Estimate, Estimates, ImuBatch, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
@@ -42,6 +45,10 @@ _ESTIMATE_INDEX = np.stack([np.arange(X_R_WC, X_R_WM).reshape(3, 3), np.arange(X
 """Where R_wc, R_wm, P[TH, TH], its transpose and b_c (in each row) lie in the state buffer `x` (5, 3, 3):
 one `take` copies them."""
 
+
+CHAIN_MAX_RAD = np.radians(22.5)
+"""Visual only: a fused frame becomes the labelling chain's reference (`visual_chain.py`) only this close
+to the prediction, rad."""
 
 _CAMERA_ONLY = (float("nan"), 1.0)
 """`Estimate.tilt_shares` without an IMU: the camera alone."""
@@ -143,6 +150,7 @@ class Mekf(Backend):
                               rest_updates=0, nonfinite_updates=0)
         self.flags = status_bits.OK  # `Status` bits gathered since the last estimate (`status_bits.py`)
         self.disagree_since_s: float | None = None  # first frame of the current run of ignored visual rotations, s
+        self._disagree_R_cm = None  # visual only: the previous frame of that run (labelled)
         self._disagree_P = None  # the error-state covariance at that frame
         self.in_imu_gap = False  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
         self.pending: list[ImuBatch] = []
@@ -279,8 +287,16 @@ class Mekf(Backend):
         if visual is not None and self.manhattan_initialised and fuses_visual:
             ignored = self._ignored_too_long(t_s, visual)
             if ignored is None:
+                # The chain's next reference: a frame within half the labelling ambiguity (45 deg) of the
+                # prediction, whatever its covariance (a wrong minimum with a capped one is fused, barely).
+                if not self.motion.uses_imu:
+                    R_cm_pred = self.R_wc.T @ self.R_wm
+                    self.visual_chain.take(visual if angle_between(R_cm_pred, visual.R_cm) < CHAIN_MAX_RAD
+                                           else dataclasses.replace(visual, R_cm=R_cm_pred))
                 return self._compiled_estimate(t_s) if self._fuse_visual(visual) else self._estimate(t_s)
             if ignored:  # else skipped (visual only): the filter coasts
+                if not self.motion.uses_imu:
+                    self.visual_chain.take(visual)
                 self._reinitialise(visual)
                 self.t_visual_s = t_s
             if self.accel.due:
@@ -509,21 +525,26 @@ class Mekf(Backend):
         # Without an IMU a gated-out frame is a disagreement too: the filter coasts through both alike.
         chi2 = cfg.disagreement_chi2 if self.motion.uses_imu else min(cfg.disagreement_chi2, cfg.visual_gate_chi2)
         if not (angle > np.radians(cfg.disagreement_min_deg) and not d2 <= chi2):
-            self.disagree_since_s = None
+            self.disagree_since_s = self._disagree_R_cm = None
             return None
+        # Without an IMU, a run re-initialises only on frames that agree with each other (the camera
+        # turned, or the filter drifted): two wrong minima in a row point different ways.
+        previous, self._disagree_R_cm = self._disagree_R_cm, visual.R_cm
+        consistent = self.motion.uses_imu or (
+            previous is not None and float(angle_between(previous, visual.R_cm)) < 0.5 * angle)
         self.flags |= status_bits.VISUAL_IGNORED
         self._counters["visual_ignored"] += 1
         if self.disagree_since_s is None:
             self.disagree_since_s, self._disagree_P = t_s, self.P.copy()
         limit_s = cfg.reinit_after_disagreement_s if self.motion.uses_imu else cfg.visual_only_reinit_after_s
-        if t_s - self.disagree_since_s >= limit_s:
+        if t_s - self.disagree_since_s >= limit_s and consistent:
             return True
         return None if self.motion.uses_imu else False
 
     def _reinitialise(self, visual: VisualRotation) -> None:
         """After `reinit_after_rejections` frames gated out in a row, or `reinit_after_disagreement_s`
         of visual rotations ignored (`_ignored_too_long`): a new scene alignment from `visual`."""
-        self.disagree_since_s = None
+        self.disagree_since_s = self._disagree_R_cm = None
         self.flags |= status_bits.REINITIALISED
         self.counters["reinitialised"] += 1
         self.motion.reinitialise(self, visual)
