@@ -8,8 +8,8 @@ the frame 90 deg relabelled and kept that labelling to the end (ARE 34.7 deg aga
 24.4 with the same rotations); on ICSL corridor_more (lines only) it re-initialised nearest an
 estimate that had spun 150 deg away (42.6 against 3.3). The rotations themselves moved by a few
 degrees per frame there, so the labelling nearest the previous frame's rotation (what `single` keeps)
-was the right one. Labelled by the chain (and re-initialised from the first frame that disagrees),
-`eval` there gives 23.86 (`single` 24.44) and ICSL corridor_more lines 2.77 (3.30).
+was the right one. Labelled by the chain (and re-initialised once two disagreeing frames agree), the
+EKF gives 23.83 there (`single` 24.44, same rotations) and 3.17 on ICSL corridor_more lines (3.30).
 
 `VisualLabelChain` labels each frame's rotation nearest the last one the filter trusted: the
 filter's innovation is then measured against a labelling the filter's own error cannot change, and
