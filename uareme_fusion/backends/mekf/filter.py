@@ -9,14 +9,18 @@ pseudo-measurement and a due accelerometer update are fused in one stacked filte
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from filterpy.kalman import update as kf_update
 
 from ...config import load_config, preset_names
 from ...errors import InputError
+from ...rotations import angle_between
 from ...types import Estimate, Estimates, ImuBatch, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
+from ..visual_chain import VisualLabelChain
 from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
@@ -42,6 +46,10 @@ _ESTIMATE_INDEX = np.stack([np.arange(X_R_WC, X_R_WM).reshape(3, 3), np.arange(X
 """Where R_wc, R_wm, P[TH, TH], its transpose and b_c (in each row) lie in the state buffer `x` (5, 3, 3):
 one `take` copies them."""
 
+
+CHAIN_MAX_RAD = np.radians(22.5)
+"""Visual only: a fused frame becomes the labelling chain's reference (`visual_chain.py`) only this close
+to the prediction, rad."""
 
 _CAMERA_ONLY = (float("nan"), 1.0)
 """`Estimate.tilt_shares` without an IMU: the camera alone."""
@@ -143,12 +151,14 @@ class Mekf(Backend):
                               rest_updates=0, nonfinite_updates=0)
         self.flags = status_bits.OK  # `Status` bits gathered since the last estimate (`status_bits.py`)
         self.disagree_since_s: float | None = None  # first frame of the current run of ignored visual rotations, s
+        self._disagree_R_cm = None  # visual only: the previous frame of that run (labelled)
         self._disagree_P = None  # the error-state covariance at that frame
         self.in_imu_gap = False  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
         self.pending: list[ImuBatch] = []
         self.pending_span_s = 0.0
         self.init_samples: list[ImuBatch] = []
         self.noise_share = VisualNoiseShare(cfg.visual_noise_share_frames)  # visual only (its `persistent_cov`)
+        self.visual_chain = VisualLabelChain()  # visual only: each frame labelled nearest the previous one
         self._dropped_reported = 0
         self.accel = AccelPeriod(self.x)
         self.gravity_only = GravityOnly(cfg)  # an accelerometer without gyro (visual only: `process_accel`)
@@ -300,12 +310,22 @@ class Mekf(Backend):
             seen_imu = self.initialised or self.pending or self.stream.newest_s > -np.inf or self.init_samples
             self.resolve_mode(MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY)
         self.propagate_to(t_s)
+        if visual is not None and self.initialised and not self.motion.uses_imu:
+            visual = self.visual_chain.label(visual)  # `visual_chain.py`: not nearest a prediction that may drift
         fuses_visual = self.motion.fuses_visual
         if visual is not None and self.manhattan_initialised and fuses_visual:
             ignored = self._ignored_too_long(t_s, visual)
             if ignored is None:
+                # The chain's next reference: a frame within half the labelling ambiguity (45 deg) of the
+                # prediction, whatever its covariance (a wrong minimum with a capped one is fused, barely).
+                if not self.motion.uses_imu:
+                    R_cm_pred = self.R_wc.T @ self.R_wm
+                    self.visual_chain.take(visual if angle_between(R_cm_pred, visual.R_cm) < CHAIN_MAX_RAD
+                                           else dataclasses.replace(visual, R_cm=R_cm_pred))
                 return self._compiled_estimate(t_s) if self._fuse_visual(visual) else self._estimate(t_s)
             if ignored:  # else skipped (visual only): the filter coasts
+                if not self.motion.uses_imu:
+                    self.visual_chain.take(visual)
                 self._reinitialise(visual)
                 self.t_visual_s = t_s
             if self.accel.due:
@@ -447,7 +467,7 @@ class Mekf(Backend):
         (`source_trust.py`), stacked with the vertical pseudo-measurement and a due accelerometer
         update (`_accel_rows`) into one update; past the gate, the accelerometer rows alone."""
         cfg = self.config
-        r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
+        r, R_vis, H = self._visual_model(visual)
         t_s, t_prev_s = self.t_state, self.t_visual_s
         self.t_visual_s = t_s
         trust, var_v = (self._visual_trust(r, R_vis, t_s, t_prev_s) if self.motion.uses_imu
@@ -457,7 +477,7 @@ class Mekf(Backend):
             rest_before = self.counters["rest_updates"]
             accel_rows = self._take_accel_rows()
             if self.counters["rest_updates"] > rest_before:  # the zero-rate update moved the state
-                r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
+                r, R_vis, H = self._visual_model(visual)
         else:
             accel_rows = self._gravity_rows()  # an accelerometer without gyro (visual only)
         if t_prev_s is not None:
@@ -481,7 +501,7 @@ class Mekf(Backend):
         shared = not self.motion.uses_imu and self.noise_share.enabled
         if shared:  # fuse the independent share only (as estimated over the previous frames)
             R_vis = R_vis * self.noise_share.share
-            self.noise_share.take(t_s, visual.symmetric_to(self.R_wc.T @ self.R_wm))
+            self.noise_share.take(t_s, visual)  # labelled by the chain
         d = np.sqrt(d2)
         if d > cfg.visual_huber_k:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_k)
@@ -492,6 +512,11 @@ class Mekf(Backend):
                     if self.motion.uses_imu and var_v < np.inf else None)
         self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
         self.counters["visual_updates"] += 1
+
+    def _visual_model(self, visual: VisualRotation):
+        """`measurements.visual_model` of the frame: labelled nearest the prediction with an IMU, as the
+        chain labelled it without (`visual_chain.py`)."""
+        return visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov, relabel=self.motion.uses_imu)
 
     def _visual_trust(self, r: np.ndarray, R_vis: np.ndarray, t_s: float, t_prev_s: float | None):
         """The camera's vertical against a quiet accelerometer's, taken into the running trust
@@ -522,7 +547,7 @@ class Mekf(Backend):
         if not _finite(visual):
             return None
         cfg = self.config
-        r, R_vis, H = visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov)
+        r, R_vis, H = self._visual_model(visual)
         angle = float(np.linalg.norm(r))
         try:
             # During a run, the covariance of its start: coasting grows P, and must not let the wrong
@@ -531,21 +556,29 @@ class Mekf(Backend):
             d2 = float(r @ np.linalg.solve(H @ P @ H.T + R_vis, r))
         except np.linalg.LinAlgError:
             d2 = np.inf
-        if not (angle > np.radians(cfg.disagreement_min_deg) and not d2 <= cfg.disagreement_chi2):
-            self.disagree_since_s = None
+        # Without an IMU a gated-out frame is a disagreement too: the filter coasts through both alike.
+        chi2 = cfg.disagreement_chi2 if self.motion.uses_imu else min(cfg.disagreement_chi2, cfg.visual_gate_chi2)
+        if not (angle > np.radians(cfg.disagreement_min_deg) and not d2 <= chi2):
+            self.disagree_since_s = self._disagree_R_cm = None
             return None
+        # Without an IMU, a run re-initialises only on frames that agree with each other (the camera
+        # turned, or the filter drifted): two wrong minima in a row point different ways.
+        previous, self._disagree_R_cm = self._disagree_R_cm, visual.R_cm
+        consistent = self.motion.uses_imu or (
+            previous is not None and float(angle_between(previous, visual.R_cm)) < 0.5 * angle)
         self.flags |= status_bits.VISUAL_IGNORED
         self._counters["visual_ignored"] += 1
         if self.disagree_since_s is None:
             self.disagree_since_s, self._disagree_P = t_s, self.P.copy()
-        if t_s - self.disagree_since_s >= cfg.reinit_after_disagreement_s:
+        limit_s = cfg.reinit_after_disagreement_s if self.motion.uses_imu else cfg.visual_only_reinit_after_s
+        if t_s - self.disagree_since_s >= limit_s and consistent:
             return True
         return None if self.motion.uses_imu else False
 
     def _reinitialise(self, visual: VisualRotation) -> None:
         """After `reinit_after_rejections` frames gated out in a row, or `reinit_after_disagreement_s`
         of visual rotations ignored (`_ignored_too_long`): a new scene alignment from `visual`."""
-        self.disagree_since_s = None
+        self.disagree_since_s = self._disagree_R_cm = None
         self.flags |= status_bits.REINITIALISED
         self.counters["reinitialised"] += 1
         self.motion.reinitialise(self, visual)

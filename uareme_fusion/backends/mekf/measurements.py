@@ -21,12 +21,16 @@ from ...rotations import nearest_symmetric
 from .state import I3, MF, N_STATE, TH
 
 
-def visual_model(R_wc: np.ndarray, R_wm: np.ndarray, R_cm: np.ndarray, cov_rad2: np.ndarray):
+def visual_model(R_wc: np.ndarray, R_wm: np.ndarray, R_cm: np.ndarray, cov_rad2: np.ndarray, relabel: bool = True):
     """The solver's rotation `R_cm` (3, 3) with covariance `cov_rad2` (3, 3, rad^2, right
     perturbation) as a measurement of `R_cm = R_wc^T R_wm`, its Manhattan labelling resolved
-    against the prediction: `(residual (3,) rad, R (3, 3) rad^2, H (3, 12))`."""
+    against the prediction (`relabel`; False: as labelled, e.g. by `backends.visual_chain`):
+    `(residual (3,) rad, R (3, 3) rad^2, H (3, 12))`."""
     R_cm_pred = R_wc.T @ R_wm
-    R_cm, P_sym = nearest_symmetric(R_cm, R_cm_pred)  # as VisualRotation.symmetric_to
+    if relabel:
+        R_cm, P_sym = nearest_symmetric(R_cm, R_cm_pred)  # as VisualRotation.symmetric_to
+    else:
+        P_sym = I3
     # Log of a product of rotations: scipy may skip its orthogonalisation (assume_valid).
     r = Rotation.from_matrix(R_cm_pred.T @ R_cm, assume_valid=True).as_rotvec()
     H = np.zeros((3, N_STATE))

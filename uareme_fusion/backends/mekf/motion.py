@@ -51,6 +51,7 @@ class ConstantRateMotion:
     def start_from_visual(self, filt, t_s: float, visual: VisualRotation) -> None:
         """`R_wc` from the first frame's `R_cm` labelled upright; the rate starts at 0."""
         visual = visual.symmetric_to(R_CM_UPRIGHT)
+        filt.visual_chain.start(visual)
         filt.R_wm = np.eye(3)
         filt.R_wc = visual.R_cm.T
         self._restart(filt, visual)
@@ -58,8 +59,8 @@ class ConstantRateMotion:
         filt.initialised = filt.manhattan_initialised = True
 
     def reinitialise(self, filt, visual: VisualRotation) -> None:
-        """A new scene alignment: `R_wc` from `R_cm` against the kept world (= Manhattan) frame."""
-        visual = visual.symmetric_to(filt.R_wc.T @ filt.R_wm)
+        """A new scene alignment: `R_wc` from `R_cm`, as the chain labelled it (`visual_chain.py`), against
+        the kept world (= Manhattan) frame."""
         filt.R_wc = filt.R_wm @ visual.R_cm.T
         self._restart(filt, visual)
 
@@ -69,6 +70,7 @@ class ConstantRateMotion:
         filt.P[RATE, RATE] = filt.config.rate_initial_std_rad_s**2 * I3
         filt.omega_c = np.zeros(3)
         filt.rejections = 0
+
 
 
 class GyroMotion:
