@@ -35,7 +35,7 @@ from uareme_fusion.rotations import nearest_symmetric, project_to_so3
 def cache(data: str, out: str, model: str | None, max_frames: int | None) -> None:
     """Read `data` once into the pickle `out` (see the module docstring)."""
     from uareme_fusion.drivers import open_source
-    from uareme_fusion.lines.detect import SegmentDetector
+    from uareme_fusion.solver.line_detection import SegmentDetector
     from uareme_fusion.normals.depth import depth_normals_for
     from uareme_fusion.normals.learned import LearnedNormals, LearnedNormalsConfig
     from uareme_fusion.solver import solve_manhattan
@@ -99,7 +99,7 @@ class CachedCues:
     """A `CueSolver` whose segments and sky come from the cache (frame index -> row)."""
 
     def __init__(self, rows: list, lines: bool = True, sky: bool = True):
-        from uareme_fusion.pipeline.cues import CueSolver
+        from uareme_fusion.solver.cues import CueSolver
 
         self.rows = {r["index"]: r for r in rows}
         self.solver = CueSolver(lines=lines, sky=sky, image_normals=False)  # the cache holds no image

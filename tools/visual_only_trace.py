@@ -67,7 +67,7 @@ def record(source: str, backend: str, normals: str, cues: str | None, out: Path)
 
 def aligned_errors_deg(R_wc: np.ndarray, R_true: np.ndarray) -> np.ndarray:
     """Per-frame angle (deg) after one constant chordal alignment (`metrics.attitude_errors`)."""
-    from uareme_fusion.evaluation.metrics import attitude_errors
+    from uareme_fusion.scoring.metrics import attitude_errors
 
     ok = np.isfinite(R_wc).all(axis=(1, 2))
     err = attitude_errors(R_wc, np.tile(np.eye(3), (len(R_wc), 1, 1)), ok, R_true)

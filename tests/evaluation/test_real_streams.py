@@ -14,12 +14,12 @@ def _single_are(shared_data, cues: str) -> np.ndarray:
     from uareme_fusion.benchmarks import realdata
     from uareme_fusion.evaluation.compare import errors_over_time, run_backend
     from uareme_fusion.pipeline import RunConfig
-    from uareme_fusion.pipeline.stages import make_backend
+    from uareme_fusion.pipeline.stages import backend_for_run
 
     found, _ = realdata.sequences(shared_data, None, ("icsl_more",))
     visual, info, _ = realdata.cue_set_sequence(found[0], "learned", cues, None, None)
     info = dataclasses.replace(info, R_ci=np.eye(3), imu_time_offset_s=0.0, has_imu=False)
-    run = run_backend(make_backend(RunConfig(backend="single"), info), visual)  # bench realdata's single row
+    run = run_backend(backend_for_run(RunConfig(backend="single"), info), visual)  # bench realdata's single row
     return errors_over_time(run, visual.R_wc_true)["are_deg"]
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from uareme_fusion.pipeline.cues import CueSolver
+from uareme_fusion.solver.cues import CueSolver
 from uareme_fusion.rotations import angle_between
 from uareme_fusion.sim.normal_maps import manhattan_normal_map
 from uareme_fusion.sim.render import intrinsics_from_fov
