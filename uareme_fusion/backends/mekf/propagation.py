@@ -83,13 +83,13 @@ def gyro_process_noise(T_s: float, q_gyro: float, q_bias: float, unknown_var_rad
     return (c @ _E_TH_CROSS_BG).reshape(N_STATE, N_STATE)
 
 
-def manhattan_walk_noise(R_wm: np.ndarray, dt_s: float, yaw_rw_rad_sqrt_s: float,
-                         tilt_rw_rad_sqrt_s: float) -> np.ndarray:
+def manhattan_walk_noise(R_wm: np.ndarray, dt_s: float, yaw_rw_rad_per_sqrt_s: float,
+                         tilt_rw_rad_per_sqrt_s: float) -> np.ndarray:
     """(3, 3) process noise of the Manhattan frame's right perturbation over `dt_s`: a random walk of
     its yaw about world up and of its tilt (densities in rad/sqrt(s))."""
     u = R_wm.T @ WORLD_UP
     uu = np.outer(u, u)
-    return dt_s * (yaw_rw_rad_sqrt_s**2 * uu + tilt_rw_rad_sqrt_s**2 * (I3 - uu))
+    return dt_s * (yaw_rw_rad_per_sqrt_s**2 * uu + tilt_rw_rad_per_sqrt_s**2 * (I3 - uu))
 
 
 def constant_rate_model(omega_c: np.ndarray, dt_s: float, q_rate: float):
