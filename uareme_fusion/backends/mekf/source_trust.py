@@ -103,12 +103,12 @@ def update_visual_trust(s, e, v, frames, min_share, rate_rad_s2):
 
     The share is the variance of the means of `BLOCK_FRAMES` consecutive still frames (averaged over
     `frames` blocks), times `BLOCK_FRAMES`, against `2 v` (clipped to [`min_share`, 1]; 1 until
-    `MIN_SAMPLES` blocks are seen):
-    the low-frequency power of the varying error, which is what a filter fusing every frame averages
-    down. A frame-to-frame spread misses errors correlated over a few frames (real EuRoC V1_01, learned
-    normals: the camera's up wanders by about 0.6 deg per axis, correlated 0.56 from one frame to the
-    next and 0.19 ten frames apart; the frame spread had the share at its floor from the fourth frame on:
-    `eval` NEES 25.9 -> 7.1 with the blocks, tilt 1.39 -> 1.20 deg). The share is below 1 only while the camera is still (`rate_rad_s2`, its squared
+    `MIN_SAMPLES` blocks are seen): the low-frequency power of the varying error, which is what a
+    filter fusing every frame averages down. A frame-to-frame spread misses errors correlated over a
+    few frames (real EuRoC V1_01, learned normals: the camera's up wanders by about 0.6 deg per axis,
+    correlated 0.56 from one frame to the next and 0.19 ten frames apart; the frame spread had the
+    share at its floor from the fourth frame on: `eval` NEES 25.9 -> 7.1 with the blocks, tilt 1.39 ->
+    1.20 deg). The share is below 1 only while the camera is still (`rate_rad_s2`, its squared
     bias-corrected gyro rate, below `STILL_RATE_RAD_S`^2): then the innovations' spread is the
     camera's own noise, whereas in motion the view, and with it the persistent error, changes from
     frame to frame (a simulated handheld walk: tilt p95 0.56 -> 2.26 deg with the share applied in
