@@ -25,15 +25,16 @@ import numpy as np
 # (s, camera clock; NaN before any), the consecutive visual rejections, and the visual updates and
 # rejections the compiled visual update counts (harvested as the others); the camera-vertical trust
 # (`source_trust.py`: running weight, count, mean innovation (3), mean variance, the share, mean square,
-# persistent variance, frames seen) and each source's tilt information per second (accelerometer, camera)
-# and the accelerometer's variance rate.
+# persistent variance, frames seen), each source's tilt information per second (accelerometer, camera),
+# the accelerometer's variance rate, and the trust's block moments (the open block's sum (3) and frames,
+# the running mean (3) and mean square of the block means, their weight and count).
 S_T_STATE, S_ACCEL_TIME, S_ACCEL_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
 S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE, S_NONFINITE = range(7, 13)
 S_IMU_T, S_T_VISUAL, S_REJECTIONS, S_VISUAL_UPDATES, S_VISUAL_REJECTED = range(13, 18)
 S_TRUST_WEIGHT, S_TRUST_COUNT, S_TRUST_MEAN, S_TRUST_VAR, S_VISUAL_SCALE = 18, 19, 20, 23, 24
 S_ACCEL_INFO_RATE, S_VISUAL_INFO_RATE, S_TRUST_SQUARE, S_TRUST_PERSISTENT, S_ACCEL_VAR_RATE = 25, 26, 27, 28, 29
-S_TRUST_FRAMES = 30
-S_SIZE = 31
+S_TRUST_FRAMES, S_BLOCK_SUM, S_BLOCK_N, S_BLOCK_MEAN, S_BLOCK_SQUARE, S_BLOCK_WEIGHT, S_BLOCK_COUNT = 30, 31, 34, 35, 38, 39, 40
+S_SIZE = 41
 
 FIELDS = (("s", (S_SIZE,)), ("R_wc", (3, 3)), ("R_wm", (3, 3)), ("b_c", (3,)), ("P", (12, 12)),
           ("last_gyro", (3,)), ("accel_sum", (3,)), ("lp", (2, 3)), ("lp_J", (2, 3, 3)), ("rest_sums", (8,)))
