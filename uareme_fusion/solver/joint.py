@@ -250,13 +250,14 @@ class JointSolver:
         return dataclasses.replace(visual, jump_deg=float(np.degrees(jump_rad)))
 
     def rotation(self, normal_map: NormalMap | None, lines: LineMoments | None, R_init=None,
-                 horizon=None) -> np.ndarray:
+                 horizon=None, local: bool = False) -> np.ndarray:
         """`solve`'s `R_cm` alone (the same rotation), without the covariance, which costs two more
-        refinements (the cues' disagreement): for searches that only compare or difference rotations."""
+        refinements (the cues' disagreement): for searches that only compare or difference rotations.
+        `local`: only R_init's own minimum (no global candidates), to follow one minimum along a search."""
         cues = self._cues(normal_map, lines, horizon)
         if cues is None:
             return self.normal_solver.solve(normal_map, R_init).R_cm
-        return _labelled(cues, self._solve_cues(cues, R_init)[0])
+        return _labelled(cues, self._solve_cues(cues, R_init, local=local and R_init is not None)[0])
 
     # --- cues -------------------------------------------------------------------------------------
     def _cues(self, normal_map: NormalMap | None, lines: LineMoments | None, horizon=None) -> list[_Cue] | None:
@@ -290,12 +291,13 @@ class JointSolver:
         return _NormalCue(moments, n_eff, self.config.covariance_scale, _NORMALS_MIN_COST)
 
     # --- optimisation -----------------------------------------------------------------------------
-    def _solve_cues(self, cues: list[_Cue], R_init) -> tuple[np.ndarray, list[_Cue], int, bool, list, float]:
+    def _solve_cues(self, cues: list[_Cue], R_init, local: bool = False
+                    ) -> tuple[np.ndarray, list[_Cue], int, bool, list, float]:
         """The robust minimum of J (module docstring): (R_cm, the cues as reweighted there, iterations,
         converged, the other minima found as (R, robust score above the best's), the angle (rad) from the
         prior's own minimum to the one kept, 0 when it is the prior's)."""
         starts = [] if R_init is None else [(_check_rotation(R_init), False)]
-        starts += self._global_starts(cues, R_init)
+        starts += [] if local else self._global_starts(cues, R_init)
         minima, first, iterations = [], [], 0
         for R, plain_first in starts:
             if plain_first:
