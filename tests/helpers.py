@@ -21,7 +21,7 @@ import pytest
 from typer.testing import CliRunner
 
 from uareme_fusion.cli import app
-from uareme_fusion.pipeline.sinks import ESTIMATE_COLUMNS
+from uareme_fusion.sinks.estimate_files import ESTIMATE_COLUMNS
 from uareme_fusion.drivers.base import GroundTruth, ImuBatch, Source, SourceInfo
 from uareme_fusion.errors import SourceError
 from uareme_fusion.sim.imu import simulate_imu

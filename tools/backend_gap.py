@@ -29,7 +29,7 @@ import numpy as np
 from uareme_fusion.backends.visual_noise_share import VisualNoiseShare
 from uareme_fusion.benchmarks.horizon import (backend_errors, backend_rows, icsl_more_reference, real_sequences,
                                               rgb_sequence)
-from uareme_fusion.evaluation.backend_factory import make_backend
+from uareme_fusion.backends.factory import make_backend
 from uareme_fusion.evaluation.compare import errors_over_time, run_backend
 from uareme_fusion.rotations import log_so3
 

@@ -120,8 +120,19 @@ def _non_finite_keys(value, prefix: str = "") -> list[str]:
     return []
 
 
+def renamed_keys(data, model: type[BaseModel]) -> list[str]:
+    """'OLD is now NEW' for each key of `data` that `model` has renamed (its class attribute
+    `renamed_keys`: old name -> new name). Old names are errors, never silent aliases."""
+    renamed = getattr(model, "renamed_keys", {})
+    return [f"'{old}' is now '{renamed[old]}'" for old in data if old in renamed] if isinstance(data, dict) else []
+
+
 def validate_config(data: dict, model: type[ModelT], where: str = "config") -> ModelT:
-    """`model(**data)` with pydantic's errors turned into one ConfigError naming each bad key."""
+    """`model(**data)` with pydantic's errors turned into one ConfigError naming each bad key; a key the
+    model has renamed is one ConfigError naming the new key (`renamed_keys`)."""
+    renamed = renamed_keys(data, model)
+    if renamed:
+        raise ConfigError(f"{where}: {'; '.join(renamed)}: rename the key")
     try:
         return model.model_validate(data)
     except ValidationError as exc:

@@ -20,7 +20,7 @@ from rich.table import Table
 
 from .benchmarks.peers import vqf_6d_R_wi
 from .drivers.base import ImuBatch, Source
-from .evaluation.statistics import error_stats
+from .scoring.statistics import error_stats
 from .io.safe_files import save_figure_atomic
 from .rotations import angle_between, exp_so3, nees, tilt_error_deg, up_in_camera
 from .sim.normal_maps import manhattan_normal_map
@@ -130,12 +130,12 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
     horizon overlay video of the bus. `scale_seconds` scales the scenes' lengths, `size` (width,
     height) and `fps` are those of the rendered frames (a smaller configuration for tests)."""
     from .backends.mekf import MekfMode
-    from .evaluation.backend_factory import make_backend
+    from .backends.factory import make_backend
     from .evaluation.compare import BackendRun, errors_over_time, run_backend
     from .evaluation.sequence import VisualSequence
     from .drivers.simulated import SimulatedSource
     from .pipeline import RunConfig
-    from .pipeline.drawing_sinks import HorizonVideoSink
+    from .sinks.drawing import HorizonVideoSink
     from .pipeline.session import build_pipeline
 
     figures, tilts = {}, {}

@@ -278,3 +278,16 @@ class Estimates:
         """The same estimates with `flags` cleared from every status."""
         return Estimates(self.t_s, self.R_wc, self.cov, self.status & ~int(flags), self.R_wm, self.gyro_bias_rad_s)
 
+
+@dataclass(frozen=True)
+class FrameResult:
+    """Everything the pipeline knows about one output time. `frame` is None for the estimates of an
+    IMU-only source; `normal_map` and `visual` are None when there was no usable image."""
+
+    t_s: float
+    estimate: Estimate
+    frame: Frame | None = None
+    normal_map: NormalMap | None = None
+    visual: VisualRotation | None = None
+    K: np.ndarray | None = None
+    """The intrinsics the visual cues used (given, or estimated from the scene), None if unknown."""

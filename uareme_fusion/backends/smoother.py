@@ -8,14 +8,14 @@ covariance is rotated with it). `R_wc` is chosen because gyro preintegration (`A
 gravity factor (`AttitudeFactorRot3`) are written for a body-to-navigation rotation.
 
 GTSAM's `Rot3` tangent convention is the project's: `retract(R, xi) = R @ Exp(xi)` (right
-perturbation; checked in tests/test_smoother.py), and `Marginals.marginalCovariance(X(k))` is the
+perturbation; checked in tests/backends/test_smoother.py), and `Marginals.marginalCovariance(X(k))` is the
 covariance of that `xi` in rad^2. So the `Estimate.cov` returned here is the right-perturbation
 covariance of `R_wc`, as docs/design.md requires.
 
 Paper mode (`mode: paper`), exactly the paper's graph: `BatchFixedLagSmoother` over the last
 `window_frames` frames; per frame a `PriorFactorRot3` on `X(k)` at `R_cm^T` with the visual
-covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`visual_huber_sigma`) kernel (paper eq. 9, f^z); an
-identity `BetweenFactorRot3` with isotropic `between_sigma_rad` between consecutive frames (f^s); the
+covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`visual_huber_k`) kernel (paper eq. 9, f^z); an
+identity `BetweenFactorRot3` with isotropic `between_std_rad` between consecutive frames (f^s); the
 oldest frame's marginal prior (f^p) is what the fixed-lag smoother leaves when it marginalises.
 The world is the Manhattan frame as labelled on the first frame: `R_wm = I`.
 
@@ -27,7 +27,7 @@ gravity aligned, so `R_wm` is no longer the identity: it is a variable `M` kept 
 (its timestamp is refreshed every frame), and each visual rotation enters as a
 `BetweenFactorRot3(M, X(k), R_cm^T)` (the measurement `R_mc = R_wm^T R_wc`). `R_wm` gets a prior at
 the identity that pins the world's yaw (a gauge: world x is the Manhattan x axis) and lets its tilt
-move by `manhattan_tilt_sigma_rad` (in a building the Manhattan axis nearest up is vertical). On the
+move by `manhattan_vertical_std_rad` (in a building the Manhattan axis nearest up is vertical). On the
 first frame the visual rotation is relabelled so that its z axis is the Manhattan axis nearest the
 measured up. The Manhattan frame is constant (a building), not a vehicle.
 
@@ -40,11 +40,12 @@ from __future__ import annotations
 
 import enum
 import logging
+from typing import ClassVar
 
 import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import M, X
-from pydantic import AliasChoices, ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field, field_validator
 
 from ..rotations import is_rotation, manhattan_symmetries
 from ..types import Estimate, Status, VisualRotation, visual_R_wc_covariance
@@ -75,16 +76,27 @@ class SmootherConfig(GyroNoiseConfig):
     """Parameters of `Smoother`; defaults are the paper's values (configs/paper.yaml, section `smoother`)."""
 
     model_config = ConfigDict(extra="forbid")
+    renamed_keys: ClassVar[dict[str, str]] = {
+        "huber_k": "visual_huber_k",
+        "gyro_bias_walk_rad_s2_sqrt_hz": "gyro_bias_rw_rad_s2_sqrt_hz",
+        "gyro_bias_prior_sigma_rad_s": "gyro_bias_initial_std_rad_s",
+        "between_sigma_rad": "between_std_rad",
+        "accel_sigma_rad": "accel_std_rad",
+        "world_yaw_sigma_rad": "world_yaw_std_rad",
+        "manhattan_tilt_sigma_rad": "manhattan_vertical_std_rad",
+        "visual_huber_sigma": "visual_huber_k",
+    }
+    """Old key -> new key: an old key in a configuration file is an error naming the new one."""
 
     mode: SmootherMode = SmootherMode.PAPER
     window_frames: int = Field(30, ge=2, le=10000)
     """Frames kept in the sliding window (the paper's n)."""
-    visual_huber_sigma: float | None = Field(0.1, ge=1e-3, le=1e6,
-                                             validation_alias=AliasChoices("visual_huber_sigma", "huber_k"))
-    """Huber threshold on the whitened visual residual (the Mahalanobis distance, as `MekfConfig`'s);
-    None for a plain Gaussian prior. The old key `huber_k` is accepted."""
-    between_sigma_rad: float = Field(0.1, ge=1e-6, le=10.0)
-    """Isotropic sigma of the identity smoothness factor (paper's lambda = sigma^2)."""
+    visual_huber_k: float | None = Field(0.1, ge=1e-3, le=1e6)
+    """Huber threshold k on the Mahalanobis distance d of the visual residual (GTSAM's Huber on the
+    whitened residual's norm; the EKF's key of the same name and meaning: weight k/d beyond k); None for a
+    plain Gaussian prior. The paper's 0.1 (the EKF's default is 2.0) down-weights nearly every frame."""
+    between_std_rad: float = Field(0.1, ge=1e-6, le=10.0)
+    """Isotropic std of the identity smoothness factor, rad (the paper's lambda = std^2)."""
     missing_variance_rad2: float = Field(1.0, ge=1e-12, le=100.0)
     """Variance reported per axis before the first visual rotation."""
     visual_noise_share_frames: float = Field(30.0, ge=0, le=1e6)
@@ -94,23 +106,21 @@ class SmootherConfig(GyroNoiseConfig):
     `single`'s 2.141 (NEES 2.90 -> 3.13); ICL kt3 0.289 unchanged; simulated walks without IMU
     1.966 / 1.920 -> 1.959 / 1.913."""
     # Gyro-aided mode: gyro noise from `GyroNoiseConfig`; the smoother's bias prior default is wider.
-    gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-4, ge=1e-9, le=1.0, validation_alias=AliasChoices(
-        "gyro_bias_rw_rad_s2_sqrt_hz", "gyro_bias_walk_rad_s2_sqrt_hz"))
-    """Gyro bias random-walk density, rad/s^2/sqrt(Hz) (> 0: a gtsam sigma; old key accepted)."""
-    gyro_bias_initial_std_rad_s: float = Field(0.02, ge=1e-6, le=10.0, validation_alias=AliasChoices(
-        "gyro_bias_initial_std_rad_s", "gyro_bias_prior_sigma_rad_s"))
-    """Prior sigma of the gyro bias on the first frame, rad/s (old key accepted)."""
-    accel_sigma_rad: float = Field(0.03, ge=1e-6, le=10.0)
-    """Sigma of the gravity direction from the mean accelerometer reading when the camera is still."""
+    gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-4, ge=1e-9, le=1.0)
+    """Gyro bias random-walk density, rad/s^2/sqrt(Hz) (> 0: a gtsam sigma)."""
+    gyro_bias_initial_std_rad_s: float = Field(0.02, ge=1e-6, le=10.0)
+    """Prior std of the gyro bias on the first frame, rad/s."""
+    accel_std_rad: float = Field(0.03, ge=1e-6, le=10.0)
+    """Std of the gravity direction from the mean accelerometer reading when the camera is still, rad."""
     accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0, le=100.0)
-    """Added to `accel_sigma_rad` per m/s^2 of | |a_mean| - g | plus the RMS spread of the samples."""
+    """Added to `accel_std_rad` per m/s^2 of | |a_mean| - g | plus the RMS spread of the samples."""
     gravity_huber_k: float | None = Field(1.345, ge=1e-3, le=1e6)
     """Huber threshold on the whitened gravity residual; None for Gaussian."""
     gravity_m_s2: float = Field(9.81, ge=1.0, le=100.0)
-    manhattan_tilt_sigma_rad: float = Field(0.02, ge=1e-6, le=10.0)
-    """Prior sigma of the Manhattan frame's tilt away from vertical (gyro mode)."""
-    world_yaw_sigma_rad: float = Field(1e-3, ge=1e-6, le=10.0)
-    """Prior sigma fixing the world's yaw (a gauge) through `R_wm` (gyro mode)."""
+    manhattan_vertical_std_rad: float = Field(0.02, ge=1e-6, le=10.0)
+    """How far the Manhattan z axis may lean from world up (std, rad; gyro mode): the EKF's key of the same name."""
+    world_yaw_std_rad: float = Field(1e-3, ge=1e-6, le=10.0)
+    """Prior std fixing the world's yaw (a gauge) through `R_wm` (gyro mode), rad."""
     R_ci: list[list[float]] = Field(default_factory=lambda: np.eye(3).tolist())
     """Camera-from-IMU rotation (3x3): `gyro_c = R_ci @ gyro_i`."""
     imu_time_offset_s: float = Field(0.0, ge=-3600.0, le=3600.0)
@@ -168,7 +178,7 @@ class Smoother(Backend):
     def __init__(self, config: SmootherConfig | None = None):
         self.config = config or SmootherConfig()
         self._R_ci = np.asarray(self.config.R_ci, dtype=float)
-        self._between_noise = gtsam.noiseModel.Isotropic.Sigma(3, self.config.between_sigma_rad)
+        self._between_noise = gtsam.noiseModel.Isotropic.Sigma(3, self.config.between_std_rad)
         self._smoother: BatchFixedLagSmoother | None = None
         self._k = -1  # index of the latest frame in the graph
         self._t_frame = float("nan")
@@ -219,7 +229,7 @@ class Smoother(Backend):
         (`visual_noise_share.py`; nothing in gyro mode)."""
         R_wc_cov = visual_R_wc_covariance(visual)
         noise = gtsam.noiseModel.Gaussian.Covariance(self._noise_share.share * R_wc_cov)
-        graph.add(self._visual_factor(k, visual, _robust(self.config.visual_huber_sigma, noise)))
+        graph.add(self._visual_factor(k, visual, _robust(self.config.visual_huber_k, noise)))
         if self._noise_share.enabled:
             self._noise_share.take(t_s, visual, R_wc_cov)
 
@@ -294,7 +304,7 @@ class Smoother(Backend):
         """After a failure: a fresh window holding X(k) at the last good estimate (propagated by the
         gyro in gyro mode) with its covariance; this frame's measurements are dropped."""
         last = self._last
-        cov = last.cov + self.config.between_sigma_rad**2 * np.eye(3)
+        cov = last.cov + self.config.between_std_rad**2 * np.eye(3)
         self._smoother = self._new_smoother()
         graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
         graph.add(gtsam.PriorFactorRot3(X(k), gtsam.Rot3(R_wc_pred), gtsam.noiseModel.Gaussian.Covariance(cov)))

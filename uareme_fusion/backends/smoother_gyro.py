@@ -65,7 +65,7 @@ class GyroSmoother(Smoother):
             return None
         spread = np.sqrt(np.mean(np.sum((accel - mean) ** 2, axis=1)))
         cfg = self.config
-        sigma = cfg.accel_sigma_rad + cfg.accel_inflation_rad_per_m_s2 * (abs(norm - cfg.gravity_m_s2) + spread)
+        sigma = cfg.accel_std_rad + cfg.accel_inflation_rad_per_m_s2 * (abs(norm - cfg.gravity_m_s2) + spread)
         noise = _robust(cfg.gravity_huber_k, gtsam.noiseModel.Isotropic.Sigma(2, sigma))
         # Error: up_w (x) R_wc @ up_c, with up_c the measured specific-force direction.
         return gtsam.AttitudeFactorRot3(key, gtsam.Unit3(WORLD_UP), noise, gtsam.Unit3(mean / norm))
@@ -125,7 +125,7 @@ class GyroSmoother(Smoother):
                           bias_cov: np.ndarray) -> None:
         """R_wm (gauge on yaw, loose tilt) and the gyro bias B(k)."""
         cfg = self.config
-        sig = [cfg.manhattan_tilt_sigma_rad, cfg.manhattan_tilt_sigma_rad, cfg.world_yaw_sigma_rad]
+        sig = [cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_std_rad, cfg.world_yaw_std_rad]
         graph.add(gtsam.PriorFactorRot3(MANHATTAN_KEY, gtsam.Rot3(R_wm), gtsam.noiseModel.Diagonal.Sigmas(sig)))
         graph.add(gtsam.PriorFactorVector(B(k), bias, gtsam.noiseModel.Gaussian.Covariance(bias_cov)))
         values.insert(MANHATTAN_KEY, gtsam.Rot3(R_wm))

@@ -17,7 +17,7 @@ from ..drivers import open_source
 from ..errors import InputError
 from ..pipeline import RunConfig
 from ..pipeline.session import run_source
-from ..evaluation.statistics import rmse
+from ..scoring.statistics import rmse
 from ..rotations import tilt_error_deg, up_in_camera
 from .peers import vqf_6d_R_wi
 

@@ -63,21 +63,13 @@ from ..errors import InputError
 from ..formats.datasets import ICL_NUIM_K_OPENCV, ICSL_CORRIDOR_K, read_icsl_depth
 from ..formats.images import natural_key
 from ..rotations import log_so3, nearest_symmetric
+from ..scoring.horizon import horizon_error
 
 AUC_CUTOFF = 0.25
 CPU_TIME_NOTE = "CPU: what a photo costs on an idle core (process time); wall grows with the machine's load"
 ICSL_FX = float(ICSL_CORRIDOR_K[0, 0])
 ICL_FX = float(ICL_NUIM_K_OPENCV[0, 0])
 ICL_CENTRE = (float(ICL_NUIM_K_OPENCV[0, 2]), float(ICL_NUIM_K_OPENCV[1, 2]))
-
-
-def horizon_error(line_est, line_true, height: int, width: int) -> float:
-    """Largest vertical distance between two horizon lines a x + b y + c = 0 over x in [0, width - 1],
-    divided by `height` (the ECD score); inf when a line is vertical or at infinity."""
-    def y_at(line, x):
-        a, b, c = line
-        return -(a * x + c) / b if abs(b) > 1e-12 else np.inf
-    return max(abs(y_at(line_est, x) - y_at(line_true, x)) for x in (0.0, width - 1.0)) / height
 
 
 def auc_percent(errors, cutoff: float = AUC_CUTOFF) -> float:

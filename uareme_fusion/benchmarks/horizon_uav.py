@@ -24,7 +24,8 @@ from rich.table import Table
 
 from ..errors import InputError
 from ..formats.images import natural_key
-from .horizon import CPU_TIME_NOTE, auc_percent, horizon_error, level_horizon
+from ..scoring.horizon import horizon_error
+from .horizon import CPU_TIME_NOTE, auc_percent, level_horizon
 
 PASS_ROLL_DEG = 5.0
 PASS_ERROR_FRACTION = 0.05

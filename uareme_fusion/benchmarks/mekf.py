@@ -42,9 +42,9 @@ from ..backends.mekf.filter import load_kernels
 from ..backends.mekf.offline import forward_backward_imu
 from ..backends.single import SingleFrame
 from ..config import load_config
-from ..drivers.broad import read_broad
+from ..formats.broad import read_broad
 from ..evaluation.scenarios import RunResult, run_scenario
-from ..evaluation.statistics import error_stats, rmse
+from ..scoring.statistics import error_stats, rmse
 from ..rotations import tilt_error_deg, up_in_camera
 from .fused_cost import REPLAYS, fused_cost_us, recording_mekf_factory
 from .peers import vqf_6d_R_wi
@@ -184,7 +184,7 @@ def run_command_cost_us(path: Path) -> tuple[float, float, int]:
     from ..drivers.registry import open_source
     from ..pipeline import RunConfig
     from ..pipeline.session import build_pipeline
-    from ..pipeline.sinks import EstimatesCsvWriter, TumTrajectoryWriter
+    from ..sinks.estimate_files import EstimatesCsvWriter, TumTrajectoryWriter
 
     cpu, wall = [], []
     for _ in range(3):

@@ -200,7 +200,7 @@ def run(seconds: float = 10.0, memory_minutes: float = 10.0, normals: str = "lea
           f"the line cue costs {tp['timing_ms']['solver'] - alone['timing_ms']['solver']:.1f} ms per frame")
     result["throughput_three_cues"] = three = throughput(seconds, normals, threads, source, cues=THREE_CUES)
     print(f"  all three cues (--cues {THREE_CUES}; the sky detector on {three['sky_looked_percent']:.0f} % of the "
-          f"frames, `pipeline/sky_cadence.py`): {three['fps']:.1f} fps; CPU {three['cpu_ms_per_frame']:.1f} ms per "
+          f"frames, `solver/sky_cadence.py`): {three['fps']:.1f} fps; CPU {three['cpu_ms_per_frame']:.1f} ms per "
           f"frame = {three['cpu_fps']:.1f} fps on an idle core (goal >= {THREE_CUES_FPS_GOAL:g}: ratio "
           f"{three['cpu_fps'] / THREE_CUES_FPS_GOAL:.2f}), {three['cpu_ms_per_frame'] / tp['cpu_ms_per_frame']:.2f}x "
           f"the CPU of normals,lines")

@@ -12,7 +12,7 @@ Two ways of running, both the library's own:
   (`evaluation.source_sequence`: learned normals + lines, learned normals alone, lines alone; depth
   normals + lines where the source has depth), then `single`, `mekf` and `smoother` run on the same
   rotations (`evaluation.compare.run_backend`, each backend made as `run` makes it:
-  `pipeline.stages.make_backend`), so a paired per-frame difference isolates the backend or the cue;
+  `pipeline.stages.backend_for_run`), so a paired per-frame difference isolates the backend or the cue;
 - `eval` runs: what a user's `uareme-fusion eval` gives (`pipeline.session.run_source`): ICL kt3 with
   default options (no --normals), EuRoC micro with default options against the IMU log alone
   (`eval mav0/imu0/data.csv --gt ...`) over the same frames, TUM with and without its accelerometer.
@@ -41,18 +41,16 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from ..evaluation.paired_difference import paired_difference
+from .realdata_rows import COLUMNS, JOINT, figure_rows
 
 CUE_SETS = {"RGB normals+lines": ("learned", "normals,lines"), "RGB normals": ("learned", "normals"),
             "RGB lines": ("learned", "lines"), "depth": ("depth", "normals,lines")}
 """Row name -> (--normals, --cues) of each cue set."""
 RGB_SINGLE_CUES = ("RGB normals", "RGB lines")
-JOINT = "RGB normals+lines"
 BACKENDS = ("single", "mekf", "smoother")
 SEQUENCES = ("tum", "euroc", "icsl", "icsl_more", "kt3")
-NEES_RANGE = (1.0, 6.0)
 QUICK_FRAMES = 20
 """Frames per sequence with `--quick` (not the reported figures)."""
-STD_SEPARATION_GOAL = 0.5
 
 
 def std_separation(std: np.ndarray, errors: np.ndarray) -> dict:
@@ -70,12 +68,6 @@ def std_separation(std: np.ndarray, errors: np.ndarray) -> dict:
     low, high = float(np.median(errors[order[:half]])), float(np.median(errors[order[half:]]))
     return {"low_std_median": low, "high_std_median": high, "ratio": low / high if high > 0 else float("inf"),
             "frames": int(len(std))}
-
-
-def no_worse(interval: dict) -> bool | None:
-    """A paired difference (A - B) whose 95 % interval does not lie wholly above 0: A is no worse than B
-    beyond the interval. None without frames."""
-    return None if not interval.get("frames") else bool(interval["low"] <= 0.0)
 
 
 def total_std_deg(cov_rad2: np.ndarray) -> np.ndarray:
@@ -177,17 +169,17 @@ def cue_set_sequence(seq: RealSequence, normals: str, cues: str, max_frames: int
 
 def backend_errors(visual, info) -> dict:
     """Per-frame errors (`compare.errors_over_time`) of each of `BACKENDS` on one `VisualSequence`,
-    each made as `run` makes it for this source (`stages.make_backend`; the sequence's IMU is already in
+    each made as `run` makes it for this source (`stages.backend_for_run`; the sequence's IMU is already in
     camera axes and on the camera clock)."""
-    from ..evaluation.backend_factory import backend_kind, knows_gravity
+    from ..backends.factory import backend_kind, knows_gravity
     from ..evaluation.compare import errors_over_time, run_backend
     from ..pipeline import RunConfig
-    from ..pipeline.stages import make_backend
+    from ..pipeline.stages import backend_for_run
 
     camera_axes = dataclasses.replace(info, R_ci=np.eye(3), imu_time_offset_s=0.0, has_imu=visual.has_imu)
     out = {}
     for name in BACKENDS:
-        run = run_backend(make_backend(RunConfig(backend=name), camera_axes), visual)
+        run = run_backend(backend_for_run(RunConfig(backend=name), camera_axes), visual)
         kind = backend_kind(name, visual.has_imu).name
         err = errors_over_time(run, visual.R_wc_true, yaw_only_nees=knows_gravity(kind, visual.has_imu))
         err["std_deg"] = total_std_deg(np.array([e.cov for e in run.estimates]))
@@ -201,9 +193,9 @@ def eval_run(spec: str, cfg, progress=None, gt: Path | None = None) -> dict:
     "has_imu"}`."""
     from ..drivers import open_source
     from ..drivers.ground_truth_file import with_ground_truth_file
-    from ..evaluation.backend_factory import backend_kind, knows_gravity
+    from ..backends.factory import backend_kind, knows_gravity
     from ..pipeline.session import configure_imu, evaluation_errors, run_source
-    from ..pipeline.sinks import EstimateLog
+    from ..sinks.estimate_files import EstimateLog
 
     log = EstimateLog()
     with tempfile.TemporaryDirectory() as out, open_source(spec) as source:
@@ -376,107 +368,6 @@ def _eval_figures(run_: dict) -> dict:
             "nees_mean": s["nees"].get("mean", float("nan")), "tilt_note": s.get("evaluation_note", "")}
 
 
-# ---------------------------------------------------------------- rows
-
-
-def _interval(d: dict | None) -> str:
-    if not d or not d.get("frames"):
-        return ""
-    return f"{d['mean']:+.2f} ({d['low']:+.2f} .. {d['high']:+.2f})"
-
-
-def _verdict(ok: bool | None) -> str:
-    return "" if ok is None else ("ok" if ok else "FAIL")
-
-
-def _in_nees(value: float) -> bool | None:
-    return None if not np.isfinite(value) else bool(NEES_RANGE[0] <= value <= NEES_RANGE[1])
-
-
-def _row(seq: str, figure: str, measured: str, goal: str = "", versus: str = "", interval: str = "",
-         ok: bool | None = None) -> dict:
-    return {"sequence": seq, "figure": figure, "measured": measured, "goal": goal, "versus": versus,
-            "paired_95": interval, "verdict": _verdict(ok)}
-
-
-def figure_rows(name: str, fig: dict) -> list[dict]:
-    """The printed rows of one sequence's figures."""
-    rows, cues = [], fig["cue_sets"]
-    depth_are = cues.get("depth", {}).get("single", {}).get("are_mean_deg")
-    tum = name.startswith("TUM")
-    for cue, backends in cues.items():
-        single = backends["single"]
-        for backend, row in backends.items():
-            figure = f"{cue}, {backend}: ARE / NEES" + (" / tilt" if "tilt_mean_deg" in row else "")
-            measured = f"{row['are_mean_deg']:.2f} / {row['nees_mean']:.2f}" + (
-                f" / {row['tilt_mean_deg']:.2f}" if "tilt_mean_deg" in row else "")
-            goal, versus, interval, ok = f"NEES in [{NEES_RANGE[0]:g}, {NEES_RANGE[1]:g}]", "", "", _in_nees(row["nees_mean"])
-            if backend == "single" and tum and cue.startswith("RGB") and cue == JOINT:
-                limit = min(8.0, 1.5 * depth_are) if depth_are is not None else 8.0
-                goal = f"ARE <= 8 and <= 1.5x depth ({limit:.2f}); " + goal
-                ok = ok and row["are_mean_deg"] <= limit
-            if backend == "single" and tum and cue == "depth":
-                goal = "ARE <= 4, NEES <= 6; NEES >= 1"
-                ok = row["are_mean_deg"] <= 4.0 and ok
-            if backend != "single":
-                goal = f"ARE no worse than single ({single['are_mean_deg']:.2f}); " + goal
-                interval = _interval(row["are_vs_single_deg"])
-                versus = "vs single"
-                ok = no_worse(row["are_vs_single_deg"]) and ok
-            rows.append(_row(name, figure, measured, goal, versus, interval, ok))
-            if "tilt_vs_imu_deg" in row and backend != "single":
-                d = row["tilt_vs_imu_deg"]
-                rows.append(_row(name, f"{cue}, {backend}: tilt vs the IMU alone (same frames)",
-                                 f"{row['tilt_mean_deg']:.2f} vs {row['tilt_mean_deg'] - d['mean']:.2f}",
-                                 "tilt no worse than the IMU's", "vs IMU alone", _interval(d), no_worse(d)))
-        if "best_single_cue" in single:
-            best = single["best_single_cue"]
-            rows.append(_row(name, f"{cue} joint vs the better single cue ({best}, single)",
-                             f"{single['are_mean_deg']:.2f} vs {cues[best]['single']['are_mean_deg']:.2f}",
-                             "no worse beyond the paired 95 % interval", f"vs {best}",
-                             _interval(single["are_vs_best_single_cue_deg"]),
-                             no_worse(single["are_vs_best_single_cue_deg"])))
-        sep = single["std_separation"]
-        rows.append(_row(name, f"{cue}, single: std separation, median ARE of the low-std / high-std half",
-                         f"{sep['low_std_median']:.2f} / {sep['high_std_median']:.2f} (ratio {sep['ratio']:.2f})",
-                         f"ratio <= {STD_SEPARATION_GOAL}", "", "",
-                         None if not np.isfinite(sep["ratio"]) else sep["ratio"] <= STD_SEPARATION_GOAL))
-    if "eval_default" in fig:
-        e = fig["eval_default"]
-        rows.append(_row(name, f"eval, default options ({e['normals']} / {e['backend']}): ARE / NEES",
-                         f"{e['are_mean_deg']:.2f} / {e['nees_mean']:.2f}", "ARE <= 0.5", "", "",
-                         e["are_mean_deg"] <= 0.5))
-    if "eval_with_imu" in fig:
-        e = fig["eval_with_imu"]
-        d = e["fused_vs_imu_tilt_deg"]
-        rows.append(_row(name, f"eval, default options ({e['normals']} / {e['backend']}): fused tilt / NEES",
-                         f"{e['fused_tilt_mean_deg']:.2f} / {e['fused_nees_mean']:.2f}",
-                         f"tilt <= 1.0 and <= IMU; NEES in [{NEES_RANGE[0]:g}, {NEES_RANGE[1]:g}]",
-                         f"IMU alone {e['imu_tilt_same_frames_mean_deg']:.2f} (same {e['frames']} frames; "
-                         f"whole log {e['imu_tilt_whole_log_mean_deg']:.2f})", _interval(d),
-                         e["fused_tilt_mean_deg"] <= 1.0 and bool(no_worse(d)) and bool(_in_nees(e["fused_nees_mean"]))))
-    if "accelerometer" in fig:
-        a = fig["accelerometer"]
-        w = a["without"]
-        rows.append(_row(name, f"eval without accelerometer ({w['normals']} / {w['backend']}): tilt / ARE / NEES",
-                         f"{w['tilt_mean_deg']:.2f} / {w['are_mean_deg']:.2f} / {w['nees_mean']:.2f}",
-                         "", "tilt after the alignment" if "alignment" in w["tilt_note"] else ""))
-        if "note" in a["with"]:
-            rows.append(_row(name, "eval with the Kinect accelerometer", a["with"]["note"], "tilt <= without"))
-        else:
-            v = a["with"]
-            d = v["tilt_vs_without_deg"]
-            rows.append(_row(name, f"eval with the Kinect accelerometer ({v['normals']} / {v['backend']}): "
-                             "tilt / ARE / NEES", f"{v['tilt_mean_deg']:.2f} / {v['are_mean_deg']:.2f} / "
-                             f"{v['nees_mean']:.2f}", "tilt no worse than without", "vs without", _interval(d),
-                             no_worse(d)))
-    return rows
-
-
-COLUMNS = (("sequence", "sequence"), ("figure", "figure"), ("measured", "measured"), ("goal", "goal"),
-           ("versus", "against"), ("paired_95", "A - B, paired 95 %"), ("verdict", ""))
-
-
 def _print(console: Console, rows: list[dict], skipped: list[str], quick: bool) -> None:
     table = Table(title="bench realdata: real development sequences" + (" (--quick: first "
                   f"{QUICK_FRAMES} frames, not the reported figures)" if quick else "") +
@@ -488,16 +379,3 @@ def _print(console: Console, rows: list[dict], skipped: list[str], quick: bool) 
     console.print(table)
     for line in skipped:
         console.print(line, markup=False)
-
-
-def markdown(results: dict) -> str:
-    """The compact results file of `--markdown`: one table of every row, then the skipped sequences."""
-    lines = ["# bench realdata" + (" (--quick)" if results["quick"] else ""), "",
-             "Angles in degrees; ARE after one constant alignment; paired 95 % intervals are of the per-frame "
-             "difference A - B (moving-block bootstrap).", "",
-             "| " + " | ".join(title or "verdict" for _, title in COLUMNS) + " |",
-             "|" + "---|" * len(COLUMNS)]
-    for row in results["rows"]:
-        lines.append("| " + " | ".join(row[key].replace("|", "/") for key, _ in COLUMNS) + " |")
-    lines += [""] + [f"- {line}" for line in results["skipped"]]
-    return "\n".join(lines) + "\n"

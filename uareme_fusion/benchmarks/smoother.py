@@ -15,7 +15,7 @@ import numpy as np
 
 from ..evaluation.compare import make_backends, run_backend, summarise
 from ..evaluation.sequence import synthetic_sequence
-from ..evaluation.statistics import error_stats
+from ..scoring.statistics import error_stats
 
 
 def run(seeds: int = 5, duration_s: float = 20.0, scenarios=("walk", "shake")) -> dict:

@@ -27,7 +27,7 @@ import numpy as np
 from ..drivers.simulated import SimulatedSource
 from ..pipeline import RunConfig
 from ..pipeline.session import build_pipeline
-from ..pipeline.sinks import EstimatesCsvWriter, TumTrajectoryWriter
+from ..sinks.estimate_files import EstimatesCsvWriter, TumTrajectoryWriter
 from ..rotations import align_constant, are_deg, tilt_error_deg, up_in_camera
 from .pipeline import rss_mb
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Optional
 
 import typer
 
@@ -32,13 +33,13 @@ def bench(
     ctx: typer.Context,
     what: str = typer.Argument("solver", help=f"Which benchmark: {', '.join(BENCHMARKS)}."),
     repeats: int = typer.Option(100, min=5, help="solver: timed runs per figure."),
-    seconds: float = typer.Option(10.0, "--seconds", min=1.0, max=600.0,
-                                  help="pipeline: length of the timed 640x480 room walk, s."),
-    memory_minutes: float = typer.Option(10.0, "--memory-minutes", min=0.0, max=600.0,
-                                         help="pipeline: length of the memory stream, min (0: skip)."),
+    duration_s: Optional[float] = typer.Option(None, "--duration-s", min=1.0, max=86400.0,
+                                               help="pipeline: length of the timed 640x480 room walk, s (default "
+                                                    "10); soak: simulated stream length (30 fps, 400 Hz IMU), s "
+                                                    "(default 3600)."),
+    memory_duration_s: float = typer.Option(600.0, "--memory-duration-s", min=0.0, max=36000.0,
+                                            help="pipeline: length of the memory stream, s (0: skip)."),
     normals: str = typer.Option("learned", "--normals", help="pipeline: learned or a model file (.pt, .onnx)."),
-    minutes: float = typer.Option(60.0, "--minutes", min=0.1, max=1440.0,
-                                  help="soak: simulated stream length (30 fps, 400 Hz IMU), min."),
     normals_noise_deg: float = typer.Option(2.0, "--normals-noise-deg", min=0.0, max=90.0,
                                             help="soak: angular noise on the simulator's normals, deg."),
     preset: str = typer.Option("building", "--preset", help="soak: EKF preset (building, handheld, vehicle)."),
@@ -78,7 +79,7 @@ def bench(
     elif what == "pipeline":
         from ..benchmarks import pipeline
 
-        results = pipeline.run(seconds, memory_minutes, normals, threads)
+        results = pipeline.run(duration_s or 10.0, memory_duration_s / 60.0, normals, threads)
     elif what == "broad":
         from ..benchmarks import broad
 
@@ -97,7 +98,7 @@ def bench(
         results = mekf.run(seeds=seeds, quick=quick, broad_dir=data or Path("../shared/data/broad_subset"),
                            run_cost=run_cost)
     elif what == "realdata":
-        from ..benchmarks import realdata
+        from ..benchmarks import realdata, realdata_rows
 
         wanted = realdata.SEQUENCES if sequences is None else tuple(s.strip() for s in sequences.split(",") if s.strip())
         unknown = sorted(set(wanted) - set(realdata.SEQUENCES))
@@ -107,7 +108,7 @@ def bench(
         if markdown_out is not None:
             from ..io.safe_files import write_text_atomic
 
-            write_text_atomic(markdown_out, realdata.markdown(results))
+            write_text_atomic(markdown_out, realdata_rows.markdown(results))
     elif what == "normals":
         from ..benchmarks import normals
 
@@ -123,7 +124,7 @@ def bench(
     else:
         from ..benchmarks import soak
 
-        results = soak.run(seconds=minutes * 60.0, normals_noise_deg=normals_noise_deg, preset=preset)
+        results = soak.run(seconds=duration_s or 3600.0, normals_noise_deg=normals_noise_deg, preset=preset)
     if json_out is not None:
         from ..io.safe_files import write_text_atomic
 

@@ -19,7 +19,7 @@ from ..drivers.intrinsics import parse_intrinsics
 from ..errors import InputError
 from ..io.safe_files import refuse_input_as_output, write_image_atomic
 from ..normals.export import unique_stems
-from ..pipeline.cues import DEFAULT_CUES
+from ..solver.cues import DEFAULT_CUES
 from ..pipeline.session import make_output_folder, prepare_output_folder
 from ..pipeline.single_image import ImageAnalyser, image_overlay, image_paths
 from .app import app

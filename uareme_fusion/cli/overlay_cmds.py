@@ -9,7 +9,7 @@ import typer
 
 from ..errors import InputError
 from ..io.safe_files import refuse_input_as_output, refuse_link
-from ..pipeline.drawing_sinks import VIDEO_CODECS, GroundSink, HorizonVideoSink
+from ..sinks.drawing import VIDEO_CODECS, GroundSink, HorizonVideoSink
 from .app import app
 from .run_cmd import _o, bag_topics, execute, run_config
 

@@ -32,7 +32,7 @@ def run_config(config: Optional[Path], **overrides) -> RunConfig:
 
 def execute(source: str, out: Path, cfg: RunConfig, imu: Optional[Path], fps: Optional[float], evaluate: bool,
             command: str, extra_sinks_factory=None, record_dir: Optional[Path] = None,
-            gt: Optional[Path] = None, gt_time_offset_s: float = 0.0, force: bool = False,
+            gt: Optional[Path] = None, gt_time_offset_s: Optional[float] = None, force: bool = False,
             topics: Optional[dict] = None) -> dict:
     """Open the source, run it with a progress bar, report how it ended; exits non-zero when it failed.
 
@@ -85,11 +85,11 @@ def viewer_sinks(rerun: Optional[Path], mcap: Optional[Path] = None, source: Opt
     def factory(src, out_dir, cfg):
         sinks = []
         if rerun is not None:
-            from ..pipeline.rerun_sink import RerunSink
+            from ..sinks.rerun_file import RerunSink
 
             sinks.append(RerunSink(rerun, cfg.assumed_fov_deg))
         if mcap is not None:
-            from ..pipeline.mcap_sink import McapSink
+            from ..sinks.mcap_file import McapSink
 
             sinks.append(McapSink(mcap, cfg.assumed_fov_deg))
         return sinks
@@ -233,8 +233,10 @@ def eval_command(
     cues: Optional[str] = _o["cues"],
     gt: Optional[Path] = typer.Option(None, "--gt", help="Ground-truth trajectory (TUM 'timestamp tx ty tz qx qy qz "
                                                          "qw', or EuRoC gt0/data.csv) in place of the source's own."),
-    gt_time_offset_s: float = typer.Option(0.0, "--gt-time-offset-s",
-                                           help="Seconds added to the --gt stamps to put them on the source's clock."),
+    gt_time_offset_s: Optional[float] = typer.Option(
+        None, "--gt-time-offset-s", help="Seconds added to the ground truth's stamps to put them on the source's "
+                                         "clock: of --gt (default 0), else of the source's own (default: TUM RGB-D "
+                                         "+0.027, others 0)."),
     mcap: Optional[Path] = _o["mcap"],
     image_topic: Optional[str] = _o["image_topic"], imu_topic: Optional[str] = _o["imu_topic"],
     depth_topic: Optional[str] = _o["depth_topic"], camera_info_topic: Optional[str] = _o["camera_info_topic"],

@@ -78,6 +78,9 @@ class SourceInfo:
     """True when the depth maps are rendered (ICL-NUIM, the simulator) rather than measured: their noise
     is per pixel, with no plane-wide part (a real sensor's calibration tilts whole planes), so depth
     normals count one independent error per fit window (`normals.depth.depth_normals_for`)."""
+    gt_time_offset_s: float = 0.0
+    """Seconds the source added to its ground truth's stamps to put them on the camera clock (a dataset
+    default: TUM RGB-D, `formats.tum.TUM_RGBD_GT_TIME_OFFSET_S`); `--gt-time-offset-s` replaces it."""
     platform: str | None = None
     """What carries the camera when the source says so (`handheld`, `vehicle`, `building`: scene.json or
     source.json `platform`); the EKF preset when none is asked for. None: unknown."""

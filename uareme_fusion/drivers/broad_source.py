@@ -19,7 +19,7 @@ import numpy as np
 from uareme_fusion.types import ImuBatch
 
 from .base import GroundTruth, Source, SourceInfo
-from .broad import read_broad
+from ..formats.broad import read_broad
 from .interleave import IMU_ONLY_BATCH_S, count_spans, split_by_span
 
 

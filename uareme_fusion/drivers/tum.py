@@ -21,6 +21,9 @@ What is read (built on `formats.tum.load_tum_rgbd` and `formats.euroc.read_euroc
 
 Clocks: frame times are the list's seconds; IMU batches keep the IMU clock
 (`info.imu_time_offset_s` from scene.json or source.json is added to put them on the camera clock).
+A TUM RGB-D folder (named as one, without scene.json or source.json) has its ground truth's stamps
+shifted by `formats.tum.TUM_RGBD_GT_TIME_OFFSET_S` onto the Kinect's clock, said in a note and in
+`info.gt_time_offset_s`; every other folder's ground truth is read as stamped (`gt_time_offset_s` 0).
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ from uareme_fusion.rotations import is_rotation
 from uareme_fusion.types import Frame, ImuBatch, NormalMap
 
 from ..formats.datasets import RENDERED_DEPTH_DATASETS
-from ..formats.tum import TumSequence, load_tum_rgbd, read_json_object, read_tum_list
+from ..formats.tum import TUM_RGBD_GT_TIME_OFFSET_S, TumSequence, load_tum_rgbd, read_json_object, read_tum_list
 from .base import PLATFORMS, GroundTruth, Source, SourceInfo
 from .imu_csv import non_increasing_note, read_imu_log
 from .interleave import interleave
@@ -174,6 +177,7 @@ class TumSource(Source):
                              if first is not None and self.camera is not None and self.camera.distorted else None)
         dataset = published_dataset(self.root)
         rendered = (self.root / SIM_META).is_file() or (dataset is not None and dataset[0] in RENDERED_DEPTH_DATASETS)
+        self._gt_offset_s = self._gt_time_offset_s(dataset)
         self.info = SourceInfo(
             name=str(root), n_frames=len(self.seq), fps=fps, K=self.seq.K,
             K_origin=None if self.camera is None else self.camera.origin,
@@ -181,8 +185,16 @@ class TumSource(Source):
             R_ci=self.meta.get("R_ci") if self.meta.get("R_ci") is not None else np.eye(3),
             imu_time_offset_s=self.meta.get("imu_time_offset_s", 0.0), platform=self.meta.get("platform"),
             image_size=None if first is None else first.rgb.shape[:2],
-            depth_rendered=rendered,
+            depth_rendered=rendered, gt_time_offset_s=self._gt_offset_s,
         )
+
+    def _gt_time_offset_s(self, dataset: tuple[str, str] | None) -> float:
+        """The dataset default shift of the ground truth's stamps (module docstring), with its note."""
+        if self.seq.groundtruth is None or self.meta or dataset is None or not dataset[0].startswith("TUM RGB-D"):
+            return 0.0
+        self.notes.append(f"{self.root / 'groundtruth.txt'}: stamps {TUM_RGBD_GT_TIME_OFFSET_S * 1000:+.0f} ms onto "
+                          f"the Kinect's clock (the TUM RGB-D default; --gt-time-offset-s to change)")
+        return TUM_RGBD_GT_TIME_OFFSET_S
 
     def _camera(self) -> CameraModel | None:
         """K from source.json / scene.json, else the published intrinsics the folder's name identifies
@@ -243,5 +255,6 @@ class TumSource(Source):
     def ground_truth(self) -> GroundTruth | None:
         if self.seq.groundtruth is None:
             return None
-        return ground_truth_from_tum(self.seq.groundtruth, bool(self.meta.get("gravity_aligned", False)),
-                                     self.time_scale)
+        truth = ground_truth_from_tum(self.seq.groundtruth, bool(self.meta.get("gravity_aligned", False)),
+                                      self.time_scale)
+        return dataclasses.replace(truth, t_s=truth.t_s + self._gt_offset_s)

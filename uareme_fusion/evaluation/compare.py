@@ -31,10 +31,10 @@ import numpy as np
 from ..io.safe_files import save_figure_atomic, write_text_atomic
 from ..backends.base import Backend
 from ..types import Status
-from .backend_factory import BACKEND_NAMES, knows_gravity, make_backend
-from .metrics import JUMP_DEG, attitude_errors, jump_counts
+from ..backends.factory import BACKEND_NAMES, knows_gravity, make_backend
+from ..scoring.metrics import JUMP_DEG, attitude_errors, jump_counts
 from .sequence import VisualSequence
-from .statistics import error_stats
+from ..scoring.statistics import error_stats
 
 
 @dataclass
@@ -48,7 +48,7 @@ class BackendRun:
 
 
 def make_backends(names=BACKEND_NAMES) -> tuple[dict, dict]:
-    """Backends by name (`backend_factory.make_backend`, EKF with its default settings), and a note for
+    """Backends by name (`backends.factory.make_backend`, EKF with its default settings), and a note for
     each that could not be made (e.g. mekf not installed)."""
     backends, notes = {}, {}
     for name in names:

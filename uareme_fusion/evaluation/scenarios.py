@@ -19,7 +19,7 @@ from ..sim.imu import simulate_imu
 from ..sim.normal_maps import manhattan_normal_map
 from ..sim.trajectory import make_trajectory
 from ..solver import solve_manhattan
-from .backend_factory import make_backend
+from ..backends.factory import make_backend
 
 VISUAL_NOISE_DEG = 8.0
 VISUAL_CORRELATION_PX = 4.0

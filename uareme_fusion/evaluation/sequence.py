@@ -42,14 +42,14 @@ class VisualSequence:
 class ChainedSolver:
     """Solves frames in order, each solve initialised from the previous solution; `invalid` counts
     the frames without a usable cue (they give no visual rotation). With `cues` (a
-    `pipeline.cues.CueSolver`) a frame's normals and line segments are solved together, as in `run`;
+    `solver.cues.CueSolver`) a frame's normals and line segments are solved together, as in `run`;
     without, its normal map alone."""
 
     def __init__(self, cues=None):
         self.R_prev, self.invalid, self.cues = None, 0, cues
 
     def solve(self, normal_map: NormalMap | None, frame=None) -> VisualRotation | None:
-        from ..pipeline.cues import solve_frame
+        from ..solver.cues import solve_frame
 
         if normal_map is None and (self.cues is None or frame is None):
             return None  # no map to solve: not counted as invalid

@@ -24,7 +24,7 @@ def source_sequence(source: Source, cfg: RunConfig, progress=None) -> VisualSequ
     is called after each frame when given."""
     if not source.info.has_frames:
         raise InputError(f"{source.info.name}: 'compare' needs frames to compare visual backends (IMU only)")
-    from ..pipeline.cues import parse_cues, pool_before_run
+    from ..solver.cues import parse_cues, pool_before_run
     from ..pipeline.session import visual_stages
 
     cues = parse_cues(cfg.cues)

@@ -1,5 +1,5 @@
 """Foxglove's message types in JSON encoding: their JSON schemas (what the `mcap` channels declare)
-and the message dictionaries, for the MCAP files `pipeline.mcap_sink` writes.
+and the message dictionaries, for the MCAP files `sinks.mcap_file` writes.
 
     schema = SCHEMAS["foxglove.FrameTransform"]        # bytes of a JSON schema
     message = frame_transform(t_ns, "world", "camera", quat_xyzw)

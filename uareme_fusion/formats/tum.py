@@ -46,6 +46,18 @@ TUM_LIST_COLUMNS = ("timestamp [s]", "filename")
 TUM_TRAJECTORY_COLUMNS = ("timestamp [s]", "tx [m]", "ty [m]", "tz [m]", "qx", "qy", "qz", "qw")
 TUM_ACCELEROMETER_COLUMNS = ("timestamp [s]", "ax [m/s^2]", "ay [m/s^2]", "az [m/s^2]")
 ASSOCIATION_COLUMNS = ("timestamp [s]", "filename", "timestamp [s]", "filename")
+TUM_RGBD_GT_TIME_OFFSET_S = 0.027
+"""Seconds added to a TUM RGB-D `groundtruth.txt`'s stamps to put them on the Kinect's clock (the
+`--gt-time-offset-s` convention): the frame stamped t was seen at mocap time t - 0.027 s. The benchmark
+stamps both streams with the recording computer's clock as they arrive (`rgb.txt`: "seconds since the
+Unix epoch"), the Kinect's images after their exposure and USB transfer, the motion capture's poses
+after its own pipeline; its tools (`associate.py`, `evaluate_ate.py`) take an `--offset` for such a
+difference and leave it 0. Estimated here from the data, on the fr1 rpy TRAIN frames only
+(`evaluation.time_offset.estimate_time_offset` on the depth-normal rotations of `eval --normals depth
+--backend single --gt-time-offset-s 0`, `tools/estimate_gt_time_offset.py`): +26.8 ms, 95 % block-bootstrap
+interval +14.6 .. +36.7 over 422 frames (first half +8.7, second half +37.3; +26.3 with the frames timed
+at their depth images); mean ARE 4.86 -> 4.55 deg there. Applied by `drivers.tum.TumSource` to folders
+named as TUM RGB-D sequences without scene.json or source.json, with a note; no other dataset is shifted."""
 QUATERNION_NORM_TOLERANCE = 1e-2
 """Stored quaternions may deviate this much from unit length (rounding); more is a broken file."""
 
@@ -124,18 +136,27 @@ def read_associations(path: Path) -> tuple[np.ndarray, list[str], list[str]]:
 
 
 def associate(t_a: np.ndarray, t_b: np.ndarray, max_dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Indices (ia, ib) pairing each time in t_a with the nearest in t_b within max_dt_s
-    (both sorted ascending); each b is used at most once."""
+    """Indices (ia, ib), ia ascending, pairing times of t_a with times of t_b (both sorted ascending)
+    within max_dt_s, each used at most once, as TUM's `associate.py` pairs them: every pair within the
+    tolerance, closest first (a greedy matching). Two rgb images nearest the same depth image thus both
+    get one when a second depth image is within the tolerance of either (fr1 rpy train split: 488 of
+    516 rgb images paired, 474 taking only each one's nearest)."""
     t_a, t_b = np.asarray(t_a, float), np.asarray(t_b, float)
     if len(t_a) == 0 or len(t_b) == 0:
         return np.zeros(0, int), np.zeros(0, int)
-    right = np.searchsorted(t_b, t_a)
-    lo, hi = np.clip(right - 1, 0, len(t_b) - 1), np.clip(right, 0, len(t_b) - 1)
-    j = np.where(np.abs(t_b[lo] - t_a) <= np.abs(t_b[hi] - t_a), lo, hi)
-    ok = np.abs(t_b[j] - t_a) <= max_dt_s
-    ia, ib = np.flatnonzero(ok), j[ok]
-    _, first = np.unique(ib, return_index=True)
-    return ia[first], ib[first]
+    lo, hi = np.searchsorted(t_b, t_a - max_dt_s, "left"), np.searchsorted(t_b, t_a + max_dt_s, "right")
+    ia = np.repeat(np.arange(len(t_a)), hi - lo)
+    ib = np.concatenate([np.arange(a, b) for a, b in zip(lo, hi)]).astype(int) if len(ia) else np.zeros(0, int)
+    keep = np.abs(t_b[ib] - t_a[ia]) <= max_dt_s
+    ia, ib = ia[keep], ib[keep]
+    used_a, used_b, pairs = set(), set(), []
+    for k in np.lexsort((ia, np.abs(t_b[ib] - t_a[ia]))):  # closest first, ties in t_a's order
+        if ia[k] not in used_a and ib[k] not in used_b:
+            used_a.add(int(ia[k]))
+            used_b.add(int(ib[k]))
+            pairs.append((int(ia[k]), int(ib[k])))
+    pairs.sort()
+    return np.array([a for a, _ in pairs], int), np.array([b for _, b in pairs], int)
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass
 
 import torch
 from torch import nn
-from torch.nn import functional as F
+from torch.nn import functional
 
 BN_EPS = 1e-3
 """BatchNorm epsilon of the TensorFlow EfficientNet-Lite weights."""
@@ -127,14 +127,14 @@ class NormalNet(nn.Module):
         x = skips[-1]
         for step, conv in enumerate(self.decoder):
             skip = skips[-2 - step]
-            x = F.interpolate(x, size=skip.shape[-2:], mode="bilinear", align_corners=False)
+            x = functional.interpolate(x, size=skip.shape[-2:], mode="bilinear", align_corners=False)
             x = conv(torch.cat([x, skip], dim=1))
-        out = F.interpolate(self.head(x), size=(height, width), mode="bilinear", align_corners=False)
-        # F.normalize(dim=1), written out: torch's vector norm over the channel dim costs 100x more
+        out = functional.interpolate(self.head(x), size=(height, width), mode="bilinear", align_corners=False)
+        # functional.normalize(dim=1), written out: torch's vector norm over the channel dim costs 100x more
         # on CPU (about 10 ms of a 60 ms forward at 160x120), same values and gradients.
         xyz = out[:, :3]
         normals = xyz / (xyz * xyz).sum(dim=1, keepdim=True).sqrt().clamp_min(1e-6)
-        kappa = F.softplus(out[:, 3:]) + self.kappa_floor
+        kappa = functional.softplus(out[:, 3:]) + self.kappa_floor
         return torch.cat([normals, kappa], dim=1)
 
     def config_dict(self) -> dict:

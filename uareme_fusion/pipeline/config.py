@@ -57,6 +57,19 @@ class RunConfig(BaseModel):
     """Added to IMU stamps to put them on the camera clock (`SourceInfo.imu_time_offset_s`).
     None: the source's own (0 unless the recording says otherwise)."""
 
+    @field_validator("mekf", "smoother")
+    @classmethod
+    def _no_renamed_keys(cls, value: dict, info) -> dict:
+        """A key the EKF or smoother has renamed is an error naming the new key (in the file's line)."""
+        from ..backends.mekf.config import MekfConfig
+        from ..backends.smoother import SmootherConfig
+        from ..config import renamed_keys
+
+        renamed = renamed_keys(value, MekfConfig if info.field_name == "mekf" else SmootherConfig)
+        if renamed:
+            raise ValueError(f"{'; '.join(renamed)}: rename the key")
+        return value
+
     @field_validator("imu_rotation")
     @classmethod
     def _imu_rotation_parses(cls, value: str | None) -> str | None:
@@ -67,11 +80,11 @@ class RunConfig(BaseModel):
                 raise ValueError(str(exc).split(": ", 1)[-1]) from None
         return value
     cues: str = "normals,lines,sky"
-    """Visual cues of the joint solver: normals, lines, sky (comma-separated); see pipeline/cues.py."""
+    """Visual cues of the joint solver: normals, lines, sky (comma-separated); see solver/cues.py."""
 
     @field_validator("cues")
     @classmethod
     def _known_cues(cls, value: str) -> str:
-        from .cues import parse_cues
+        from ..solver.cues import parse_cues
 
         return ",".join(parse_cues(value))

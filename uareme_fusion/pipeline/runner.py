@@ -24,28 +24,14 @@ import numpy as np
 from ..backends.base import Backend
 from ..drivers.base import Source
 from ..errors import InputError, OutputError, SourceError
-from ..types import Estimate, Estimates, Frame, ImuBatch, NormalMap, Status, VisualRotation
+from ..solver.cues import pool_before_run, solve_frame
+from ..types import Estimates, Frame, FrameResult, ImuBatch, NormalMap, Status, VisualRotation
 from . import stop_signals
-from .cues import pool_before_run, solve_frame
 
 STAGES = ("source", "normals", "solver", "backend", "sinks")
 IMU_ONLY_BULK_BATCHES = 256
 """Batches of an IMU-only source handled together (about 8.5 s at 30 estimates per second): the
 sinks write and flush their rows once per this many."""
-
-
-@dataclass(frozen=True)
-class FrameResult:
-    """Everything the pipeline knows about one output time. `frame` is None for the estimates of an
-    IMU-only source; `normal_map` and `visual` are None when there was no usable image."""
-
-    t_s: float
-    estimate: Estimate
-    frame: Frame | None = None
-    normal_map: NormalMap | None = None
-    visual: VisualRotation | None = None
-    K: np.ndarray | None = None
-    """The intrinsics the visual cues used (given, or estimated from the scene), None if unknown."""
 
 
 class StageTimes:

@@ -20,19 +20,19 @@ import numpy as np
 from ..drivers.base import GroundTruth, Source
 from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
 from ..errors import InputError, OutputError
-from ..evaluation.backend_factory import backend_kind, knows_gravity
-from ..evaluation.metrics import attitude_errors, error_summary
-from ..evaluation.statistics import error_stats
+from ..backends.factory import backend_kind, knows_gravity
+from ..scoring.metrics import attitude_errors, error_summary
+from ..scoring.statistics import error_stats
 from ..io.safe_files import ENVIRONMENT_ERRNOS, ReservedFile
 from ..rotations import align_constant
 from ..types import Status
 from .config import RunConfig
-from .cues import CueSolver, parse_cues
+from ..solver.cues import CueSolver, parse_cues
 from .imu_rotation_check import ImuRotationCheck
 from .runner import Pipeline, RunStats
 from . import stop_signals
-from .sinks import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
-from .stages import CappedNormals, make_backend, make_normal_estimator, mekf_preset_for
+from ..sinks.estimate_files import EstimateLog, EstimatesCsvWriter, TumTrajectoryWriter
+from .stages import CappedNormals, backend_for_run, make_normal_estimator, mekf_preset_for
 
 
 OUTPUT_NAMES = ("trajectory.tum", "estimates.csv", "summary.json", "masks", "overlay", "ground.mp4")
@@ -99,7 +99,7 @@ def visual_stages(cfg: RunConfig, info) -> tuple[CappedNormals | None, CueSolver
 
 def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipeline:
     normals, cues = visual_stages(cfg, source.info) if source.info.has_frames else (None, None)
-    backend = make_backend(cfg, source.info)
+    backend = backend_for_run(cfg, source.info)
     if cfg.offline:
         from ..backends.mekf.offline import offline_backend
 
@@ -147,7 +147,7 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
             summary["normals_note"] = normals_note
         if pipeline.cues is not None and pipeline.cues.focal is not None:  # K given, estimated or assumed
             summary["intrinsics"] = pipeline.cues.intrinsics_summary()
-        if pipeline.cues is not None and pipeline.cues.sky_cadence is not None:  # `pipeline/sky_cadence.py`
+        if pipeline.cues is not None and pipeline.cues.sky_cadence is not None:  # `solver/sky_cadence.py`
             summary["sky_detector"] = {"frames": pipeline.cues.sky_cadence.frames, "looked": pipeline.cues.sky_cadence.looks}
         for sink in extra_sinks:
             summary.update(getattr(sink, "summary", dict)())
@@ -176,10 +176,11 @@ def configure_imu(source: Source, cfg: RunConfig) -> Source:
 
 
 def open_for_run(source_spec: str, cfg: RunConfig, imu: str | Path | None = None, fps: float | None = None,
-                 gt: Path | None = None, gt_time_offset_s: float = 0.0, topics: dict | None = None) -> Source:
+                 gt: Path | None = None, gt_time_offset_s: float | None = None, topics: dict | None = None) -> Source:
     """The source as `run` opens it: `imu` merged, the configuration's K, camera-IMU rotation and time
-    offset, a ground-truth file `gt` in place of its own, and a ROS bag's `topics` (`image_topic`, ...
-    as `open_source` takes them; None values are left to the bag)."""
+    offset, a ground-truth file `gt` in place of its own (its stamps + `gt_time_offset_s`, 0 when None),
+    or without `gt` its own ground truth shifted by `gt_time_offset_s` in place of its default, and a ROS
+    bag's `topics` (`image_topic`, ... as `open_source` takes them; None values are left to the bag)."""
     from ..drivers import open_source
 
     opened = configure_imu(open_source(str(source_spec), imu=None if imu is None else str(imu), fps=fps,
@@ -187,7 +188,11 @@ def open_for_run(source_spec: str, cfg: RunConfig, imu: str | Path | None = None
     if gt is not None:
         from ..drivers.ground_truth_file import with_ground_truth_file
 
-        with_ground_truth_file(opened, gt, gt_time_offset_s)
+        with_ground_truth_file(opened, gt, gt_time_offset_s or 0.0)
+    elif gt_time_offset_s is not None:
+        from ..drivers.ground_truth_file import with_ground_truth_time_offset
+
+        with_ground_truth_time_offset(opened, gt_time_offset_s)
     return opened
 
 

@@ -27,7 +27,7 @@ from ..drivers.intrinsics import scaled_camera, undistorted_image
 from ..errors import InputError
 from ..formats.images import IMAGE_SUFFIXES, images_in_folder, read_rgb
 from ..io.images import image_size, reduction_for
-from ..lines.detect import LineSegments, SegmentDetector
+from ..solver.line_detection import LineSegments, SegmentDetector
 from ..overlay import side_by_side
 from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K, check_K
 from ..overlay.compose import draw_overlay
@@ -43,7 +43,7 @@ from ..solver.sky_horizon import SkyDetector, SkyHorizon
 from ..solver.manhattan import up_candidate
 from ..solver.self_calibration import FrameEvidence, SelfCalibrationConfig, pool_intrinsics, solve_with_pooled_K
 from ..types import Frame, NormalMap, VisualRotation
-from .cues import DEFAULT_CUES, VALID_CUES, parse_cues
+from ..solver.cues import DEFAULT_CUES, VALID_CUES, parse_cues
 from .stages import CappedNormals, make_normal_estimator
 
 IMAGE_DETECT_WIDTH_PX = 640

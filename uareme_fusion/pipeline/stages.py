@@ -188,13 +188,13 @@ def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str |
     return requested or IMU_ONLY_PRESET, None
 
 
-def make_backend(cfg: RunConfig, info: SourceInfo) -> Backend:
-    """The backend of `cfg` (`evaluation.backend_factory`), given the source's IMU-to-camera rotation
-    and time offset."""
-    from ..evaluation.backend_factory import backend_kind, make_backend as make_named_backend
+def backend_for_run(cfg: RunConfig, info: SourceInfo) -> Backend:
+    """The backend of `cfg`, made by the one factory (`backends.factory.make_backend`) with the source's
+    IMU-to-camera rotation and time offset, the EKF preset for this source and `cfg`'s config keys."""
+    from ..backends.factory import backend_kind, make_backend
 
     imu_geometry = {"R_ci": np.asarray(info.R_ci, float).tolist(), "imu_time_offset_s": info.imu_time_offset_s}
     kind = backend_kind(cfg.backend, info.has_imu)
     overrides = cfg.mekf if kind.name == "mekf" else cfg.smoother
     preset = mekf_preset_for(cfg.mekf_preset, info)[0] if kind.name == "mekf" else None
-    return make_named_backend(kind.name, imu_geometry, preset, overrides)
+    return make_backend(kind.name, imu_geometry, preset, overrides)

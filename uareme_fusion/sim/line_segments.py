@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..lines.detect import LineSegments
+from ..solver.line_detection import LineSegments
 
 
 def manhattan_segments(R_cm: np.ndarray, K: np.ndarray, width: int, height: int, per_axis=(30, 30, 30),

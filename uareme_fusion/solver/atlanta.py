@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lines.detect import LineSegments
+from .line_detection import LineSegments
 from ..pinhole import focal_from_hfov
 from .horizontal_vps import VanishingPoint, horizontal_vps
 from .vp_linkage import linkage_vps

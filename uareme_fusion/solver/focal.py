@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lines.detect import LineSegments
+from .line_detection import LineSegments
 from ..pinhole import DEFAULT_FOV_DEG, assumed_K, centred_K, focal_from_hfov
 from ..rotations import log_so3
 from ..types import NormalMap, VisualRotation

@@ -58,7 +58,7 @@ class SkyVetoConfig:
 def sky_vetoed(sky, atlanta, config: SkyVetoConfig | None = None) -> bool:
     """Whether the segments' Atlanta horizon (`solver/atlanta.py`), seen with vertical structure, overrules
     the sky boundary `sky` (`solver/sky_horizon.py`): see `SkyVetoConfig`."""
-    from ..benchmarks.horizon import horizon_error
+    from ..scoring.horizon import horizon_error
 
     cfg = config or SkyVetoConfig()
     h = sky.height

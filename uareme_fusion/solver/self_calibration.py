@@ -43,7 +43,7 @@ from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
-from ..lines.detect import LineSegments
+from .line_detection import LineSegments
 from ..pinhole import focal_from_hfov, pinhole
 from ..rotations import nearest_symmetric, skew
 from ..types import NormalMap, VisualRotation

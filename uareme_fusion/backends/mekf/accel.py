@@ -13,7 +13,7 @@ import numpy as np
 
 from ...rotations import skew
 from .measurements import zero_rate_model
-from .state_buffer import (S_ACC_ELAPSED, S_ACC_TIME, S_ACCEL_DUE, S_LP_VALID, S_REST_N, S_REST_SINCE, BufferArray,
+from .state_buffer import (S_ACCEL_ELAPSED, S_ACCEL_TIME, S_ACCEL_DUE, S_LP_VALID, S_REST_N, S_REST_SINCE, BufferArray,
                            BufferScalar, field_views, new_state_buffer)
 
 PERIOD_TOLERANCE_S = 1e-9
@@ -54,11 +54,11 @@ class AccelPeriod:
     update in place; without `x` the period has a buffer of its own.
     """
 
-    sum_c = BufferArray("acc_sum")
+    sum_c = BufferArray("accel_sum")
     lp_J = BufferArray("lp_J")
     rest_sums = BufferArray("rest_sums")
-    time_s = BufferScalar(S_ACC_TIME)
-    elapsed_s = BufferScalar(S_ACC_ELAPSED)
+    time_s = BufferScalar(S_ACCEL_TIME)
+    elapsed_s = BufferScalar(S_ACCEL_ELAPSED)
     due = BufferScalar(S_ACCEL_DUE, bool)
     rest_n = BufferScalar(S_REST_N, int)
     rest_since_s = BufferScalar(S_REST_SINCE, optional=True)
@@ -122,23 +122,23 @@ class AccelPeriod:
     def take_mean(self) -> tuple[np.ndarray, float]:
         """`(mean specific force (3,) m/s^2, time it covers s)` of the period, which restarts."""
         T = self.time_s
-        acc_c = self.sum_c / T if T > 0 else self.sum_c.copy()
+        accel_c = self.sum_c / T if T > 0 else self.sum_c.copy()
         self.sum_c, self.time_s, self.elapsed_s = 0.0, 0.0, 0.0
-        return acc_c, T
+        return accel_c, T
 
-    def lowpass(self, acc_c: np.ndarray, T_s: float, tau_s: float) -> np.ndarray:
-        """Feed the period mean `acc_c` (3,) m/s^2 over `T_s` s to the two stages (time constant
+    def lowpass(self, accel_c: np.ndarray, T_s: float, tau_s: float) -> np.ndarray:
+        """Feed the period mean `accel_c` (3,) m/s^2 over `T_s` s to the two stages (time constant
         `tau_s` each) and return the second stage; the period's own mean is taken as bias-free (its
-        age is ~T/2). `acc_c` unchanged when `tau_s` or `T_s` is 0."""
+        age is ~T/2). `accel_c` unchanged when `tau_s` or `T_s` is 0."""
         if not (tau_s > 0 and T_s > 0):
-            return acc_c
+            return accel_c
         lp = self.lp_c
         if lp is None:
-            lp = self.lp_c = np.array([acc_c, acc_c])
+            lp = self.lp_c = np.array([accel_c, accel_c])
             self.lp_J = np.zeros((2, 3, 3))
         else:
             alpha = 1.0 - np.exp(-T_s / tau_s)
-            lp[0] += alpha * (acc_c - lp[0])
+            lp[0] += alpha * (accel_c - lp[0])
             lp[1] += alpha * (lp[0] - lp[1])
             J = self.lp_J
             J[0] *= 1.0 - alpha
@@ -165,9 +165,9 @@ class AccelPeriod:
         return r, var * np.eye(3), H
 
 
-def tilt_direction(acc_c: np.ndarray) -> np.ndarray:
+def tilt_direction(accel_c: np.ndarray) -> np.ndarray:
     """Unit up direction (3,) in the camera frame from a mean specific force (3,) m/s^2 (down-the-image
     when there is none)."""
-    if not np.linalg.norm(acc_c) > 0:
-        acc_c = np.array([0.0, -1.0, 0.0])
-    return acc_c / np.linalg.norm(acc_c)
+    if not np.linalg.norm(accel_c) > 0:
+        accel_c = np.array([0.0, -1.0, 0.0])
+    return accel_c / np.linalg.norm(accel_c)

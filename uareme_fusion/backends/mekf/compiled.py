@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ... import jit
-from . import kernels as K
+from . import kernels
 from .accel import PERIOD_TOLERANCE_S
 from .state import ORTHONORMALISE_EVERY
 from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_NONFINITE, S_REST_UPDATES,
@@ -24,14 +24,14 @@ from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATE
 
 def kernels_available() -> bool:
     """Whether the compiled kernels are there (numba imported, none failed)."""
-    return K.KERNEL is not None
+    return kernels.KERNEL is not None
 
 
 def fall_back(filt, exc: BaseException) -> None:
     """A kernel failed to compile or load: one warning line, no kernels from now on, and `filt`
     switched to the reference path (see the module docstring)."""
     jit.disable(exc)
-    K.disable_all()
+    kernels.disable_all()
     to_reference_path(filt)
 
 
@@ -58,39 +58,39 @@ def _parameters(filt, defer: bool) -> np.ndarray:
         for manhattan in (False, True):
             for deferred in (False, True):
                 p = parameter_vector(filt, deferred)
-                p[K.P_MF_INIT] = float(manhattan)
+                p[kernels.P_MF_INIT] = float(manhattan)
                 cache[manhattan, deferred] = p
     return cache[filt.manhattan_initialised, defer]
 
 
 def parameter_vector(filt, defer: bool) -> np.ndarray:
-    """The kernels' parameter vector (`K.P_SIZE`,) for filter `filt`, from its configuration; `defer`:
+    """The kernels' parameter vector (`kernels.P_SIZE`,) for filter `filt`, from its configuration; `defer`:
     an update due at the end of a batch waits for the frame."""
     cfg = filt.config
-    p = np.empty(K.P_SIZE)
-    p[K.P_Q_GYRO], p[K.P_Q_BIAS], p[K.P_Q_RATE] = filt.q_gyro, filt.q_bias, filt.q_rate
-    p[K.P_TRAPEZOID] = float(filt.trapezoid)
-    p[K.P_PERIOD] = cfg.accel_update_period_s
-    p[K.P_DUE] = cfg.accel_update_period_s - PERIOD_TOLERANCE_S
-    p[K.P_DEFER] = float(defer)
-    p[K.P_LP_TAU] = cfg.accel_lowpass_tau_s
-    p[K.P_INV_G], p[K.P_GRAVITY] = 1.0 / cfg.gravity_m_s2, cfg.gravity_m_s2
-    p[K.P_ACC_NOISE] = cfg.accel_tilt_noise_rad_sqrt_s
-    p[K.P_NORM_SCALE], p[K.P_INNOV_SCALE] = cfg.accel_norm_scale, cfg.accel_innovation_scale_rad
-    p[K.P_FLAG_RATIO] = cfg.accel_downweight_flag_ratio
-    p[K.P_REST_GYRO], p[K.P_REST_ACCEL] = cfg.rest_gyro_max_rad_s, cfg.rest_accel_max_m_s2
-    p[K.P_REST_MIN_S], p[K.P_REST_STD] = cfg.rest_min_duration_s, cfg.rest_rate_std_rad_s
-    p[K.P_MF_INIT] = float(filt.manhattan_initialised)
+    p = np.empty(kernels.P_SIZE)
+    p[kernels.P_Q_GYRO], p[kernels.P_Q_BIAS], p[kernels.P_Q_RATE] = filt.q_gyro, filt.q_bias, filt.q_rate
+    p[kernels.P_TRAPEZOID] = float(filt.trapezoid)
+    p[kernels.P_PERIOD] = cfg.accel_update_period_s
+    p[kernels.P_DUE] = cfg.accel_update_period_s - PERIOD_TOLERANCE_S
+    p[kernels.P_DEFER] = float(defer)
+    p[kernels.P_LP_TAU] = cfg.accel_lowpass_tau_s
+    p[kernels.P_INV_G], p[kernels.P_GRAVITY] = 1.0 / cfg.gravity_m_s2, cfg.gravity_m_s2
+    p[kernels.P_ACCEL_NOISE] = cfg.accel_tilt_noise_rad_sqrt_s
+    p[kernels.P_NORM_SCALE], p[kernels.P_INNOV_SCALE] = cfg.accel_norm_scale, cfg.accel_innovation_scale_rad
+    p[kernels.P_FLAG_RATIO] = cfg.accel_downweight_flag_ratio
+    p[kernels.P_REST_GYRO], p[kernels.P_REST_ACCEL] = cfg.rest_gyro_max_rad_s, cfg.rest_accel_max_m_s2
+    p[kernels.P_REST_MIN_S], p[kernels.P_REST_STD] = cfg.rest_min_duration_s, cfg.rest_rate_std_rad_s
+    p[kernels.P_MF_INIT] = float(filt.manhattan_initialised)
     walks = filt.manhattan_walks
-    p[K.P_MF_YAW_RW] = cfg.manhattan_yaw_rw_rad_sqrt_s if walks else 0.0
-    p[K.P_MF_TILT_RW] = cfg.manhattan_tilt_rw_rad_sqrt_s if walks else 0.0
-    p[K.P_ORTHO_EVERY] = ORTHONORMALISE_EVERY
-    p[K.P_RECORD] = float(cfg.record_imu_estimates)
-    p[K.P_GAP_LIMIT] = cfg.imu_gap_limit_s
-    p[K.P_GATE_CHI2], p[K.P_HUBER] = cfg.visual_gate_chi2, cfg.visual_huber_sigma
-    p[K.P_VERTICAL_STD], p[K.P_VERTICAL_MAX] = cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad
-    p[K.P_VISUAL_CORRELATION] = cfg.visual_error_correlation_s
-    p[K.P_TRUST_FRAMES], p[K.P_TRUST_MIN_SHARE] = cfg.visual_trust_frames, cfg.visual_trust_min_share
+    p[kernels.P_MF_YAW_RW] = cfg.manhattan_yaw_rw_rad_per_sqrt_s if walks else 0.0
+    p[kernels.P_MF_TILT_RW] = cfg.manhattan_tilt_rw_rad_per_sqrt_s if walks else 0.0
+    p[kernels.P_ORTHO_EVERY] = ORTHONORMALISE_EVERY
+    p[kernels.P_RECORD] = float(cfg.record_imu_estimates)
+    p[kernels.P_GAP_LIMIT] = cfg.imu_gap_limit_s
+    p[kernels.P_GATE_CHI2], p[kernels.P_HUBER] = cfg.visual_gate_chi2, cfg.visual_huber_k
+    p[kernels.P_VERTICAL_STD], p[kernels.P_VERTICAL_MAX] = cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad
+    p[kernels.P_VISUAL_CORRELATION] = cfg.visual_error_correlation_s
+    p[kernels.P_TRUST_FRAMES], p[kernels.P_TRUST_MIN_SHARE] = cfg.visual_trust_frames, cfg.visual_trust_min_share
     return p
 
 
@@ -123,7 +123,7 @@ def integrate_compiled(filt, rows: np.ndarray, extra_s: float, defer: bool) -> b
     gap, which the reference path then handles."""
     record_R, record_P = _record_buffers(filt, rows.shape[0])
     try:
-        code = K.KERNEL(filt.x, rows, extra_s, _parameters(filt, defer), record_R, record_P)
+        code = kernels.KERNEL(filt.x, rows, extra_s, _parameters(filt, defer), record_R, record_P)
     except Exception as exc:  # noqa: BLE001 -- the reference path takes the batch
         fall_back(filt, exc)
         return False
@@ -158,7 +158,7 @@ def stage_compiled(filt, t, gyro_c, accel_c) -> int:
     an accelerometer period and the reorder window (a batch that long may release samples)."""
     stream = filt._stream
     try:
-        return K.STAGE(filt._stage, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s,
+        return kernels.STAGE(filt._stage, t, gyro_c, accel_c, stream.watermark_s, stream.gyro_range_rad_s,
                        filt.stage_span_s)
     except Exception as exc:  # noqa: BLE001 -- nothing staged: the reorder buffer takes the batch
         fall_back(filt, exc)
@@ -173,7 +173,7 @@ def integrate_staged_compiled(filt, n: int, t_frame_s: float) -> bool:
     path: the fewest Python steps around the one call."""
     record_R, record_P = _record_buffers(filt, n)
     try:
-        code = K.INTEGRATE_STAGED(filt.x, filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
+        code = kernels.INTEGRATE_STAGED(filt.x, filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
     except Exception as exc:  # noqa: BLE001 -- the reference path takes the staged batch
         fall_back(filt, exc)
         return False
@@ -193,7 +193,7 @@ def integrate_segments_compiled(filt, t, gyro_c, accel_c, ends: np.ndarray):
     record_R, record_P = _record_buffers(filt, t.size)
     out_R, out_cov, out_b, out_flags = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3)), np.empty(m, np.int64)
     try:
-        done = K.SEGMENTS(filt.x, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
+        done = kernels.SEGMENTS(filt.x, np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float),
                           np.ascontiguousarray(accel_c, float), ends, _parameters(filt, False), record_R, record_P,
                           out_R, out_cov, out_b, out_flags)
     except Exception as exc:  # noqa: BLE001 -- the reference path takes the segments
@@ -212,7 +212,7 @@ def accel_update_compiled(filt) -> bool:
     """The accelerometer (and at-rest) update of the period just completed, compiled, in the filter's
     state buffer: as `Mekf.accel_update` (no longer due). False, changing nothing, after `fall_back`."""
     try:
-        filt.flags |= K.ACCEL_UPDATE(filt.x, _parameters(filt, False))
+        filt.flags |= kernels.ACCEL_UPDATE(filt.x, _parameters(filt, False))
     except Exception as exc:  # noqa: BLE001 -- the reference path applies the update
         fall_back(filt, exc)
         return False
@@ -230,9 +230,9 @@ def visual_update_compiled(filt, visual) -> int | None:
     if not (type(R_cm) is type(cov) is np.ndarray and R_cm.dtype is cov.dtype is _FLOAT64):
         R_cm, cov = np.asarray(R_cm, float), np.asarray(cov, float)  # lists, other dtypes: one specialisation
     try:
-        code = K.VISUAL_UPDATE(filt.x, _parameters(filt, False), R_cm, cov, filt.estimate_out)
+        code = kernels.VISUAL_UPDATE(filt.x, _parameters(filt, False), R_cm, cov, filt.estimate_out)
     except Exception as exc:  # noqa: BLE001 -- the reference path fuses the frame
         fall_back(filt, exc)
         return None
     filt.flags |= code
-    return code & K.VISUAL_REJECTED
+    return code & kernels.VISUAL_REJECTED

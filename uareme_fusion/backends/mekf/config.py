@@ -6,6 +6,7 @@ Presets are YAML files in `uareme_fusion/configs/` (`load_config("vehicle", Mekf
 from __future__ import annotations
 
 import enum
+from typing import ClassVar
 
 import numpy as np
 from pydantic import ConfigDict, Field, field_validator
@@ -38,6 +39,12 @@ class MekfConfig(GyroNoiseConfig):
     `gyro_bias_initial_std_rad_s`) come from `GyroNoiseConfig`, shared with the smoother."""
 
     model_config = ConfigDict(extra="forbid")
+    renamed_keys: ClassVar[dict[str, str]] = {
+        "manhattan_yaw_rw_rad_sqrt_s": "manhattan_yaw_rw_rad_per_sqrt_s",
+        "manhattan_tilt_rw_rad_sqrt_s": "manhattan_tilt_rw_rad_per_sqrt_s",
+        "visual_huber_sigma": "visual_huber_k",
+    }
+    """Old key -> new key: an old key in a configuration file is an error naming the new one."""
 
     mode: MekfMode = MekfMode.AUTO
     gyro_rate_noise_sqrt_s: float = Field(0.0, ge=0, le=1.0)
@@ -88,10 +95,10 @@ class MekfConfig(GyroNoiseConfig):
     """Tilt std after initialisation from the first accelerometer samples, rad."""
     init_accel_window_s: float = Field(0.05, ge=1e-4, le=60.0)
     """Accelerometer samples averaged for the initial tilt, s."""
-    manhattan_yaw_rw_rad_sqrt_s: float = Field(0.0, ge=0, le=10.0)
+    manhattan_yaw_rw_rad_per_sqrt_s: float = Field(0.0, ge=0, le=10.0)
     """Random walk of the Manhattan frame's yaw about world up, rad/sqrt(s) (0 in a building; a
     vehicle's turns need about 0.5)."""
-    manhattan_tilt_rw_rad_sqrt_s: float = Field(0.0, ge=0, le=10.0)
+    manhattan_tilt_rw_rad_per_sqrt_s: float = Field(0.0, ge=0, le=10.0)
     """Random walk of the Manhattan frame's tilt, rad/sqrt(s) (vehicle body sway)."""
     manhattan_vertical_std_rad: float = Field(0.02, ge=1e-6, le=10.0)
     """How far the Manhattan z axis may lean from world up (std, rad): a pseudo-measurement applied
@@ -127,8 +134,10 @@ class MekfConfig(GyroNoiseConfig):
     """Floor of the independent share of the visual covariance that is fused (dimensionless)."""
     visual_gate_chi2: float = Field(16.27, gt=0, le=1e6)
     """Mahalanobis gate on the 3-dof visual residual (16.27 = chi-square 99.9 %)."""
-    visual_huber_sigma: float = Field(2.0, ge=1e-3, le=1e6)
-    """Huber threshold on the Mahalanobis distance: beyond it the visual covariance is scaled by d/k."""
+    visual_huber_k: float = Field(2.0, ge=1e-3, le=1e6)
+    """Huber threshold k on the Mahalanobis distance d of the visual residual (dimensionless; the
+    smoother's key of the same name and meaning): beyond it the visual covariance is scaled by d/k (the
+    Huber weight k/d)."""
     reinit_after_rejections: int = Field(8, ge=1, le=1000000)
     """Consecutive gated-out frames after which the Manhattan frame is re-initialised."""
     reinit_after_disagreement_s: float = Field(1.0, ge=0.0, le=3600.0)

@@ -120,7 +120,7 @@ class Mekf(Backend):
         self.q_gyro = cfg.gyro_noise_rad_s_sqrt_hz**2
         self.q_bias = cfg.gyro_bias_rw_rad_s2_sqrt_hz**2
         self.q_rate = cfg.gyro_rate_noise_sqrt_s**2
-        self.manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_sqrt_s or cfg.manhattan_tilt_rw_rad_sqrt_s)
+        self.manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_per_sqrt_s or cfg.manhattan_tilt_rw_rad_per_sqrt_s)
         self.trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
         self.compiled = cfg.compiled and kernels_available()
         self._stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
@@ -372,16 +372,16 @@ class Mekf(Backend):
         free fall). Consumes the period. The reference path: compiled, `kernels.accel_rows` does this
         inside the update that takes it."""
         cfg = self.config
-        acc_c, T = self.accel.take_mean()
+        accel_c, T = self.accel.take_mean()
         if cfg.rest_gyro_max_rad_s > 0:
             rows = self.accel.rest_measurement(T, self.t_state, self.b_c, cfg, self.q_gyro)
             if rows is not None:
                 self._kalman_update(*rows)
                 self.counters["rest_updates"] += 1
-        acc_c = self.accel.lowpass(acc_c, T, cfg.accel_lowpass_tau_s)
+        accel_c = self.accel.lowpass(accel_c, T, cfg.accel_lowpass_tau_s)
         use_lp_J = cfg.accel_lowpass_tau_s > 0
         ok, r, var, H, downweighted = gravity_model(
-            acc_c, T, self.R_wc, self.accel.lp_J[1], use_lp_J, cfg.gravity_m_s2,
+            accel_c, T, self.R_wc, self.accel.lp_J[1], use_lp_J, cfg.gravity_m_s2,
             cfg.accel_tilt_noise_rad_sqrt_s, cfg.accel_norm_scale, cfg.accel_innovation_scale_rad,
             cfg.accel_downweight_flag_ratio)
         if not ok:
@@ -449,8 +449,8 @@ class Mekf(Backend):
             R_vis = R_vis * self.noise_share.share
             self.noise_share.take(t_s, visual.symmetric_to(self.R_wc.T @ self.R_wm))
         d = np.sqrt(d2)
-        if d > cfg.visual_huber_sigma:  # Huber weight w = k / d  ->  covariance / w
-            R_vis = R_vis * (d / cfg.visual_huber_sigma)
+        if d > cfg.visual_huber_k:  # Huber weight w = k / d  ->  covariance / w
+            R_vis = R_vis * (d / cfg.visual_huber_k)
         if trust != 1.0:  # the independent share of the frame's error (gated on the full one)
             R_vis = R_vis * trust
         # "m's z is up" only where the world is not the Manhattan frame itself (visual only).

@@ -40,9 +40,9 @@ from .source_trust import (note_accel_information, note_visual_information, squa
 from ..imu_stream import rows_if_clean
 from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
 from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_DUE, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_ACCEL_VAR_RATE,
-                           S_ACC_ELAPSED, S_ACC_TIME, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REJECTIONS,
+                           S_ACCEL_ELAPSED, S_ACCEL_TIME, S_IMU_T, S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REJECTIONS,
                            S_REST_N, S_REST_SINCE, S_REST_UPDATES, S_T_STATE, S_T_VISUAL, S_VISUAL_INFO_RATE,
-                           S_VISUAL_REJECTED, S_VISUAL_UPDATES, X_ACC_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P,
+                           S_VISUAL_REJECTED, S_VISUAL_UPDATES, X_ACCEL_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_P,
                            X_REST_SUMS, X_R_WC, X_R_WM, X_S, X_SIZE)
 
 # The kernels' results: bits of the code `integrate_batch`, `accel_update_in_place`, `visual_update` return.
@@ -57,7 +57,7 @@ a constant of the compiled code."""
 
 # Layout of the float64 parameter vector `p`.
 (P_Q_GYRO, P_Q_BIAS, P_Q_RATE, P_TRAPEZOID, P_PERIOD, P_DUE, P_DEFER, P_LP_TAU, P_INV_G, P_GRAVITY,
- P_ACC_NOISE, P_NORM_SCALE, P_INNOV_SCALE, P_FLAG_RATIO, P_REST_GYRO, P_REST_ACCEL, P_REST_MIN_S,
+ P_ACCEL_NOISE, P_NORM_SCALE, P_INNOV_SCALE, P_FLAG_RATIO, P_REST_GYRO, P_REST_ACCEL, P_REST_MIN_S,
  P_REST_STD, P_MF_INIT, P_MF_YAW_RW, P_MF_TILT_RW, P_ORTHO_EVERY, P_RECORD, P_GAP_LIMIT, P_GATE_CHI2, P_HUBER,
  P_VERTICAL_STD, P_VERTICAL_MAX, P_VISUAL_CORRELATION, P_TRUST_FRAMES, P_TRUST_MIN_SHARE) = range(31)
 P_SIZE = 31
@@ -132,9 +132,9 @@ def gyro_predict_in_place(P, C, A_bias):
     P[:, 0:3] = cols
 
 
-def accel_measurement(acc_c, T, R_wc, lp_J1, use_lp_J, p):
+def accel_measurement(accel_c, T, R_wc, lp_J1, use_lp_J, p):
     """`measurements.gravity_model` with the parameters of `p`."""
-    return gravity_model(acc_c, T, R_wc, lp_J1, use_lp_J, p[P_GRAVITY], p[P_ACC_NOISE], p[P_NORM_SCALE],
+    return gravity_model(accel_c, T, R_wc, lp_J1, use_lp_J, p[P_GRAVITY], p[P_ACCEL_NOISE], p[P_NORM_SCALE],
                          p[P_INNOV_SCALE], p[P_FLAG_RATIO])
 
 
@@ -268,16 +268,16 @@ def inject_and_reset(s, R_wc, R_wm, b_c, P, lp, lp_J, dx, P_new, p):
             P[i, j] = 0.5 * (GPG[i, j] + GPG[j, i])
 
 
-def accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
+def accel_rows(s, R_wc, R_wm, b_c, P, accel_sum, lp, lp_J, rest_sums, p):
     """The end of an accelerometer period (as `Mekf._accel_rows`): the zero-rate update when at rest,
     applied in place, then the (low-passed) accelerometer direction's measurement. Consumes the
     period. Returns (ok, residual (3,), variance, H (3, 12), downweighted); `ok` False (no
     measurement) near free fall."""
-    T = s[S_ACC_TIME]
-    acc_c = acc_sum / T if T > 0 else acc_sum.copy()
-    acc_sum[:] = 0.0
-    s[S_ACC_TIME] = 0.0
-    s[S_ACC_ELAPSED] = 0.0
+    T = s[S_ACCEL_TIME]
+    accel_c = accel_sum / T if T > 0 else accel_sum.copy()
+    accel_sum[:] = 0.0
+    s[S_ACCEL_TIME] = 0.0
+    s[S_ACCEL_ELAPSED] = 0.0
     if p[P_REST_GYRO] > 0:
         n = s[S_REST_N]
         if n >= 2 and T > 0:
@@ -295,17 +295,17 @@ def accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
     tau = p[P_LP_TAU]
     if tau > 0 and T > 0:
         if s[S_LP_VALID] == 0:
-            lp[0], lp[1] = acc_c, acc_c
+            lp[0], lp[1] = accel_c, accel_c
             lp_J[:] = 0.0
             s[S_LP_VALID] = 1
         else:
             alpha = 1.0 - math.exp(-T / tau)
-            lp[0] += alpha * (acc_c - lp[0])
+            lp[0] += alpha * (accel_c - lp[0])
             lp[1] += alpha * (lp[0] - lp[1])
             lp_J[0] *= 1.0 - alpha
             lp_J[1] += alpha * (lp_J[0] - lp_J[1])
-        acc_c = lp[1].copy()
-    ok, r, var, H, downweighted = accel_measurement(acc_c, T, R_wc, lp_J[1], tau > 0, p)
+        accel_c = lp[1].copy()
+    ok, r, var, H, downweighted = accel_measurement(accel_c, T, R_wc, lp_J[1], tau > 0, p)
     if not ok:
         s[S_ACCEL_SKIPPED] += 1
         return False, r, var, H, False
@@ -316,10 +316,10 @@ def accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
     return True, r, var, H, downweighted
 
 
-def accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p):
+def accel_and_rest_update(s, R_wc, R_wm, b_c, P, accel_sum, lp, lp_J, rest_sums, p):
     """The update at the end of an accelerometer period (as `Mekf.accel_update`), in place:
     `accel_rows`, then its measurement's update. Returns whether it was down-weighted."""
-    ok, r, var, H, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
+    ok, r, var, H, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, accel_sum, lp, lp_J, rest_sums, p)
     if ok:
         isotropic_update(s, R_wc, R_wm, b_c, P, lp, lp_J, r, var, H, p)
     return downweighted
@@ -327,9 +327,9 @@ def accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p
 
 def state_views(x):
     """The fields of the state buffer `x` (`state_buffer.py`) as views: (s, R_wc, R_wm, b_c, P,
-    last_gyro, acc_sum, lp, lp_J, rest_sums)."""
+    last_gyro, accel_sum, lp, lp_J, rest_sums)."""
     return (x[X_S:X_R_WC], x[X_R_WC:X_R_WM].reshape((3, 3)), x[X_R_WM:X_B_C].reshape((3, 3)), x[X_B_C:X_P],
-            x[X_P:X_LAST_GYRO].reshape((12, 12)), x[X_LAST_GYRO:X_ACC_SUM], x[X_ACC_SUM:X_LP],
+            x[X_P:X_LAST_GYRO].reshape((12, 12)), x[X_LAST_GYRO:X_ACCEL_SUM], x[X_ACCEL_SUM:X_LP],
             x[X_LP:X_LP_J].reshape((2, 3)), x[X_LP_J:X_REST_SUMS].reshape((2, 3, 3)), x[X_REST_SUMS:X_SIZE])
 
 
@@ -343,13 +343,13 @@ def integrate_batch(x, rows, extra_s, p, record_R, record_P):
     covariance predicted to the end of its chunk. Returns the `DOWNWEIGHTED` | `NONFINITE` bits of
     what happened, or -1, changing nothing, when a step (from `s[S_T_STATE]` on) exceeds
     `P_GAP_LIMIT` (an IMU gap). The batch's last stamp goes to `s[S_IMU_T]`."""
-    s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums = state_views(x)
+    s, R_wc, R_wm, b_c, P, last_gyro, accel_sum, lp, lp_J, rest_sums = state_views(x)
     t, gyro, accel = rows[:, 0], rows[:, 1:4], rows[:, 4:7]
     if has_gap(t, s[S_T_STATE], p[P_GAP_LIMIT]):
         return -1
     nonfinite_before = s[S_NONFINITE]
-    bounds = chunk_bounds(t, s[S_T_STATE], s[S_ACC_ELAPSED], p[P_PERIOD])
-    code = integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
+    bounds = chunk_bounds(t, s[S_T_STATE], s[S_ACCEL_ELAPSED], p[P_PERIOD])
+    code = integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, accel_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
                             extra_s, p, record_R, record_P)
     code |= NONFINITE if s[S_NONFINITE] > nonfinite_before else 0
     s[S_IMU_T] = t[t.shape[0] - 1]
@@ -405,7 +405,7 @@ def visual_update(x, p, R_cm, cov, estimate):
     (the attitude block of `P`, symmetrised), `R_wm`, and `b_c` in the first row. Returns the
     `VISUAL_REJECTED` | `DOWNWEIGHTED` | `NONFINITE` bits of what happened; the re-initialisation after
     many rejections is left to the caller."""
-    s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums = state_views(x)
+    s, R_wc, R_wm, b_c, P, last_gyro, accel_sum, lp, lp_J, rest_sums = state_views(x)
     nonfinite_before = s[S_NONFINITE]
     code = 0
     r, R_all, H = np.zeros(9), np.zeros((9, 9)), np.zeros((9, 12))
@@ -413,8 +413,8 @@ def visual_update(x, p, R_cm, cov, estimate):
     # How far the camera is trusted (`source_trust.py`), from the frame before the accelerometer rows
     # consume the period's specific force.
     var_v = p[P_VERTICAL_STD] ** 2
-    quiet = (p[P_FLAG_RATIO] * p[P_ACC_NOISE]) ** 2
-    e, v = visual_vertical_innovation(R_wc, R_wm, r, R_all, acc_sum, s[S_ACC_TIME], s[S_ACCEL_VAR_RATE], quiet, var_v)
+    quiet = (p[P_FLAG_RATIO] * p[P_ACCEL_NOISE]) ** 2
+    e, v = visual_vertical_innovation(R_wc, R_wm, r, R_all, accel_sum, s[S_ACCEL_TIME], s[S_ACCEL_VAR_RATE], quiet, var_v)
     share, _ = update_visual_trust(s, e, v, p[P_TRUST_FRAMES], p[P_TRUST_MIN_SHARE], squared_rate(last_gyro, b_c))
     var_v = vertical_variance(s, var_v, p[P_TRUST_FRAMES])
     t_prev = s[S_T_VISUAL]
@@ -424,7 +424,7 @@ def visual_update(x, p, R_cm, cov, estimate):
     if s[S_ACCEL_DUE] > 0:  # left to the frame at the end of its batch (`P_DEFER`)
         s[S_ACCEL_DUE] = 0
         rest_before = s[S_REST_UPDATES]
-        with_accel, r_a, var_a, H_a, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
+        with_accel, r_a, var_a, H_a, downweighted = accel_rows(s, R_wc, R_wm, b_c, P, accel_sum, lp, lp_J, rest_sums, p)
         if s[S_REST_UPDATES] > rest_before:  # the zero-rate update moved the state: the residual again
             r[:], R_all[:, :], H[:, :] = 0.0, 0.0, 0.0
             visual_measurement(R_wc, R_wm, R_cm, cov, r, R_all, H)
@@ -510,7 +510,7 @@ def has_gap(t, t_state, gap_limit_s):
     return False
 
 
-def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
+def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, accel_sum, lp, lp_J, rest_sums, t, gyro, accel, bounds,
                      extra_s, p, record_R, record_P):
     """`integrate_batch` on a batch known to hold no gap: `DOWNWEIGHTED` when an update was, else 0."""
     n_chunks = bounds.shape[0] - 1
@@ -541,7 +541,7 @@ def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_s
             s[S_PRODUCTS] = 0
         last_gyro[:] = gyro[b - 1]
         # Specific force, time-weighted, in the chunk's end frame.
-        acc = acc_sum.copy()
+        acc = accel_sum.copy()
         t_prev = s[S_T_STATE]
         for k in range(b - a):
             dt = t[a + k] - t_prev
@@ -550,9 +550,9 @@ def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_s
                 acc[i] += dt * (C_k[k, i, 0] * f0 + C_k[k, i, 1] * f1 + C_k[k, i, 2] * f2)
             t_prev = t[a + k]
         for i in range(3):
-            acc_sum[i] = C_N[0, i] * acc[0] + C_N[1, i] * acc[1] + C_N[2, i] * acc[2]
-        s[S_ACC_TIME] += T - extra
-        s[S_ACC_ELAPSED] += T
+            accel_sum[i] = C_N[0, i] * acc[0] + C_N[1, i] * acc[1] + C_N[2, i] * acc[2]
+        s[S_ACCEL_TIME] += T - extra
+        s[S_ACCEL_ELAPSED] += T
         if s[S_LP_VALID] > 0:
             carry_lowpass_in_place(lp, lp_J, C_N, A_bias)
         if p[P_REST_GYRO] > 0:
@@ -568,11 +568,11 @@ def integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_s
                 rest_sums[7] += f0 * f0 + f1 * f1 + f2 * f2
             s[S_REST_N] += b - a
         s[S_T_STATE] = t[b - 1] + extra
-        if not last or s[S_ACC_ELAPSED] >= p[P_DUE]:
+        if not last or s[S_ACCEL_ELAPSED] >= p[P_DUE]:
             if last and p[P_DEFER] > 0:
                 s[S_ACCEL_DUE] = 1
             else:
-                downweighted_any |= accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
+                downweighted_any |= accel_and_rest_update(s, R_wc, R_wm, b_c, P, accel_sum, lp, lp_J, rest_sums, p)
     return DOWNWEIGHTED if downweighted_any else 0
 
 
@@ -603,16 +603,16 @@ def integrate_segments(x, t, gyro, accel, ends, p, record_R, record_P, out_R, ou
     `out_cov[i]` the attitude covariance (symmetrised), `out_b[i]` b_c, `out_flags[i]` the
     `DOWNWEIGHTED` | `NONFINITE` bits of what happened. Returns -1, changing nothing, when a step
     exceeds `P_GAP_LIMIT`, else 0."""
-    s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums = state_views(x)
+    s, R_wc, R_wm, b_c, P, last_gyro, accel_sum, lp, lp_J, rest_sums = state_views(x)
     if has_gap(t, s[S_T_STATE], p[P_GAP_LIMIT]):
         return -1
     start = 0
     for i in range(ends.shape[0]):
         end = ends[i]
         seg_t = t[start:end]
-        bounds = chunk_bounds(seg_t, s[S_T_STATE], s[S_ACC_ELAPSED], p[P_PERIOD])
+        bounds = chunk_bounds(seg_t, s[S_T_STATE], s[S_ACCEL_ELAPSED], p[P_PERIOD])
         nonfinite_before = s[S_NONFINITE]
-        downweighted = integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, acc_sum, lp, lp_J, rest_sums, seg_t,
+        downweighted = integrate_chunks(s, R_wc, R_wm, b_c, P, last_gyro, accel_sum, lp, lp_J, rest_sums, seg_t,
                                         gyro[start:end], accel[start:end], bounds, 0.0, p, record_R[start:end],
                                         record_P[start:end])
         out_R[i] = R_wc
@@ -627,9 +627,9 @@ def integrate_segments(x, t, gyro, accel, ends, p, record_R, record_P, out_R, ou
 def accel_update_in_place(x, p):
     """`accel_and_rest_update` on the state buffer `x`, in place: the `DOWNWEIGHTED` | `NONFINITE`
     bits of what happened."""
-    s, R_wc, R_wm, b_c, P, _, acc_sum, lp, lp_J, rest_sums = state_views(x)
+    s, R_wc, R_wm, b_c, P, _, accel_sum, lp, lp_J, rest_sums = state_views(x)
     nonfinite_before = s[S_NONFINITE]
-    downweighted = accel_and_rest_update(s, R_wc, R_wm, b_c, P, acc_sum, lp, lp_J, rest_sums, p)
+    downweighted = accel_and_rest_update(s, R_wc, R_wm, b_c, P, accel_sum, lp, lp_J, rest_sums, p)
     return (DOWNWEIGHTED if downweighted else 0) + (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
 
 

@@ -82,9 +82,9 @@ def vertical_distance2(R_wm: np.ndarray, P_m: np.ndarray, std_rad: float, max_ra
     return float(r @ np.linalg.solve(H_m @ P_m @ H_m.T + R, r))
 
 
-def gravity_model(acc_c, T_s, R_wc, lp_J1, use_lp_J, gravity_m_s2, noise_rad_sqrt_s, norm_scale,
+def gravity_model(accel_c, T_s, R_wc, lp_J1, use_lp_J, gravity_m_s2, noise_rad_sqrt_s, norm_scale,
                   innovation_scale_rad, flag_ratio):
-    """Accelerometer direction as a tilt measurement: `acc_c` (3,) m/s^2 the mean (or low-passed)
+    """Accelerometer direction as a tilt measurement: `accel_c` (3,) m/s^2 the mean (or low-passed)
     specific force over `T_s` s in the camera frame measures up, `R_wc^T up`. Its variance
     `noise_rad_sqrt_s^2 / T_s` grows by `1 + (dev / norm_scale)^2` (dev: relative deviation of |acc|
     from `gravity_m_s2`) and `1 + (angle / innovation_scale_rad)^2` (angle between measured and
@@ -92,14 +92,14 @@ def gravity_model(acc_c, T_s, R_wc, lp_J1, use_lp_J, gravity_m_s2, noise_rad_sqr
     through `lp_J1` (3, 3), its sensitivity to the bias. Returns `(ok, residual (3,), variance rad^2,
     H (3, 12), downweighted)`: `ok` False near free fall (no direction); `downweighted` when the std
     exceeds `flag_ratio` times the nominal one."""
-    norm = math.sqrt(acc_c[0] ** 2 + acc_c[1] ** 2 + acc_c[2] ** 2)
+    norm = math.sqrt(accel_c[0] ** 2 + accel_c[1] ** 2 + accel_c[2] ** 2)
     H = np.zeros((3, 12))
     if not (T_s > 0 and norm > 0.1 * gravity_m_s2):
         return False, np.zeros(3), 0.0, H, False
     # |mean specific force| against gravity: the mean is taken in a common (rotating) camera frame,
     # so it is the inertial-frame average and translational accelerations cancel in it.
     norm_dev = abs(norm * (1.0 / gravity_m_s2) - 1.0)
-    z = acc_c / norm
+    z = accel_c / norm
     h = R_wc[2].copy()  # R_wc^T @ (0, 0, 1)
     angle = math.acos(min(1.0, max(-1.0, z[0] * h[0] + z[1] * h[1] + z[2] * h[2])))
     var0 = noise_rad_sqrt_s**2 / T_s

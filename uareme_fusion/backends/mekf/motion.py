@@ -211,13 +211,13 @@ class GyroMotion:
         rate_var = filt.q_rate * float(np.einsum("ki,ki,k->", rate_c, rate_c, dt)) if filt.q_rate else 0.0
         Q = gyro_process_noise(T, filt.q_gyro, filt.q_bias, unknown_var, rate_var)
         if filt.manhattan_walks and filt.manhattan_initialised and T_elapsed > 0:
-            Q[MF, MF] += manhattan_walk_noise(filt.R_wm, T_elapsed, cfg.manhattan_yaw_rw_rad_sqrt_s,
-                                              cfg.manhattan_tilt_rw_rad_sqrt_s)
+            Q[MF, MF] += manhattan_walk_noise(filt.R_wm, T_elapsed, cfg.manhattan_yaw_rw_rad_per_sqrt_s,
+                                              cfg.manhattan_tilt_rw_rad_per_sqrt_s)
         _, filt.P = kf_predict(ZERO_STATE, filt.P, F, Q)
         if cfg.record_imu_estimates and n:
             filt.record_P.append(np.repeat(filt.P[None, TH, TH], n, axis=0))
-        acc_time_s = T_elapsed - extra_s if unknown_var == 0.0 else float(dt[:n].sum())
-        filt.accel.add_chunk(C, accel_c, dt, acc_time_s if n else 0.0, T_elapsed)
+        accel_time_s = T_elapsed - extra_s if unknown_var == 0.0 else float(dt[:n].sum())
+        filt.accel.add_chunk(C, accel_c, dt, accel_time_s if n else 0.0, T_elapsed)
         filt.accel.carry_lowpass(C_N, A_bias)
         if cfg.rest_gyro_max_rad_s > 0 and n:
             filt.accel.add_rest(gyro_c, accel_c)

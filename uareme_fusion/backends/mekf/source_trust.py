@@ -53,20 +53,20 @@ MIN_SAMPLES = 3
 waits for them; the share stays 1)."""
 
 
-def visual_vertical_innovation(R_wc, R_wm, r, R_vis, acc_sum, acc_time_s, accel_var_rate, quiet_var_rate,
+def visual_vertical_innovation(R_wc, R_wm, r, R_vis, accel_sum, accel_time_s, accel_var_rate, quiet_var_rate,
                                vertical_var):
     """`(e (3,) rad, v rad^2)`: this frame's up in the camera (m's z through the visual residual `r`
     (3,), right perturbation of the predicted `R_cm = R_wc^T R_wm`) minus the accelerometer's (the
-    direction of the current period's specific force `acc_sum` (3,), carried in the camera frame by the
-    gyro, over `acc_time_s` s), and the variance per tilt axis of that difference were the frame's error
+    direction of the current period's specific force `accel_sum` (3,), carried in the camera frame by the
+    gyro, over `accel_time_s` s), and the variance per tilt axis of that difference were the frame's error
     independent (module docstring): the visual covariance `R_vis` (3, 3, m frame) on m's x and y axes,
-    the accelerometer's `accel_var_rate / acc_time_s` (its noise density squared times its inflation, the
+    the accelerometer's `accel_var_rate / accel_time_s` (its noise density squared times its inflation, the
     last update's) and `vertical_var` rad^2. `v` is 0 (no sample) without accelerometer samples or
     when the accelerometer is not quiet: its last update inflated past `quiet_var_rate` (by |a| off
     gravity or by its disagreement with the gyro-propagated up: a turning vehicle)."""
     e = np.zeros(3)
-    norm = math.sqrt(acc_sum[0] ** 2 + acc_sum[1] ** 2 + acc_sum[2] ** 2)
-    if not (acc_time_s > 0 and norm > 0 and 0 < accel_var_rate <= quiet_var_rate):
+    norm = math.sqrt(accel_sum[0] ** 2 + accel_sum[1] ** 2 + accel_sum[2] ** 2)
+    if not (accel_time_s > 0 and norm > 0 and 0 < accel_var_rate <= quiet_var_rate):
         return e, 0.0
     # Exp(r) e_z by Rodrigues: e_z + a (r x e_z) + b r x (r x e_z) (the helpers of `matrix3` are not
     # called here: the kernels compile this function alone)
@@ -82,8 +82,8 @@ def visual_vertical_innovation(R_wc, R_wm, r, R_vis, acc_sum, acc_time_s, accel_
         for j in range(3):
             R_pred_ij = R_wc[0, i] * R_wm[0, j] + R_wc[1, i] * R_wm[1, j] + R_wc[2, i] * R_wm[2, j]
             acc += R_pred_ij * (z0 if j == 0 else z1 if j == 1 else z2)
-        e[i] = acc - acc_sum[i] / norm
-    v = 0.5 * (R_vis[0, 0] + R_vis[1, 1]) + accel_var_rate / acc_time_s + vertical_var
+        e[i] = acc - accel_sum[i] / norm
+    v = 0.5 * (R_vis[0, 0] + R_vis[1, 1]) + accel_var_rate / accel_time_s + vertical_var
     return e, v
 
 

@@ -7,7 +7,7 @@ array, and nothing is packed or unpacked between the two paths.
 
 Layout (offsets `X_*`, shapes in `FIELDS`): `s` (S_SIZE,) scalars indexed by `S_*`, `R_wc` (3, 3),
 `R_wm` (3, 3), `b_c` (3,) rad/s, `P` (12, 12), `last_gyro` (3,) rad/s (the previous gyro reading,
-camera frame), `acc_sum` (3,) m/s, `lp` (2, 3) m/s^2, `lp_J` (2, 3, 3), `rest_sums` (8,). Units and
+camera frame), `accel_sum` (3,) m/s, `lp` (2, 3) m/s^2, `lp_J` (2, 3, 3), `rest_sums` (8,). Units and
 meanings as in `filter.Mekf` and `accel.AccelPeriod`. A scalar that may be absent (`t_state`,
 `rest_since_s`, `t_visual_s`) is NaN while it is None.
 """
@@ -27,7 +27,7 @@ import numpy as np
 # (`source_trust.py`: running weight, count, mean innovation (3), mean variance, the share, mean square,
 # persistent variance, frames seen) and each source's tilt information per second (accelerometer, camera)
 # and the accelerometer's variance rate.
-S_T_STATE, S_ACC_TIME, S_ACC_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
+S_T_STATE, S_ACCEL_TIME, S_ACCEL_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
 S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE, S_NONFINITE = range(7, 13)
 S_IMU_T, S_T_VISUAL, S_REJECTIONS, S_VISUAL_UPDATES, S_VISUAL_REJECTED = range(13, 18)
 S_TRUST_WEIGHT, S_TRUST_COUNT, S_TRUST_MEAN, S_TRUST_VAR, S_VISUAL_SCALE = 18, 19, 20, 23, 24
@@ -36,10 +36,10 @@ S_TRUST_FRAMES = 30
 S_SIZE = 31
 
 FIELDS = (("s", (S_SIZE,)), ("R_wc", (3, 3)), ("R_wm", (3, 3)), ("b_c", (3,)), ("P", (12, 12)),
-          ("last_gyro", (3,)), ("acc_sum", (3,)), ("lp", (2, 3)), ("lp_J", (2, 3, 3)), ("rest_sums", (8,)))
+          ("last_gyro", (3,)), ("accel_sum", (3,)), ("lp", (2, 3)), ("lp_J", (2, 3, 3)), ("rest_sums", (8,)))
 """Fields of `x` in order, with their shapes."""
 _OFFSETS = np.cumsum([0] + [math.prod(shape) for _, shape in FIELDS]).tolist()
-X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACC_SUM, X_LP, X_LP_J, X_REST_SUMS, X_SIZE = _OFFSETS
+X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACCEL_SUM, X_LP, X_LP_J, X_REST_SUMS, X_SIZE = _OFFSETS
 """Where each field of `FIELDS` starts in `x` (Python ints: compile-time constants in the kernels), and its size."""
 
 

@@ -1,0 +1,420 @@
+"""The compiled IMU path of the EKF (issue 17) against the numpy/filterpy reference: same estimates
+on seeded streams, with frames, with bad samples, gaps and saturation; fallback without numba."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+from uareme_fusion import jit
+from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels, state, state_buffer
+from uareme_fusion.backends.mekf import compiled as mekf_compiled
+from uareme_fusion.config import load_config
+from uareme_fusion.rotations import angle_between, exp_so3
+from uareme_fusion.sim.imu import simulate_imu
+from uareme_fusion.sim.trajectory import make_trajectory
+from uareme_fusion.types import Status, VisualRotation
+
+needs_numba = pytest.mark.skipif(not mekf_compiled.kernels_available(),
+                                 reason="numba not installed: no compiled path")
+
+
+def fresh_python(code: str, timeout_s: float) -> subprocess.CompletedProcess:
+    """`code` run in a new interpreter (numba loads a kernel at its first call, once per process),
+    which must exit 0; its output."""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout_s)
+    assert out.returncode == 0, out.stderr
+    return out
+
+
+def stream(seed: int, duration_s: float = 30.0, rate_hz: float = 200.0):
+    traj = make_trajectory("walk", duration_s=duration_s, seed=seed)
+    t, gyro, accel = simulate_imu(traj, rate_hz=rate_hz, seed=seed + 1)
+    return traj, t, gyro + np.array([0.01, -0.02, 0.015]), accel  # a gyro bias to estimate
+
+
+def run(config: MekfConfig, t, gyro, accel, step: int, frames=None):
+    """Feed `step` samples per call (a frame after each call when `frames` gives R_cm(t)); returns
+    the filter and its estimates."""
+    filt = Mekf(config)
+    ests = []
+    for i in range(0, t.size, step):
+        filt.process_imu(t[i:i + step], gyro[i:i + step], accel[i:i + step])
+        if frames is not None and i + step < t.size:
+            t_f = float(t[min(i + step, t.size) - 1]) + 0.001
+            ests.append(filt.process_frame(t_f, frames(t_f, filt)))
+    filt.flush()
+    return filt, ests
+
+
+def assert_same_filters(a: Mekf, b: Mekf, ests_a=(), ests_b=()):
+    assert np.degrees(angle_between(a.R_wc, b.R_wc)) < 1e-9 * 180 / np.pi
+    np.testing.assert_allclose(a.P, b.P, rtol=1e-7, atol=1e-15)
+    np.testing.assert_allclose(a.b_c, b.b_c, atol=1e-10)
+    assert a.counters == b.counters
+    assert a.stream.counts == b.stream.counts
+    if a.config.record_imu_estimates:
+        (ta, Ra), (tb, Rb) = a.imu_trajectory(), b.imu_trajectory()
+        np.testing.assert_array_equal(ta, tb)
+        assert angle_between(Ra, Rb).max() < 1e-9
+        np.testing.assert_allclose(a.imu_trajectory_cov(), b.imu_trajectory_cov(), rtol=1e-7, atol=1e-15)
+    for ea, eb in zip(ests_a, ests_b):
+        assert ea.status == eb.status
+        assert angle_between(ea.R_wc, eb.R_wc) < 1e-9
+        np.testing.assert_allclose(ea.cov, eb.cov, rtol=1e-6, atol=1e-15)
+
+
+def both(config: MekfConfig):
+    return config.model_copy(update={"compiled": True}), config.model_copy(update={"compiled": False})
+
+
+@needs_numba
+def test_both_paths_re_orthonormalise_after_the_same_products():
+    """After every call both paths count the same products since their last re-orthonormalisation,
+    the count wraps before `ORTHONORMALISE_EVERY` (it has wrapped many times here) and R_wc stays
+    orthonormal to rounding."""
+    _, t, gyro, accel = stream(0, duration_s=5.0)
+    compiled, reference = (Mekf(c) for c in both(load_config("imu_only", MekfConfig)))
+    counts = []
+    for i in range(0, t.size, 7):
+        for filt in (compiled, reference):
+            filt.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
+        assert compiled.products_unnormalised == reference.products_unnormalised, i
+        counts.append(compiled.products_unnormalised)
+    assert max(counts) == state.ORTHONORMALISE_EVERY - 1 and counts.count(0) > 5
+    assert np.abs(compiled.R_wc.T @ compiled.R_wc - np.eye(3)).max() < 1e-12
+
+
+@needs_numba
+@pytest.mark.parametrize("step", [1, 7, 10_000])
+def test_imu_only_preset_same_estimates_in_any_batch_size(step):
+    _, t, gyro, accel = stream(0)
+    cfg = load_config("imu_only", MekfConfig).model_copy(update={"record_imu_estimates": True})
+    (a, _), (b, _) = (run(c, t, gyro, accel, step) for c in both(cfg))
+    assert a.counters["rest_updates"] + a.counters["accel_updates"] > 100
+    assert_same_filters(a, b)
+
+
+@needs_numba
+@pytest.mark.parametrize("preset", ["handheld", "vehicle"])
+def test_fused_with_frames_same_estimates(preset):
+    traj, t, gyro, accel = stream(1, duration_s=12.0)
+    rng = np.random.default_rng(5)
+    deltas = rng.normal(scale=0.01, size=(2000, 3))
+    cov = 1e-4 * np.eye(3)
+
+    def frames(t_f, filt):  # the same draws for both filters
+        k = int(t_f * 1000) % 2000
+        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0] @ exp_so3(deltas[k])
+        return VisualRotation(R_cm=R_cm, cov=cov, cost=0.01, iterations=3, n_valid=100)
+
+    (a, ea), (b, eb) = (run(c, t, gyro, accel, 7, frames) for c in both(load_config(preset, MekfConfig)))
+    assert a.counters["visual_updates"] > 100
+    assert_same_filters(a, b, ea, eb)
+
+
+@needs_numba
+@pytest.mark.parametrize("update", [{}, {"visual_error_correlation_s": 0.3, "manhattan_vertical_max_rad": 0.002}])
+def test_compiled_visual_update_gates_weighs_and_reinitialises_as_the_reference(update):
+    """The frame's compiled visual update (`kernels.visual_update`) against the reference
+    (`Mekf._visual_update`, numpy/scipy/filterpy): rotations relabelled by random cube symmetries,
+    frames with twice the noise their covariance claims (Huber-weighted), lone outliers (gated out),
+    a run of 10 outliers (re-initialisation), a NaN covariance (gated out); with and without
+    correlated-error scaling and the vertical pseudo-measurement. Same estimates, counts and flags."""
+    from uareme_fusion.rotations import manhattan_symmetries
+
+    traj, t, gyro, accel = stream(7, duration_s=12.0)
+    rng = np.random.default_rng(11)
+    n_frames = t.size // 7
+    deltas = rng.normal(scale=0.01, size=(n_frames, 3))
+    deltas[rng.random(n_frames) < 0.2] *= 2.0  # beyond what the covariance says: Huber-weighted
+    deltas[rng.random(n_frames) < 0.05] = [0.0, 0.5, 0.0]  # lone outliers: gated out
+    deltas[250:260] = [0.4, 0.0, 0.3]  # ten in a row: re-initialised
+    labels = rng.integers(0, 24, size=n_frames)
+    symmetries = manhattan_symmetries()
+
+    def frames(t_f, filt):  # the same draws for both filters
+        k = min(int(round(t_f * 200.0)) // 7, n_frames - 1)
+        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0] @ exp_so3(deltas[k])
+        cov = np.full((3, 3), np.nan) if k == 200 else 1e-4 * np.eye(3)
+        return VisualRotation(R_cm=R_cm @ symmetries[labels[k]], cov=cov, cost=0.01, iterations=3, n_valid=100)
+
+    cfg = load_config("handheld", MekfConfig).model_copy(update=update)
+    (a, ea), (b, eb) = (run(c, t, gyro, accel, 7, frames) for c in both(cfg))
+    assert a.counters["visual_updates"] > 250 and a.counters["visual_rejected"] > 20
+    assert a.counters["reinitialised"] >= 1
+    assert sum(bool(e.status & Status.VISUAL_REJECTED) for e in ea) == a.counters["visual_rejected"]
+    assert_same_filters(a, b, ea, eb)
+
+
+@needs_numba
+def test_accelerometer_rows_stacked_into_visual_updates_same_with_rest_updates():
+    """A camera held still in front of a scene: the accelerometer rows that compiled visual updates
+    stack (`kernels.visual_update`, `kernels.accel_rows`) apply the at-rest update first and give the
+    reference's estimates, counts and flags; each estimate owns its arrays."""
+    traj, t, gyro, accel = stream(4, duration_s=8.0)
+    still = np.zeros_like(gyro) + np.array([0.01, -0.02, 0.015])  # only the bias the filter should learn
+    accel_still = np.tile(accel[0], (t.size, 1))
+    R_cm = traj.sample(t[:1]).R_wc[0].T @ traj.R_wm(t[:1])[0]
+
+    def frames(t_f, filt):
+        return VisualRotation(R_cm=R_cm, cov=1e-4 * np.eye(3), cost=0.01, iterations=3, n_valid=100)
+
+    cfg = load_config("handheld", MekfConfig).model_copy(update={"rest_gyro_max_rad_s": 0.05,
+                                                                 "rest_min_duration_s": 0.5})
+    (a, ea), (b, eb) = (run(c, t, still, accel_still, 7, frames) for c in both(cfg))
+    assert a.counters["rest_updates"] > 20 and a.counters["visual_updates"] > 100
+    assert_same_filters(a, b, ea, eb)
+    est = ea[-1]
+    est.R_wc[0, 0] = est.gyro_bias_rad_s[0] = np.nan  # a copy: the filter and the other fields keep theirs
+    assert np.isfinite(a.R_wc).all() and np.isfinite(a.b_c).all() and np.isfinite(est.R_wm).all()
+
+
+@needs_numba
+def test_bad_samples_gaps_and_saturation_same_estimates_counts_and_flags():
+    _, t, gyro, accel = stream(2, duration_s=20.0)
+    gyro, accel, t = gyro.copy(), accel.copy(), t.copy()
+    gyro[100:103] = np.nan
+    accel[500, 1] = np.inf
+    t[900] = np.nan
+    gyro[1500:1504, 2] = 40.0  # beyond the 34.9 rad/s range: saturated
+    keep = np.ones(t.size, bool)
+    keep[2000:2100] = False  # a 0.5 s gap
+    t, gyro, accel = t[keep], gyro[keep], accel[keep]
+    cfg = load_config("imu_only", MekfConfig).model_copy(update={"record_imu_estimates": True})
+    results = []
+    for c in both(cfg):
+        filt = Mekf(c)
+        flags = Status.OK
+        for i in range(0, t.size, 20):
+            filt.process_imu(t[i:i + 20], gyro[i:i + 20], accel[i:i + 20])
+            flags |= filt.process_frame(float(np.nanmax(t[i:i + 20])) + 1e-4, None).status
+        filt.flush()
+        results.append((filt, flags))
+    (a, fa), (b, fb) = results
+    assert a.stream.counts.nonfinite == 5 and a.stream.counts.saturated == 4
+    assert a.counters["imu_gaps"] == 1
+    assert fa & Status.IMU_GAP and fa & Status.GYRO_SATURATED and fa & Status.IMU_DROPPED
+    assert fa == fb
+    assert_same_filters(a, b)
+
+
+def test_without_numba_the_reference_runs_after_one_warning_line():
+    code = ("import sys, warnings; sys.modules['numba'] = None\n"
+            "warnings.simplefilter('always')\n"
+            "import numpy as np\n"
+            "from uareme_fusion.backends.mekf import Mekf, MekfConfig\n"
+            "from uareme_fusion.solver import normal_moments\n"
+            "f = Mekf(MekfConfig(mode='imu_only')); t = np.arange(0, 1, 0.005)\n"
+            "f.process_imu(t, np.zeros((t.size, 3)), np.tile([0, 0, 9.81], (t.size, 1))); f.flush()\n"
+            "m = normal_moments(np.ones((4, 3)))\n"
+            "print(f.counters['accel_updates'], m.n_valid)\n")
+    out = fresh_python(code, timeout_s=120)
+    assert out.stdout.split() == ["24", "4"]
+    warnings = [line for line in out.stderr.splitlines() if "compiled kernels unavailable" in line]
+    assert len(warnings) == 1
+
+
+
+@needs_numba
+def test_frame_batch_held_for_its_frame_is_a_copy_and_counted_when_read():
+    """`process_imu` holds a frame's batch for the frame's single compiled call: the caller may reuse
+    its arrays at once, and the stream's counts are current whenever they are read."""
+    traj, t, gyro, accel = stream(3, duration_s=6.0)
+    gyro = gyro.copy()
+    gyro[400, 1] = np.nan
+    filt, ref = (Mekf(c) for c in both(load_config("handheld", MekfConfig)))
+    buf_t, buf_g, buf_a = np.empty(7), np.empty((7, 3)), np.empty((7, 3))
+    for i in range(0, t.size - 7, 7):  # one reused buffer; a frame after one batch or after two
+        buf_t[:], buf_g[:], buf_a[:] = t[i:i + 7], gyro[i:i + 7], accel[i:i + 7]
+        filt.process_imu(buf_t, buf_g, buf_a)
+        ref.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
+        if i % 21 == 14:  # read before the frame: the held batch counted like any other
+            assert filt.stream.counts == ref.stream.counts
+        buf_t[:] = np.nan  # reused before the frame
+        if i % 21 != 7:
+            t_f = float(t[i + 6]) + 0.001
+            e, e_ref = filt.process_frame(t_f, None), ref.process_frame(t_f, None)
+            assert e.status == e_ref.status
+    assert filt.stream.counts.nonfinite == 1
+    assert_same_filters(filt, ref)
+
+
+@needs_numba
+def test_update_due_at_a_frame_same_as_reference_with_or_without_a_rotation():
+    """An accelerometer update that falls due at the end of a frame's batch waits for the frame: the
+    frame's compiled visual update (`kernels.visual_update`) stacks it, a frame without a rotation
+    applies it alone. Frames with and without rotation, the counts read between the propagation and
+    the frame, and a propagation past a waiting update: the reference's estimates, counts and flags."""
+    traj, t, gyro, accel = stream(6, duration_s=10.0)
+    rng = np.random.default_rng(8)
+    deltas = rng.normal(scale=0.01, size=(t.size, 3))
+    filt, ref = (Mekf(c) for c in both(load_config("handheld", MekfConfig)))
+    ests = ([], [])
+    waiting = 0
+    for k, i in enumerate(range(0, t.size - 7, 7)):
+        t_f = float(t[i + 6]) + 0.001
+        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0] @ exp_so3(deltas[i])
+        visual = VisualRotation(R_cm=R_cm, cov=1e-4 * np.eye(3), cost=0.01, iterations=3, n_valid=100)
+        for f in (filt, ref):
+            f.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
+            f.propagate_to(t_f - 0.0005 if k % 11 == 5 else t_f)  # now and then the frame comes later
+        if filt.accel.due:
+            waiting += 1
+            if waiting % 2:
+                _ = filt.counters  # read (and moved out of the state buffer) before the frame takes the update
+        for f, out in zip((filt, ref), ests):
+            out.append(f.process_frame(t_f, None if k % 4 == 1 else visual))
+        assert filt.counters == ref.counters
+    assert waiting > 30 and filt.counters["accel_updates"] > 40 and filt.counters["visual_updates"] > 100
+    assert_same_filters(filt, ref, *ests)
+
+
+def _broken_kernel(*args):
+    raise RuntimeError("Failed in nopython mode pipeline (step: native lowering)")  # as a compiler failure
+
+
+@needs_numba
+def test_kernels_that_fail_to_compile_fall_back_to_the_reference_after_one_warning(monkeypatch):
+    """numba compiles a kernel at its first call. Should that fail (here every kernel raises as a
+    failed compilation does), the filter warns once and goes on on the reference path with the
+    reference's estimates, counts and flags, and later filters start on it; nothing crashes."""
+    from uareme_fusion.backends import imu_stream
+
+    for name in ("KERNEL", "ACCEL_UPDATE", "SEGMENTS", "STAGE", "INTEGRATE_STAGED", "VISUAL_UPDATE"):
+        monkeypatch.setattr(kernels, name, _broken_kernel)  # restored after the test, as is what follows
+    monkeypatch.setattr(imu_stream, "_ROWS_IF_CLEAN", _broken_kernel)
+    monkeypatch.setattr(jit, "_warned", False)
+    monkeypatch.delenv("UAREME_NO_JIT", raising=False)
+    traj, t, gyro, accel = stream(9, duration_s=4.0)
+
+    def frames(t_f, filt):
+        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0]
+        return VisualRotation(R_cm=R_cm, cov=1e-4 * np.eye(3), cost=0.01, iterations=3, n_valid=100)
+
+    cfg_compiled, cfg_reference = both(load_config("handheld", MekfConfig))
+    with pytest.warns(RuntimeWarning) as caught:
+        a, ea = run(cfg_compiled, t, gyro, accel, 7, frames)
+    assert sum("compiled kernels unavailable" in str(w.message) for w in caught) == 1
+    b, eb = run(cfg_reference, t, gyro, accel, 7, frames)
+    assert not a.compiled and not Mekf(cfg_compiled).compiled and a.counters["visual_updates"] > 50
+    assert_same_filters(a, b, ea, eb)
+
+
+def test_a_kernel_that_fails_in_the_warm_up_moves_the_filter_to_the_reference(monkeypatch):
+    """`warm_up` runs the kernels on a scratch filter; should one fail there, the filter that asked is on
+    the reference path before its first sample (one warning line), not only the scratch one."""
+    from uareme_fusion.backends.mekf import filter as mekf_filter
+
+    for name in ("KERNEL", "ACCEL_UPDATE", "SEGMENTS", "STAGE", "INTEGRATE_STAGED", "VISUAL_UPDATE"):
+        monkeypatch.setattr(kernels, name, _broken_kernel)  # restored after the test, as is what follows
+    monkeypatch.setattr(mekf_filter, "_KERNELS_LOADED", set())
+    monkeypatch.setattr(jit, "_warned", False)
+    monkeypatch.delenv("UAREME_NO_JIT", raising=False)
+    filt = Mekf("handheld")
+    assert filt.compiled
+    with pytest.warns(RuntimeWarning) as caught:
+        filt.warm_up(has_imu=True, has_frames=True)
+    assert sum("compiled kernels unavailable" in str(w.message) for w in caught) == 1
+    assert not filt.compiled
+    # Its IMU batches, accelerometer and visual updates run on the reference path (every kernel still
+    # raises, and a second warning would fail here), with the reference filter's estimates.
+    traj, t, gyro, accel = stream(10, duration_s=2.0)
+
+    def frames(t_f, _filt):
+        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0]
+        return VisualRotation(R_cm=R_cm, cov=1e-4 * np.eye(3), cost=0.01, iterations=3, n_valid=100)
+
+    reference = Mekf(load_config("handheld", MekfConfig).model_copy(update={"compiled": False}))
+    ests, ests_reference = [], []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for i in range(0, t.size, 7):
+            for one, out in ((filt, ests), (reference, ests_reference)):
+                one.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
+                t_f = float(t[min(i + 7, t.size) - 1]) + 0.001
+                out.append(one.process_frame(t_f, frames(t_f, one)))
+    assert filt.counters["visual_updates"] > 20
+    assert_same_filters(filt, reference, ests, ests_reference)
+
+
+def _doubled(x):
+    return 2.0 * x
+
+
+@needs_numba
+def test_a_kernel_compiles_where_no_cache_folder_is_writable(tmp_path, monkeypatch):
+    """A read-only install with no writable cache folder anywhere: numba cannot cache, and a kernel
+    asked to cache still compiles (in each process) instead of failing or falling back."""
+    from numba.core import config as numba_config
+
+    not_a_folder = tmp_path / "file"
+    not_a_folder.write_text("")
+    # numba looks only in NUMBA_CACHE_DIR, which cannot be created (a file is in the way)
+    monkeypatch.setattr(numba_config, "CACHE_LOCATOR_CLASSES", "UserProvidedCacheLocator")
+    monkeypatch.setattr(numba_config, "CACHE_DIR", str(not_a_folder))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "compiled kernels unavailable": it compiled, nothing fell back
+        kernel = jit.compiled(_doubled, cache=True)
+        assert kernel is not None and kernel(np.arange(3.0)).tolist() == [0.0, 2.0, 4.0]
+    assert not_a_folder.is_file() and list(tmp_path.iterdir()) == [not_a_folder]  # and nothing was cached
+
+
+def test_kernel_caches_older_than_any_module_they_draw_on_are_dropped(tmp_path):
+    """numba checks a cache against its own source only: `jit.drop_stale_caches` deletes the cache
+    files beside the listed modules that are older than the newest of them (an edited state-buffer
+    layout must not leave kernels with the old one), and keeps newer ones and other files."""
+    import os
+
+    kernels_py, layout_py = tmp_path / "kernels.py", tmp_path / "sub" / "layout.py"
+    layout_py.parent.mkdir()
+    kernels_py.write_text("")
+    layout_py.write_text("")
+    cache, other_cache = tmp_path / "__pycache__", tmp_path / "sub" / "__pycache__"
+    cache.mkdir()
+    other_cache.mkdir()
+    old = [cache / "kernels.f-1.py311.nbi", cache / "kernels.f-1.py311.1.nbc", other_cache / "layout.g-2.py311.nbi"]
+    kept = [cache / "kernels.h-3.py311.nbi", cache / "kernels.cpython-311.pyc"]
+    for path in old + kept:
+        path.write_text("")
+    for path in old + [kept[1]]:
+        os.utime(path, (1_000, 1_000))
+    os.utime(kernels_py, (2_000, 2_000))
+    os.utime(layout_py, (3_000, 3_000))  # the layout edited after the caches were written
+    os.utime(kept[0], (4_000, 4_000))
+    jit.drop_stale_caches([kernels_py, layout_py])
+    assert not any(path.exists() for path in old) and all(path.exists() for path in kept)
+
+
+def test_kernels_see_the_fields_that_python_sees():
+    """`kernels.state_views` (the kernels' fields of the state buffer) and `state_buffer.field_views`
+    (Python's) are the same views of `x`, field by field, in the order of `state_buffer.FIELDS`."""
+    x = state_buffer.new_state_buffer()
+    x[:] = np.arange(x.size)
+    python_views = state_buffer.field_views(x)
+    kernel_views = getattr(kernels.state_views, "py_func", kernels.state_views)(x)
+    assert len(kernel_views) == len(state_buffer.FIELDS)
+    for view, (name, shape) in zip(kernel_views, state_buffer.FIELDS):
+        assert view.shape == shape and np.shares_memory(view, x)
+        assert np.array_equal(view, python_views[name])
+
+
+@pytest.mark.slow
+@needs_numba
+def test_warm_up_loads_every_kernel_a_filter_with_an_imu_calls():
+    """In a fresh process (numba loads a kernel at its first call), `warm_up` leaves no kernel of the
+    stream to come to load: IMU-only in bulk, then with frames; without an IMU, or in visual-only
+    mode, it loads nothing."""
+    code = ("from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels\n"
+            "from uareme_fusion.backends import imu_stream\n"
+            "names = ('KERNEL', 'ACCEL_UPDATE', 'SEGMENTS', 'STAGE', 'INTEGRATE_STAGED', 'VISUAL_UPDATE')\n"
+            "loaded = lambda: ''.join(str(len(getattr(kernels, n).signatures)) for n in names)\n"
+            "Mekf('handheld').warm_up(False, True); Mekf(MekfConfig(mode='visual_only')).warm_up(True, True)\n"
+            "print(loaded()); Mekf('imu_only').warm_up(True, False); print(loaded())\n"
+            "Mekf('handheld').warm_up(True, True); print(loaded(), len(imu_stream._ROWS_IF_CLEAN.signatures))\n")
+    # IMU-only: integrate, segments
+    assert fresh_python(code, timeout_s=300).stdout.split() == ["000000", "101000", "111111", "1"]

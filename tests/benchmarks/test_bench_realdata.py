@@ -1,0 +1,94 @@
+"""`bench realdata` (issues 29, 30): its statistics on inputs with known answers, and the bench itself
+on a few real frames (skipped without the development data), its figures those of the library's runs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from uareme_fusion.benchmarks.realdata import _nearest, std_separation, total_std_deg
+from uareme_fusion.benchmarks.realdata_rows import markdown, no_worse
+from uareme_fusion.cli import app
+from uareme_fusion.evaluation.paired_difference import paired_difference
+
+
+def test_std_separation_is_the_median_error_of_the_lower_std_half_over_the_upper():
+    std = np.array([5.0, 1.0, 4.0, 2.0, 3.0, 6.0])
+    errors = np.array([50.0, 1.0, 40.0, 3.0, 2.0, 60.0])  # lower half of std: 1, 2, 3 deg -> errors 1, 3, 2
+    sep = std_separation(std, errors)
+    assert sep == {"low_std_median": 2.0, "high_std_median": 50.0, "ratio": 0.04, "frames": 6}
+    # an odd middle frame goes to the upper half; NaNs are left out
+    sep = std_separation([1.0, 2.0, 3.0, np.nan], [1.0, 4.0, 8.0, 100.0])
+    assert (sep["low_std_median"], sep["high_std_median"], sep["frames"]) == (1.0, 6.0, 3)
+    # a std that does not rank the errors: ratio 1
+    assert std_separation(np.arange(10.0), np.ones(10))["ratio"] == 1.0
+    assert np.isnan(std_separation([1.0], [1.0])["ratio"])
+
+
+def test_no_worse_passes_while_the_paired_interval_reaches_zero():
+    rng = np.random.default_rng(0)
+    base = rng.uniform(1.0, 10.0, 400)
+    same = base + rng.normal(0.0, 0.05, 400)  # no real difference: the interval holds 0
+    worse = base + 0.5 + rng.normal(0.0, 0.05, 400)  # worse by 0.5 on every frame
+    better = base - 0.5
+    d_same, d_worse, d_better = (paired_difference(x, base) for x in (same, worse, better))
+    assert d_same["low"] <= 0.0 <= d_same["high"] and no_worse(d_same)
+    assert d_worse["low"] == pytest.approx(0.5, abs=0.02) and not no_worse(d_worse)
+    assert d_better["mean"] == pytest.approx(-0.5) and no_worse(d_better)
+    assert no_worse(paired_difference([np.nan], [1.0])) is None
+
+
+def test_total_std_and_nearest_times():
+    cov = np.stack([np.diag([1.0, 2.0, 1.0]) * np.radians(1.0) ** 2, np.eye(3) * np.radians(3.0) ** 2])
+    np.testing.assert_allclose(total_std_deg(cov), [2.0, 3.0 * np.sqrt(3.0)])
+    np.testing.assert_array_equal(_nearest(np.array([0.0, 1.0, 2.0]), np.array([-1.0, 0.4, 0.6, 1.9, 5.0])),
+                                  [0, 0, 1, 2, 2])
+
+
+def test_markdown_holds_every_row():
+    rows = [{"sequence": "S", "figure": "a|b", "measured": "1.00", "goal": "<= 2", "versus": "", "paired_95": "",
+             "verdict": "ok"}]
+    text = markdown({"quick": True, "rows": rows, "skipped": ["tum: skipped, not fetched"]})
+    assert "| S | a/b | 1.00 | <= 2 |  |  | ok |" in text and "- tum: skipped, not fetched" in text
+
+
+@pytest.mark.slow
+def test_quick_bench_on_real_kt3_prints_the_runs_figures(shared_data, tmp_path):
+    """kt3's first frames: the bench's `eval` row is `uareme-fusion eval` with default options over the same
+    frames (depth normals, ARE <= 0.5), and its cue-set figures are those of `compare` on the same frames."""
+    from uareme_fusion.benchmarks.realdata import QUICK_FRAMES
+    from uareme_fusion.drivers import open_source
+    from uareme_fusion.evaluation.compare import errors_over_time, run_backend
+    from uareme_fusion.evaluation.source_sequence import source_sequence
+    from uareme_fusion.pipeline import RunConfig
+    from uareme_fusion.pipeline.stages import backend_for_run
+
+    out_json, out_md = tmp_path / "r.json", tmp_path / "r.md"
+    result = CliRunner().invoke(app, ["bench", "realdata", "--quick", "--sequences", "kt3", "--data", str(shared_data),
+                                      "--json", str(out_json), "--markdown", str(out_md)], env={"COLUMNS": "250"})
+    assert result.exit_code == 0, result.output
+    printed = result.output
+    kt3 = json.loads(out_json.read_text())["sequences"]["kt3"]
+    kt3_dir = shared_data / "icl_nuim_office_kt3"
+    result = CliRunner().invoke(app, ["eval", str(kt3_dir), "--max-frames", str(QUICK_FRAMES),
+                                      "--out", str(tmp_path / "eval")])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "eval" / "summary.json").read_text())
+    assert kt3["eval_default"]["normals"] == summary["normals"] == "auto (depth)"
+    assert kt3["eval_default"]["are_mean_deg"] == pytest.approx(summary["are_deg"]["mean"], abs=1e-9)
+    assert kt3["eval_default"]["are_mean_deg"] <= 0.5
+    with open_source(str(kt3_dir)) as source:
+        seq = source_sequence(source, RunConfig(normals="learned", cues="lines", max_frames=QUICK_FRAMES))
+        info = source.info
+    err = errors_over_time(run_backend(backend_for_run(RunConfig(backend="single"), info), seq), seq.R_wc_true)
+    lines_single = kt3["cue_sets"]["RGB lines"]["single"]
+    assert lines_single["are_mean_deg"] == pytest.approx(np.nanmean(err["are_deg"]), abs=1e-9)
+    assert lines_single["frames"] == QUICK_FRAMES
+    # printed as measured, with its paired interval, in the table and in the markdown file
+    joint = kt3["cue_sets"]["RGB normals+lines"]["single"]["are_vs_best_single_cue_deg"]
+    for text in (printed, out_md.read_text()):
+        assert f"{summary['are_deg']['mean']:.2f} / {summary['nees']['mean']:.2f}" in text
+        assert f"{joint['mean']:+.2f} ({joint['low']:+.2f} .. {joint['high']:+.2f})" in text
