@@ -104,14 +104,15 @@ def test_focal_length_from_segments_along_three_axes(hfov_deg):
 def test_focal_search_is_global_at_the_assumed_and_first_focal_lengths_only(monkeypatch):
     """The focal grid's solves after the first start from the previous focal length's rotation (R moves
     smoothly with f; a global search at each of 19 was 2.6x the cost for the same figures on ICSL,
-    ICL-NUIM and ECD); the estimate stays right."""
+    ICL-NUIM and ECD) and follow its minimum alone (`local`: no global candidates); the estimate stays right."""
     K = assumed_K(H, W, 75.0)
     R_true = exp_so3([0.2, 0.5, -0.1])
     seg = manhattan_segments(R_true, K, W, H, noise_px=1.0, rng=np.random.default_rng(4))
-    starts = []  # (method, global search) of each solve
+    starts, local = [], []  # (method, global search) of each solve, and whether it followed one minimum
     for name in ("solve", "rotation"):
         def spy(self, nm, lines, R_init=None, method=getattr(JointSolver, name), name=name, **t_s):
             starts.append((name, R_init is None))
+            local.append(t_s.get("local", False))
             return method(self, nm, lines, R_init, **t_s)
         monkeypatch.setattr(JointSolver, name, spy)
     visual, focal = solve_with_focal(JointSolver(), None, seg)
@@ -119,6 +120,7 @@ def test_focal_search_is_global_at_the_assumed_and_first_focal_lengths_only(monk
     # search at its first f only; the final solve and the slope start from the grid's best.
     assert starts[:3] == [("solve", True), ("rotation", True), ("rotation", False)]
     assert starts[2:20] == [("rotation", False)] * 18 and not any(g for _, g in starts[2:])
+    assert local[1:20] == [True] * 19 and not local[0]  # (the first, without R_init, searches globally)
     assert focal.source == "estimated" and abs(focal.hfov_deg - 75.0) < 0.05 * 75.0
     assert _error_and_nees(visual, R_true)[0] < 1.5
 

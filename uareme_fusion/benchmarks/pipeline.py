@@ -115,6 +115,10 @@ class CpuClock:
         pass
 
 
+THREE_CUES_FPS_GOAL = 40.0
+"""640x480 with all three cues (normals, lines, sky), learned normals, EKF (issue 26)."""
+THREE_CUES = "normals,lines,sky"
+
 BUSY_GOAL_RATIO = 0.5
 """fps with a busy neighbour over fps alone (issue 16)."""
 
@@ -143,10 +147,12 @@ def throughput(seconds: float = 10.0, normals: str = "learned", threads: int | N
     pipeline_ms = {k: v for k, v in summary["timing_ms"].items() if k not in ("source", "total")}
     pipeline_total = sum(pipeline_ms.values())
     cpu_ms = clock.ms_per_frame
+    sky = summary.get("sky_detector")
     return {"frames": summary["frames"], "timing_ms": pipeline_ms, "pipeline_ms": pipeline_total,
             "fps": 1e3 / pipeline_total, "cpu_ms_per_frame": cpu_ms, "cpu_fps": 1e3 / cpu_ms,
             "frames_without_visual": summary["frames_without_visual"], "status_counts": summary["status_counts"],
-            "warm_up_ms": 1e3 * summary["warm_up_s"]}
+            "warm_up_ms": 1e3 * summary["warm_up_s"],
+            "sky_looked_percent": 100.0 * sky["looked"] / max(sky["frames"], 1) if sky else float("nan")}
 
 
 def memory(minutes: float = 10.0, normals: str = "learned", fps: float = 30.0) -> dict:
@@ -192,6 +198,12 @@ def run(seconds: float = 10.0, memory_minutes: float = 10.0, normals: str = "lea
     result["throughput_normals_only"] = alone = throughput(seconds, normals, threads, source, cues="normals")
     print(f"  normals only (--cues normals): {alone['fps']:.1f} fps, solver {alone['timing_ms']['solver']:.1f} ms; "
           f"the line cue costs {tp['timing_ms']['solver'] - alone['timing_ms']['solver']:.1f} ms per frame")
+    result["throughput_three_cues"] = three = throughput(seconds, normals, threads, source, cues=THREE_CUES)
+    print(f"  all three cues (--cues {THREE_CUES}; the sky detector on {three['sky_looked_percent']:.0f} % of the "
+          f"frames, `solver/sky_cadence.py`): {three['fps']:.1f} fps; CPU {three['cpu_ms_per_frame']:.1f} ms per "
+          f"frame = {three['cpu_fps']:.1f} fps on an idle core (goal >= {THREE_CUES_FPS_GOAL:g}: ratio "
+          f"{three['cpu_fps'] / THREE_CUES_FPS_GOAL:.2f}), {three['cpu_ms_per_frame'] / tp['cpu_ms_per_frame']:.2f}x "
+          f"the CPU of normals,lines")
     if memory_minutes > 0:
         result["memory"] = mem = memory(memory_minutes, normals)
         print(f"memory over a {mem['stream_minutes']:g}-minute stream ({mem['frames']} frames, "

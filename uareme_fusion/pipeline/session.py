@@ -171,6 +171,8 @@ def run_source(source: Source, out: Path, cfg: RunConfig, evaluate: bool = False
                                                if k.startswith("accel_only")}
         if pipeline.cues is not None and pipeline.cues.focal is not None:  # K given, estimated or assumed
             summary["intrinsics"] = pipeline.cues.intrinsics_summary()
+        if pipeline.cues is not None and pipeline.cues.sky_cadence is not None:  # `solver/sky_cadence.py`
+            summary["sky_detector"] = {"frames": pipeline.cues.sky_cadence.frames, "looked": pipeline.cues.sky_cadence.looks}
         for sink in extra_sinks:
             summary.update(getattr(sink, "summary", dict)())
         if check is not None:

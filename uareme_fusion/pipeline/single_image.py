@@ -36,7 +36,8 @@ from ..rotations import quat_xyzw
 from ..solver.atlanta import AtlantaHorizon, estimate_horizon
 from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal, unknown_centre_floor
 from ..solver.horizon_estimate import (HorizonKnownConfig, HorizonUncertainty, SkyVetoConfig, aligned_rotation,
-                                      horizon_known, horizon_uncertainty, sky_and_segments, up_covariance)
+                                      horizon_known, horizon_uncertainty, sky_and_segments, sky_decides,
+                                      sky_start, up_covariance)
 from ..solver.joint import JointSolver
 from ..solver.sky_horizon import SkyDetector, SkyHorizon
 from ..solver.manhattan import up_candidate
@@ -247,12 +248,13 @@ class ImageAnalyser:
         """The rotation and K of one image by itself (K given, estimated from its segments, or assumed)."""
         h, w = seen.rgb.shape[:2]
         normal_map, segments, given_K = seen.normal_map, seen.segments, seen.given_K
+        sky_first = self._sky_first(seen) if seen.sky is not None else None
+        if sky_first is not None:
+            return sky_first
         try:
             if given_K is not None or segments is None or not len(segments):
-                K = given_K if given_K is not None else assumed_K(h, w, self.focal_config.assumed_fov_deg)
-                visual = solve_given_K(self.solver, normal_map, segments, K)
-                focal = (FocalEstimate(K, "given", width=w, origin=self.camera.origin) if given_K is not None
-                         else FocalEstimate(K, "assumed", width=w))
+                focal = self._fixed_focal(given_K, h, w)
+                visual = solve_given_K(self.solver, normal_map, segments, focal.K)
                 if given_K is None:
                     visual = unknown_centre_floor(visual, focal, self.focal_config, self.solver)
             else:
@@ -261,10 +263,30 @@ class ImageAnalyser:
             if seen.sky is None:
                 raise InputError(f"{seen.path}: no confident normals and no line segments in this image "
                                  "(blank or dark?)") from None
-            focal = (FocalEstimate(given_K, "given", width=w, origin=self.camera.origin) if given_K is not None
-                     else FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w))
+            focal = self._fixed_focal(given_K, h, w)
             visual = None
         return self._with_sky(seen, visual, focal), focal
+
+    def _fixed_focal(self, given_K: np.ndarray | None, h: int, w: int) -> FocalEstimate:
+        """The given intrinsics (in the analysed image's pixels), else the assumed field of view's K."""
+        if given_K is not None:
+            return FocalEstimate(given_K, "given", width=w, origin=self.camera.origin)
+        return FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
+
+    def _sky_first(self, seen: "_Seen") -> tuple[VisualRotation, FocalEstimate] | None:
+        """When the sky boundary sets up alone (the segments show no man-made verticals that could veto
+        or join it: `sky_decides`), one solve of the normals and the sky under the given or assumed K,
+        without the focal-length search: the segments it would read are those judged unable to tell up
+        (a runway's, a field's edges), and a sky horizon l ~ K^-T up_c is the boundary whatever K.
+        None otherwise (the structure is solved first, `_with_sky`)."""
+        focal = self._fixed_focal(seen.given_K, *seen.rgb.shape[:2])
+        sky_up = seen.sky.observation(focal.K).up_c
+        if not sky_decides(seen.segments, focal.K, sky_up, self.sky_veto):
+            return None
+        visual = solve_given_K(self.solver, seen.normal_map, None, focal.K, sky_start(seen.normal_map, sky_up),
+                               sky=seen.sky)
+        return (visual if focal.source == "given" else unknown_centre_floor(visual, focal, self.focal_config,
+                                                                            self.solver)), focal
 
     def _with_sky(self, seen: "_Seen", visual: VisualRotation | None, focal: FocalEstimate) -> VisualRotation:
         """The structure's solve `visual` (None: no normals or segments) solved again with the sky boundary as

@@ -219,6 +219,34 @@ def _vp_height(vps: list[VanishingPoint], n: np.ndarray, in_range, prior: tuple[
     return float(grid[int(np.argmax(log_p))])
 
 
+def _zenith_step(segments: LineSegments, K: np.ndarray, up_c: np.ndarray, cfg: AtlantaConfig):
+    """Step 1 of the module docstring: (scale, the end points centred and scaled, the first guess's
+    zenith in those coordinates, each segment's angle std, the `estimate_zenith` found or None)."""
+    c = K[:2, 2]
+    scale = float(np.hypot(segments.width, segments.height))
+    ends = (segments.endpoints_px - c) / scale  # centred, scaled coordinates
+    zenith = K @ up_c
+    zenith = np.array([zenith[0] - c[0] * zenith[2], zenith[1] - c[1] * zenith[2], zenith[2] * scale])
+    length = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
+    sigma_angle = math.sqrt(2.0) * cfg.endpoint_noise_px / scale / np.maximum(length, 1e-9)
+    half_size = np.array([segments.width, segments.height]) / 2.0 / scale
+    return scale, ends, zenith, sigma_angle, estimate_zenith(ends, segments.weights, sigma_angle, zenith,
+                                                             half_size, cfg.zenith)
+
+
+def vertical_segments(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
+                      config: AtlantaConfig | None = None) -> float:
+    """The effective number of vertical segments behind the zenith that `estimate_horizon` would find
+    (its `n_vertical` when it finds a horizon; 0 below `min_vertical_effective`), from its first step
+    alone: a fifth of its cost (horizon_uav), for callers that only need to know whether the segments show
+    vertical structure."""
+    cfg = config or AtlantaConfig()
+    if len(segments) < 4:
+        return 0.0
+    found = _zenith_step(segments, np.asarray(K, float), up_c, cfg)[-1]
+    return found.n_effective if found is not None and found.n_effective >= cfg.min_vertical_effective else 0.0
+
+
 def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
                      config: AtlantaConfig | None = None) -> AtlantaHorizon | None:
     """The Atlanta-world horizon of `segments` (see the module docstring), None without evidence.
@@ -228,16 +256,10 @@ def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
         return None
     K = np.asarray(K, float)
     c = K[:2, 2]
-    scale = float(np.hypot(segments.width, segments.height))
-    ends = (segments.endpoints_px - c) / scale  # centred, scaled coordinates
+    scale, ends, zenith, sigma_angle, found = _zenith_step(segments, K, up_c, cfg)
     w = segments.weights
-    zenith = K @ up_c
-    zenith = np.array([zenith[0] - c[0] * zenith[2], zenith[1] - c[1] * zenith[2], zenith[2] * scale])
     lines = segment_lines(ends)
     length = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
-    sigma_angle = math.sqrt(2.0) * cfg.endpoint_noise_px / scale / np.maximum(length, 1e-9)
-    half_size = np.array([segments.width, segments.height]) / 2.0 / scale
-    found = estimate_zenith(ends, w, sigma_angle, zenith, half_size, cfg.zenith)
     n_vertical, zenith_cov = 0.0, None
     if found is not None and found.n_effective >= cfg.min_vertical_effective:
         zenith, n_vertical, zenith_cov = found.point, found.n_effective, found.cov

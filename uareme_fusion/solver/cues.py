@@ -33,6 +33,7 @@ from ..solver.sky_horizon import SkyDetector
 from ..solver.self_calibration import FrameEvidence, SelfCalibrationConfig, pool_intrinsics
 from ..solver import solve_manhattan
 from ..types import Frame, NormalMap, VisualRotation
+from .sky_cadence import SkyCadence
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +74,8 @@ class CueSolver:
         self.detector = (detector or SegmentDetector()) if lines else None
         self.sky = SkyDetector() if sky else None
         """The sky boundary cue (`solver/sky_horizon.py`), None without it."""
+        self.sky_cadence = SkyCadence() if sky else None
+        """On which frames the sky detector runs (`solver/sky_cadence.py`)."""
         self._sky_now = None
         """The current frame's sky boundary (None: none, or not looked for)."""
         self.image_normals = image_normals
@@ -101,18 +104,24 @@ class CueSolver:
         self._frames += 1
         other_size = self._other_size(frame)
         segments = self.detector.detect(frame.rgb) if self.detector is not None and frame.rgb is not None else None
-        self._sky_now = self.sky.detect(frame.rgb) if self.sky is not None and frame.rgb is not None else None
-        if self._sky_now is not None:  # the segments join only with man-made verticals (`sky_and_segments`)
+        looked = self.sky is not None and frame.rgb is not None and self.sky_cadence.look()
+        self._sky_now = self.sky.detect(frame.rgb) if looked else None
+        found = self._sky_now is not None
+        if found:  # the segments join only with man-made verticals (`sky_and_segments`); R_init: the structure's axes
             K = frame.K if frame.K is not None else (self.focal or self._assumed(*frame.rgb.shape[:2])).K
             guess = (up_candidate(R_init, self._sky_now.observation(K).up_c)[1] if R_init is not None
                      else self._sky_now.observation(K).up_c)
-            self._sky_now, segments = sky_and_segments(self._sky_now, segments, K, guess)
+            self._sky_now, segments = sky_and_segments(self._sky_now, segments, K, guess, R_cm=R_init)
         try:
             if other_size:
                 visual = self._solve_alone(frame, normal_map, segments, R_init)
             else:
                 visual = self._solve(frame, normal_map, segments, R_init)
         except InputError:
+            visual = None
+        if self.sky_cadence is not None:
+            self.sky_cadence.seen(looked, found, visual)
+        if visual is None:
             return None
         visual = self.offset.update(visual)
         reason = no_evidence_reason(frame.rgb) if self.image_normals and normal_map is not None else ""

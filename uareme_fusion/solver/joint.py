@@ -262,13 +262,14 @@ class JointSolver:
         return dataclasses.replace(visual, jump_deg=float(np.degrees(jump_rad)))
 
     def rotation(self, normal_map: NormalMap | None, lines: LineMoments | None, R_init=None,
-                 horizon=None) -> np.ndarray:
+                 horizon=None, local: bool = False) -> np.ndarray:
         """`solve`'s `R_cm` alone (the same rotation), without the covariance, which costs two more
-        refinements (the cues' disagreement): for searches that only compare or difference rotations."""
+        refinements (the cues' disagreement): for searches that only compare or difference rotations.
+        `local`: only R_init's own minimum (no global candidates), to follow one minimum along a search."""
         cues = self._cues(normal_map, lines, horizon)
         if cues is None:
             return self.normal_solver.solve(normal_map, R_init).R_cm
-        return _labelled(cues, self._solve_cues(cues, R_init)[0])
+        return _labelled(cues, self._solve_cues(cues, R_init, local=local and R_init is not None)[0])
 
     # --- cues -------------------------------------------------------------------------------------
     def _cues(self, normal_map: NormalMap | None, lines: LineMoments | None, horizon=None) -> list[_Cue] | None:
@@ -304,7 +305,8 @@ class JointSolver:
         return cue
 
     # --- optimisation -----------------------------------------------------------------------------
-    def _solve_cues(self, cues: list[_Cue], R_init) -> tuple[np.ndarray, list[_Cue], int, bool, list, float]:
+    def _solve_cues(self, cues: list[_Cue], R_init, local: bool = False
+                    ) -> tuple[np.ndarray, list[_Cue], int, bool, list, float]:
         """The robust minimum of J (module docstring): (R_cm, the cues as reweighted there, iterations,
         converged, the other minima found as (R, robust score above the best's), the angle (rad) from the
         prior's own minimum to the one kept, 0 when it is the prior's)."""
@@ -318,7 +320,7 @@ class JointSolver:
                 if not any(_angle_rad(R, m[0]) < _SAME_MINIMUM_RAD for m in minima):
                     minima.append((R, found, converged))
         n_prior = len(minima)
-        for R, plain_first in self._global_starts(cues, R_init):
+        for R, plain_first in ([] if local else self._global_starts(cues, R_init)):
             if plain_first:
                 R, its, _, converged = self._refine(cues, R)
                 iterations += its

@@ -357,6 +357,10 @@ class HorizonCue(_Cue):
     def _axis(self, R):
         """(r, k): R's axis nearest up_c (sign towards it) and its index; R (3, 3) or (N, 3, 3)."""
         R = np.asarray(R, float)
+        if R.ndim == 2:  # one rotation (each step of the solve): without the stacks' indexing, 4x faster
+            dots = self.obs.up_c @ R
+            k = int(np.argmax(np.abs(dots)))
+            return (R[:, k] if dots[k] >= 0 else -R[:, k]), k
         dots = np.einsum("...ik,i->...k", R, self.obs.up_c)
         k = np.argmax(np.abs(dots), axis=-1)
         r = np.take_along_axis(R, k[..., None, None].repeat(3, axis=-2), axis=-1)[..., 0]
@@ -366,7 +370,7 @@ class HorizonCue(_Cue):
     def cost(self, R):
         r, _ = self._axis(R)
         e = r @ self.obs.basis
-        return 0.5 * np.einsum("...i,ij,...j->...", e, self.W, e)
+        return 0.5 * float(e @ self.W @ e) if e.ndim == 1 else 0.5 * np.einsum("...i,ij,...j->...", e, self.W, e)
 
     def derivatives(self, R):
         """Gradient and Gauss-Newton Hessian in the right perturbation: r(R Exp(d)) = r - R [e_k]x d."""
