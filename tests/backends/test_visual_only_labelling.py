@@ -1,5 +1,5 @@
 """Without an IMU the filters follow the camera (issue 30 "no silent drift"): the Manhattan labelling is
-chained from frame to frame (`backends/visual_chain.py`), a frame that disagrees with the prediction
+kept by a track of the frames (`backends/labelling_track.py`, the one `single` uses), a frame that disagrees with the prediction
 re-initialises the EKF at once, a fast handheld turn is followed without a flag, and a burst of
 confidently wrong frames neither relabels the stream nor leaves the filters worse than `single`.
 Hand-made streams, navlie style: noiseless convergence, seeded NEES, faults injected."""
@@ -14,7 +14,7 @@ import pytest
 from uareme_fusion.backends.mekf import Mekf, MekfConfig
 from uareme_fusion.backends.single import SingleFrame
 from uareme_fusion.backends.smoother import Smoother
-from uareme_fusion.backends.visual_chain import VisualLabelChain
+from uareme_fusion.backends.labelling_track import LabellingTrack
 from uareme_fusion.evaluation.compare import errors_over_time, run_backend
 from uareme_fusion.evaluation.sequence import synthetic_sequence
 from uareme_fusion.rotations import align_constant, angle_between, exp_so3, manhattan_symmetries, nees
@@ -59,20 +59,19 @@ def are_deg(ests, R_wc) -> np.ndarray:
     return np.degrees(angle_between(align_constant(R, R_wc) @ R, R_wc))
 
 
-def test_the_chain_labels_each_frame_nearest_the_previous_one():
+def test_the_track_labels_each_frame_nearest_the_previous_one():
     rng = np.random.default_rng(0)
-    chain, R_cm = VisualLabelChain(), R_CM_UPRIGHT
+    track, R_cm = LabellingTrack(), R_CM_UPRIGHT
     labelled = []
-    for _ in range(40):  # 4 deg per frame: 160 deg in all, labels drawn at random
+    for k in range(40):  # 4 deg per frame at 30 fps (120 deg/s): 160 deg in all, labels drawn at random
         R_cm = R_cm @ exp_so3([0.0, np.radians(4.0), 0.0])
         P = manhattan_symmetries()[rng.integers(24)]
-        visual = chain.label(VisualRotation(R_cm @ P, 1e-4 * np.eye(3), 0.0, 1, 10))
-        chain.take(visual)
-        labelled.append(visual.R_cm)
+        labelled.append(track.label(k / FPS, VisualRotation(R_cm @ P, 1e-4 * np.eye(3), 0.0, 1, 10)).R_cm)
     steps = np.degrees(angle_between(np.array(labelled[:-1]), np.array(labelled[1:])))
     np.testing.assert_allclose(steps, 4.0, atol=1e-6)  # never a 90-degree relabelling
     nan = VisualRotation(np.full((3, 3), np.nan), np.eye(3), 0.0, 1, 10)
-    assert chain.label(nan) is nan
+    assert track.label(40 / FPS, nan) is nan
+    np.testing.assert_allclose(track.R_cm, labelled[-1], atol=1e-3)  # a NaN frame leaves the track as it was
 
 
 def test_noiseless_fast_handheld_turns_are_followed_without_a_flag():

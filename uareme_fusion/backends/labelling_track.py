@@ -62,6 +62,10 @@ class LabellingTrack:
         """Times the track restarted at a frame after `restart_after_rejected` consecutive rejections."""
         self._rejected_run = 0
 
+    def start(self, t_s: float, visual: VisualRotation) -> None:
+        """Restart the track at `visual` as it is labelled (a backend's first frame or re-initialisation)."""
+        self.R_cm, self.cov, self.t_s, self._rejected_run = np.array(visual.R_cm, float), np.asarray(visual.cov, float), t_s, 0
+
     def predicted(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
         """The track's (R_cm, cov) predicted to `t_s`; None before the first frame."""
         if self.R_cm is None:
@@ -79,7 +83,9 @@ class LabellingTrack:
     def label(self, t_s: float, visual: VisualRotation) -> VisualRotation:
         """`visual` with the labelling nearest the track; the track then takes it in (first frame: it
         starts there), unless it is beyond the gate (then, the `restart_after_rejected`-th such frame in a
-        row restarts it there) or its covariance is not finite."""
+        row restarts it there) or its covariance is not finite. A non-finite rotation is returned as it is."""
+        if not np.isfinite(visual.R_cm).all():
+            return visual
         prediction = self.predicted(t_s)
         if prediction is None:
             self.R_cm, self.cov, self.t_s = visual.R_cm, np.asarray(visual.cov, float), t_s

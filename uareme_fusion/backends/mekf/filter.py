@@ -9,8 +9,6 @@ pseudo-measurement and a due accelerometer update are fused in one stacked filte
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 from filterpy.kalman import update as kf_update
 
@@ -20,7 +18,7 @@ from ...rotations import angle_between
 from ...types import Estimate, Estimates, ImuBatch, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
-from ..visual_chain import VisualLabelChain
+from ..labelling_track import LabellingTrack
 from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
@@ -46,10 +44,6 @@ _ESTIMATE_INDEX = np.stack([np.arange(X_R_WC, X_R_WM).reshape(3, 3), np.arange(X
 """Where R_wc, R_wm, P[TH, TH], its transpose and b_c (in each row) lie in the state buffer `x` (5, 3, 3):
 one `take` copies them."""
 
-
-CHAIN_MAX_RAD = np.radians(22.5)
-"""Visual only: a fused frame becomes the labelling chain's reference (`visual_chain.py`) only this close
-to the prediction, rad."""
 
 _CAMERA_ONLY = (float("nan"), 1.0)
 """`Estimate.tilt_shares` without an IMU: the camera alone."""
@@ -158,7 +152,7 @@ class Mekf(Backend):
         self.pending_span_s = 0.0
         self.init_samples: list[ImuBatch] = []
         self.noise_share = VisualNoiseShare(cfg.visual_noise_share_frames)  # visual only (its `persistent_cov`)
-        self.visual_chain = VisualLabelChain()  # visual only: each frame labelled nearest the previous one
+        self.labelling = LabellingTrack()  # visual only: each frame labelled nearest a track of the frames
         self._dropped_reported = 0
         self.accel = AccelPeriod(self.x)
         self.gravity_only = GravityOnly(cfg)  # an accelerometer without gyro (visual only: `process_accel`)
@@ -311,21 +305,15 @@ class Mekf(Backend):
             self.resolve_mode(MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY)
         self.propagate_to(t_s)
         if visual is not None and self.initialised and not self.motion.uses_imu:
-            visual = self.visual_chain.label(visual)  # `visual_chain.py`: not nearest a prediction that may drift
+            visual = self.labelling.label(t_s, visual)  # `labelling_track.py`: not nearest a prediction that may drift
         fuses_visual = self.motion.fuses_visual
         if visual is not None and self.manhattan_initialised and fuses_visual:
             ignored = self._ignored_too_long(t_s, visual)
             if ignored is None:
-                # The chain's next reference: a frame within half the labelling ambiguity (45 deg) of the
-                # prediction, whatever its covariance (a wrong minimum with a capped one is fused, barely).
-                if not self.motion.uses_imu:
-                    R_cm_pred = self.R_wc.T @ self.R_wm
-                    self.visual_chain.take(visual if angle_between(R_cm_pred, visual.R_cm) < CHAIN_MAX_RAD
-                                           else dataclasses.replace(visual, R_cm=R_cm_pred))
                 return self._compiled_estimate(t_s) if self._fuse_visual(visual) else self._estimate(t_s)
             if ignored:  # else skipped (visual only): the filter coasts
                 if not self.motion.uses_imu:
-                    self.visual_chain.take(visual)
+                    self.labelling.start(t_s, visual)
                 self._reinitialise(visual)
                 self.t_visual_s = t_s
             if self.accel.due:
@@ -501,7 +489,7 @@ class Mekf(Backend):
         shared = not self.motion.uses_imu and self.noise_share.enabled
         if shared:  # fuse the independent share only (as estimated over the previous frames)
             R_vis = R_vis * self.noise_share.share
-            self.noise_share.take(t_s, visual)  # labelled by the chain
+            self.noise_share.take(t_s, visual)  # labelled by the track (`labelling_track.py`)
         d = np.sqrt(d2)
         if d > cfg.visual_huber_k:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_k)
@@ -515,7 +503,7 @@ class Mekf(Backend):
 
     def _visual_model(self, visual: VisualRotation):
         """`measurements.visual_model` of the frame: labelled nearest the prediction with an IMU, as the
-        chain labelled it without (`visual_chain.py`)."""
+        track labelled it without (`labelling_track.py`)."""
         return visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov, relabel=self.motion.uses_imu)
 
     def _visual_trust(self, r: np.ndarray, R_vis: np.ndarray, t_s: float, t_prev_s: float | None):

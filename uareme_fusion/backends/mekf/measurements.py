@@ -24,7 +24,7 @@ from .state import I3, MF, N_STATE, TH
 def visual_model(R_wc: np.ndarray, R_wm: np.ndarray, R_cm: np.ndarray, cov_rad2: np.ndarray, relabel: bool = True):
     """The solver's rotation `R_cm` (3, 3) with covariance `cov_rad2` (3, 3, rad^2, right
     perturbation) as a measurement of `R_cm = R_wc^T R_wm`, its Manhattan labelling resolved
-    against the prediction (`relabel`; False: as labelled, e.g. by `backends.visual_chain`):
+    against the prediction (`relabel`; False: as labelled, e.g. by `backends.labelling_track`):
     `(residual (3,) rad, R (3, 3) rad^2, H (3, 12))`."""
     R_cm_pred = R_wc.T @ R_wm
     if relabel:

@@ -51,7 +51,7 @@ class ConstantRateMotion:
     def start_from_visual(self, filt, t_s: float, visual: VisualRotation) -> None:
         """`R_wc` from the first frame's `R_cm` labelled upright; the rate starts at 0."""
         visual = visual.symmetric_to(R_CM_UPRIGHT)
-        filt.visual_chain.start(visual)
+        filt.labelling.start(t_s, visual)
         filt.R_wm = np.eye(3)
         filt.R_wc = visual.R_cm.T
         self._restart(filt, visual)
@@ -59,7 +59,7 @@ class ConstantRateMotion:
         filt.initialised = filt.manhattan_initialised = True
 
     def reinitialise(self, filt, visual: VisualRotation) -> None:
-        """A new scene alignment: `R_wc` from `R_cm`, as the chain labelled it (`visual_chain.py`), against
+        """A new scene alignment: `R_wc` from `R_cm`, as the track labelled it (`labelling_track.py`), against
         the kept world (= Manhattan) frame."""
         filt.R_wc = filt.R_wm @ visual.R_cm.T
         self._restart(filt, visual)
