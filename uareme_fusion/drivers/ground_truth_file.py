@@ -1,14 +1,10 @@
-"""Ground truth from a trajectory file, for `eval --gt FILE` on sources without their own.
+"""Ground truth from a trajectory file attached to a source, for `eval --gt FILE` on sources without
+their own:
 
     source = with_ground_truth_file(open_source(folder), "groundtruth.txt", time_offset_s=0.0)
 
-Formats (told apart by the first data line: commas mean EuRoC):
-- TUM (`timestamp tx ty tz qx qy qz qw`, seconds, whitespace): the camera's `R_wc`;
-- EuRoC ground truth (`timestamp [ns], p xyz, q_RS w x y z, ...`, commas): the body (IMU) frame's
-  `R_wi`, turned into the camera's `R_wc = R_wi R_ci^T` with the run's camera-IMU rotation.
-Both worlds are taken as gravity-aligned (z up), as in EuRoC, TUM RGB-D with its IMU and our own
-outputs; `time_offset_s` is added to the file's stamps to put them on the source's clock (the same
-convention as `--imu-time-offset-s`). The file is read by `formats.ground_truth`.
+The file's formats, frames and the time-offset convention are those of `formats.ground_truth`, which
+reads it.
 """
 
 from __future__ import annotations
