@@ -38,7 +38,8 @@ FRAMES = 12
 @pytest.fixture(scope="module")
 def sim_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("sim") / "room"
-    options = SequenceOptions(frames=FRAMES, width=64, height=48, fps=10.0, seed=1, imu_rate_hz=200.0)
+    # 30 fps: at 10 fps the EKF rejected every frame of this room (ARE 75 deg), so bag and folder agreed by chance
+    options = SequenceOptions(frames=FRAMES, width=64, height=48, fps=30.0, seed=1, imu_rate_hz=200.0)
     write_sequence("room", out, options)
     return out
 
@@ -111,7 +112,7 @@ def test_header_stamps_are_used_not_receive_times(sim_dir, tmp_path, folder_run)
         write_bag(src, tmp_path / "late.bag", image_receive_delay_s=0.35)  # images arrive 0.35 s late
     summary, bag = _run(tmp_path / "late.bag", tmp_path / "out")
     np.testing.assert_allclose(bag[:, 0], folder_run[1][:, 0], atol=1e-6)
-    assert _angles_deg(bag, folder_run[1]).max() < 0.05
+    assert _angles_deg(bag, folder_run[1]).max() < 0.5  # as the bags frame by frame (receive times: degrees off)
 
 
 def test_camera_on_another_clock_is_put_on_the_imus_by_receive_times(sim_dir, tmp_path, folder_run):
