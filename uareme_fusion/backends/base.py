@@ -27,6 +27,10 @@ class Backend(ABC):
         Backends without IMU support ignore them.
         """
 
+    uses_image_motion: bool = False
+    """Whether `process_frame` uses the image rotation since the previous frame (`VisualRotation.R_cp`:
+    the labelling track, `labelling_track.py`); the pipeline measures it only then (5 ms a frame)."""
+
     accelerometer_lookahead_s: float = 0.0
     """How far past a frame's time `process_accel` wants samples before the frame, s (a replay feeds them)."""
 

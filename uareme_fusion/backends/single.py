@@ -22,6 +22,7 @@ class SingleFrame(Backend):
     """`R_wc = R_cm^T` per frame; frames without a visual rotation repeat the last estimate."""
 
     name = "single"
+    uses_image_motion = True  # the labelling track
 
     def __init__(self, missing_variance_rad2: float = 1.0, labelling: LabellingTrackConfig | None = None):
         self.missing_variance_rad2 = missing_variance_rad2

@@ -136,7 +136,8 @@ class Pipeline:
     def visual_rotation(self, normal_map: NormalMap | None, t_s: float, frame: Frame | None = None) -> VisualRotation | None:
         """The solver's rotation for one frame, None when it has no usable cue (no valid normals, no lines)."""
         R_init = self.backend.predicted_R_cm(t_s)
-        visual = solve_frame(self.cues, frame, normal_map, R_init if R_init is not None else self._R_cm_prev)
+        visual = solve_frame(self.cues, frame, normal_map, R_init if R_init is not None else self._R_cm_prev,
+                             image_motion=self.backend.uses_image_motion)
         if visual is None:
             return None
         self._R_cm_prev = visual.R_cm

@@ -99,8 +99,10 @@ class CueSolver:
         self.pooled_switch: dict | None = None
         """When the pooled K took over (the stream's frame index and time) and what was used before."""
 
-    def solve(self, frame: Frame, normal_map: NormalMap | None, R_init=None) -> VisualRotation | None:
-        """None when neither cue is usable (a blank frame and no normals)."""
+    def solve(self, frame: Frame, normal_map: NormalMap | None, R_init=None,
+              image_motion: bool = True) -> VisualRotation | None:
+        """None when neither cue is usable (a blank frame and no normals). `image_motion`: also measure the
+        image rotation since the previous frame (`VisualRotation.R_cp`), for a backend that uses it."""
         self._frames += 1
         other_size = self._other_size(frame)
         segments = self.detector.detect(frame.rgb) if self.detector is not None and frame.rgb is not None else None
@@ -126,7 +128,7 @@ class CueSolver:
         visual = self.offset.update(visual)
         reason = no_evidence_reason(frame.rgb) if self.image_normals and normal_map is not None else ""
         visual = without_evidence(visual, reason, self.solver.config.max_variance_rad2) if reason else visual
-        return self._with_motion(frame, visual)
+        return self._with_motion(frame, visual) if image_motion else visual
 
     def _with_motion(self, frame: Frame, visual: VisualRotation) -> VisualRotation:
         """`visual` with the image rotation since the previous frame (`FrameMotion`, at the K in use)."""
@@ -289,11 +291,11 @@ def stream_focal(focal_px: list[float], height: int, width: int) -> FocalEstimat
 
 
 def solve_frame(cues: CueSolver | None, frame: Frame | None, normal_map: NormalMap | None,
-                R_init=None) -> VisualRotation | None:
+                R_init=None, image_motion: bool = True) -> VisualRotation | None:
     """One frame's visual rotation: through `cues` (normals and segments jointly) when given with the
     frame, else from the normal map alone; None when no cue is usable (no valid normals, no segments)."""
     if cues is not None and frame is not None:
-        return cues.solve(frame, normal_map, R_init)
+        return cues.solve(frame, normal_map, R_init, image_motion)
     if normal_map is None:
         return None
     try:

@@ -212,6 +212,11 @@ class Mekf(Backend):
             t_s, gyro_rad_s, accel_m_s2 = t, gyro, accel  # checked: `ImuStream.add` takes them as they are
         self._add(t_s, gyro_rad_s, accel_m_s2)
 
+    @property
+    def uses_image_motion(self) -> bool:
+        """Visual only (or not yet known): the labelling track takes the image rotation."""
+        return not self._mode_resolved or not self.motion.uses_imu
+
     def process_accel(self, t_s, accel_m_s2) -> None:
         """Feed accelerometer samples of a sensor without gyro: `t_s` (N,) s on the IMU clock,
         `accel_m_s2` (N, 3) m/s^2 in the IMU frame (`R_ci`). The visual-only model uses them as a
