@@ -88,7 +88,7 @@ class LabellingTrack:
             return visual
         prediction = self.predicted(t_s)
         if prediction is None:
-            self.R_cm, self.cov, self.t_s = visual.R_cm, np.asarray(visual.cov, float), t_s
+            self.start(t_s, visual)
             return visual
         R_pred, P = self._moved(t_s, visual)
         visual = visual.symmetric_to(R_pred)
@@ -102,7 +102,7 @@ class LabellingTrack:
             self.rejected += 1
             self._rejected_run += 1
             if self._rejected_run >= self.config.restart_after_rejected:
-                self.R_cm, self.cov, self._rejected_run = visual.R_cm, C, 0
+                self.start(t_s, visual)
                 self.restarts += 1
             return visual
         self._rejected_run = 0
