@@ -20,6 +20,12 @@ BLOCK_FRAMES = 10
 visual-only backends' error differences (lag-one correlation -0.1 to +0.3 on the real sequences)."""
 
 
+def block_starts(n: int, length: int, draws: int, seed: int) -> np.ndarray:
+    """(draws, ceil(n / length)) start frames of the moving blocks of `length` frames that make up each of
+    `draws` resamples of `n` frames (module docstring), drawn with `seed`."""
+    return np.random.default_rng(seed).integers(0, n - length + 1, size=(draws, -(-n // length)))
+
+
 def paired_difference(errors_a: np.ndarray, errors_b: np.ndarray, level: float = 0.95,
                       block_frames: int = BLOCK_FRAMES, draws: int = 2000, seed: int = 0) -> dict:
     """Mean of `errors_a - errors_b` (N,) over the frames where both are finite, and its `level`
@@ -35,10 +41,9 @@ def paired_difference(errors_a: np.ndarray, errors_b: np.ndarray, level: float =
     length = min(int(block_frames), n)
     if length == n:
         return {"mean": mean, "low": mean, "high": mean, "frames": n}
-    blocks = -(-n // length)
     sums = np.concatenate([[0.0], np.cumsum(diff)])
     block_sums = sums[length:] - sums[:-length]  # the sum of each block of `length` frames, by its start
-    starts = np.random.default_rng(seed).integers(0, n - length + 1, size=(draws, blocks))
-    means = block_sums[starts].sum(axis=1) / (blocks * length)
+    starts = block_starts(n, length, draws, seed)
+    means = block_sums[starts].sum(axis=1) / (starts.shape[1] * length)
     low, high = np.quantile(means, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
     return {"mean": mean, "low": float(low), "high": float(high), "frames": n}

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..rotations import align_constant, angle_between, are_deg, nearest_symmetric
+from .paired_difference import block_starts
 
 DEFAULT_SEARCH_S = 0.1
 """Candidates run over +-this (s)."""
@@ -102,10 +103,9 @@ def _minimum(offsets: np.ndarray, curve: np.ndarray) -> float:
 def _block_bootstrap(offsets: np.ndarray, are: np.ndarray, block: int, resamples: int, level: float,
                      seed: int) -> tuple[float, float]:
     """(low, high) of the offset over moving-block resamples of the frames (columns of `are` (K, N))."""
-    rng = np.random.default_rng(seed)
     n = are.shape[1]
     block = max(1, min(block, n))
-    starts = rng.integers(0, n - block + 1, (resamples, -(-n // block)))
+    starts = block_starts(n, block, resamples, seed)
     picks = (starts[:, :, None] + np.arange(block)).reshape(resamples, -1)[:, :n]
     found = [_minimum(offsets, are[:, idx].mean(axis=1)) for idx in picks]
     tail = 50.0 * (1.0 - level)
