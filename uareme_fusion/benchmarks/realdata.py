@@ -26,7 +26,9 @@ Figures: ARE mean (deg, after one constant alignment), NEES mean, tilt mean wher
 gravity-aligned; "no worse beyond a paired 95 % interval": the mean per-frame difference (A - B) with
 its moving-block bootstrap interval (`evaluation.paired_difference`), passing while the interval's low
 end is <= 0; the std separation: median ARE of the frames in the lower half of the reported std
-(sqrt of the covariance's trace) over that of the upper half, goal <= 0.5.
+(sqrt of the covariance's trace) over that of the upper half, goal <= 0.5, printed beside the oracle's
+ratio (the frames ranked by their true error: what a perfect std would reach; where the errors are
+homogeneous it lies above the goal, and the goal cannot be met there).
 """
 
 from __future__ import annotations
@@ -243,6 +245,8 @@ def cue_backend_figures(errors_by_cue: dict, gravity_aligned: bool) -> dict:
                 row["are_vs_single_deg"] = paired_difference(err["are_deg"], errs["single"]["are_deg"])
             rows[name] = row
         rows["single"]["std_separation"] = std_separation(errs["single"]["std_deg"], errs["single"]["are_deg"])
+        rows["single"]["std_separation"]["oracle_ratio"] = std_separation(  # the best any std can do
+            errs["single"]["are_deg"], errs["single"]["are_deg"])["ratio"]
         out[cue] = rows
     singles = [c for c in RGB_SINGLE_CUES if c in out]
     if JOINT in out and singles:
