@@ -45,8 +45,8 @@ class FocalConfig:
     assumed_fov_deg: float = DEFAULT_FOV_DEG
     principal_point_std_fraction: float = 0.02
     """Without intrinsics the principal point is taken at the image centre; real cameras put it this
-    far off (std, fraction of the width: ICSL's is 6 px from the centre of 640): the rotation gets a
-    floor of (this * width / f)^2 rad^2 about the camera's x and y axes (`unknown_centre_floor`)."""
+    far off (std, fraction of the width: ICSL's is 6 px from the centre of 640): the rotation gets an
+    isotropic floor of (this * width / f)^2 rad^2 (`unknown_centre_floor`)."""
     endpoint_noise_px: float = 1.5
     """Segment end point noise (full-resolution pixels) behind `pixel_consistency`."""
 
@@ -124,19 +124,12 @@ def solve_with_focal(solver: JointSolver, normal_map: NormalMap | None, segments
 
 def unknown_centre_floor(visual: VisualRotation, focal: FocalEstimate, config: FocalConfig,
                          solver: JointSolver) -> VisualRotation:
-    """`visual` with (principal_point_std_fraction * width / f)^2 added to the variances about the camera's
-    x and y axes (capped), when segments took part; the normals use no intrinsics, so a normals-only rotation
-    is returned as it is. A centre off by (dx, dy) px moves every ray by (dx, dy) / f: to first order a
-    rotation about y and x, not about the optical axis, so the roll keeps its own variance (it was isotropic:
-    ICSL corridor RGB, depth-normal reference, NEES 0.06, the floor's 1.35 deg per axis against 0.32 deg of
-    error; with the roll left out, 0.62, ARE unchanged). The centre's offset is one per camera, so it is a
-    steady error that the sequence's alignment removes: the remaining x, y floor is why NEES stays below 1
-    there."""
+    """`visual` with (principal_point_std_fraction * width / f)^2 added to each variance (capped), when
+    segments took part; the normals use no intrinsics, so a normals-only rotation is returned as it is."""
     if "lines" not in visual.cues and "sky" not in visual.cues:
         return visual
     std_rad = config.principal_point_std_fraction * focal.width / focal.f_px
-    floor_c = std_rad**2 * np.diag([1.0, 1.0, 0.0])  # camera axes: a shifted centre tilts, it does not roll
-    return replace_cov(visual, solver, visual.cov + visual.R_cm.T @ floor_c @ visual.R_cm)
+    return replace_cov(visual, solver, visual.cov + std_rad**2 * np.eye(3))
 
 
 def _solve_with_focal(solver, normal_map, segments, R_init, cfg, t_s, sky=None) -> tuple[VisualRotation, FocalEstimate]:
