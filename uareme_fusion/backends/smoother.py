@@ -18,11 +18,20 @@ covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`visual_huber_k`) kernel
 identity `BetweenFactorRot3` with isotropic `between_std_rad` between consecutive frames (f^s); the
 oldest frame's marginal prior (f^p) is what the fixed-lag smoother leaves when it marginalises.
 The world is the Manhattan frame as labelled on the first frame: `R_wm = I`.
+Two departures when the frames carry the image rotation since the previous frame (`VisualRotation.R_cp`,
+`uses_image_motion`; docs/departures.md): f^s is that rotation, `X(j)^-1 X(k) = R_cp^T` from the latest
+frame `j` with a visual rotation, with a rate bias `C(k)` estimated in the window
+(`smoother_image_motion.py`: the identity could not follow a handheld camera, real TUM fr1 rpy eval
+RGB 44.6 deg ARE against `single`'s 19.0, 15.7 with it), and those frames' f^z use
+`image_motion_visual_huber_k`; frames are labelled by the labelling track (`labelling_track.py`, as
+`single`), not nearest the smoother's own estimate. Without `R_cp` the graph is the paper's.
 
 Gyro-aided mode (`mode: gyro`): the between factors are `AHRSFactor`s from gyro preintegration
 (`PreintegratedAhrsMeasurements`) with one gyro-bias variable `B(k)` per frame linked by a random
 walk; an `AttitudeFactorRot3` per frame from the mean accelerometer direction since the previous
-frame, with a noise inflated by how far |a| is from gravity and how much it varied. The world is
+frame, with a noise inflated by how far |a| is from gravity plus the mean's standard error (vibration
+averages out: weighed by the samples' RMS, the quiet accelerometer of a static drone with running motors,
+real EuRoC V1_01, lost to the gyro bias: tilt 2.8-3.8 deg against the IMU alone's 1.78, now 1.0-1.2). The world is
 gravity aligned, so `R_wm` is no longer the identity: it is a variable `M` kept in the window
 (its timestamp is refreshed every frame), and each visual rotation enters as a
 `BetweenFactorRot3(M, X(k), R_cm^T)` (the measurement `R_mc = R_wm^T R_wc`). `R_wm` gets a prior at
@@ -126,7 +135,8 @@ class SmootherConfig(GyroNoiseConfig):
     accel_std_rad: float = Field(0.03, ge=1e-6, le=10.0)
     """Std of the gravity direction from the mean accelerometer reading when the camera is still, rad."""
     accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0, le=100.0)
-    """Added to `accel_std_rad` per m/s^2 of | |a_mean| - g | plus the RMS spread of the samples."""
+    """Added to `accel_std_rad` per m/s^2 of | |a_mean| - g |; the mean's standard error (the samples'
+    RMS spread / sqrt(N), over g, rad) is added too."""
     gravity_huber_k: float | None = Field(1.345, ge=1e-3, le=1e6)
     """Huber threshold on the whitened gravity residual; None for Gaussian."""
     gravity_m_s2: float = Field(9.81, ge=1.0, le=100.0)
