@@ -12,7 +12,7 @@ import numpy as np
 from uareme_fusion.backends.labelling_track import LabellingTrack
 from uareme_fusion.backends.smoother import Smoother, SmootherConfig
 from uareme_fusion.rotations import are_deg, exp_so3, manhattan_symmetries
-from uareme_fusion.types import VisualRotation
+from uareme_fusion.types import Status, VisualRotation
 
 from test_smoother import R_wc_at, feed, imu_for
 
@@ -96,3 +96,20 @@ def test_gravity_factor_on_a_vibrating_platform_weighs_the_mean_by_its_standard_
     ests = feed(Smoother(SmootherConfig(mode="gyro")), t, visuals, (imu_t, gyro, accel))
     up_err = np.degrees(np.arccos(np.clip([e.R_wc[2] @ R_still[0][2] for e in ests], -1, 1)))
     assert up_err[20:].mean() < 1.0  # measured 0.39
+
+
+def test_a_visual_rotation_with_nan_covariance_is_rejected_counted_and_its_image_rotation_kept():
+    t = np.arange(40) / 30.0
+    R_true = R_wc_at(t)
+    visuals = noisy_visuals(t, R_true, np.random.default_rng(6), np.radians(1.0))
+    for k in (10, 25):
+        visuals[k] = dataclasses.replace(visuals[k], cov=np.full((3, 3), np.nan))
+    sm = Smoother()
+    ests = feed(sm, t, visuals)
+    assert sm.rejected_nonfinite == 2
+    flagged = [k for k, e in enumerate(ests) if e.status & Status.VISUAL_REJECTED]
+    assert flagged == [10, 25] and not any(e.status & Status.OPTIMISER_FAILED for e in ests)
+    err = are_deg(np.array([e.R_wc for e in ests]), R_true, align=False)
+    assert err[5:].max() < 3.0 and np.all(np.isfinite([e.cov for e in ests]))  # frame 0: its own 1 deg noise
+    first = Smoother().process_frame(0.0, dataclasses.replace(visuals[0], cov=np.full((3, 3), np.nan)))
+    assert first.status & Status.NOT_INITIALISED and first.status & Status.VISUAL_REJECTED

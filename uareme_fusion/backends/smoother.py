@@ -161,6 +161,11 @@ class SmootherConfig(GyroNoiseConfig):
         return value
 
 
+def _finite(visual: VisualRotation) -> bool:
+    """Whether a frame's rotation and covariance are finite."""
+    return bool(np.isfinite(visual.R_cm).all() and np.isfinite(visual.cov).all())
+
+
 class OptimiserFailure(RuntimeError):
     """The smoother's optimisation raised or returned a non-finite estimate."""
 
@@ -218,6 +223,8 @@ class Smoother(Backend):
         """Paper mode: the stream's labelling (`labelling_track.py`, as `single`'s), turned by the image
         rotations; gyro mode labels nearest the gyro-propagated estimate instead."""
         self._k_visual: int | None = None  # latest frame in the window with a visual rotation
+        self.rejected_nonfinite = 0
+        """Visual rotations with a non-finite rotation or covariance, not fused."""
         self._t_visual = float("nan")  # its time, s
         self._image_motion = ImageMotionFactors(self.config.image_rotation_bias_initial_std_rad_s,
                                                 self.config.image_rotation_bias_rw_rad_s2_sqrt_hz)
@@ -308,13 +315,19 @@ class Smoother(Backend):
 
     def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
         """Add frame `t_s` (its visual rotation, or None) to the window, optimise, and return the
-        estimate of `R_wc` with its marginal covariance (right perturbation, rad^2)."""
+        estimate of `R_wc` with its marginal covariance (right perturbation, rad^2). A visual rotation
+        whose rotation or covariance is not finite is not fused (`Status.VISUAL_REJECTED`, counted in
+        `rejected_nonfinite`); its image rotation still ties the frame to the previous one."""
         status = Status.OK if visual is not None else Status.VISUAL_MISSING
+        usable = visual is not None and _finite(visual)
+        if visual is not None and not usable:
+            self.rejected_nonfinite += 1
+            status |= Status.VISUAL_REJECTED
         if self._dropped_imu:
             status |= Status.IMU_DROPPED
             self._dropped_imu = 0
         if self._last is None:
-            if visual is None:
+            if not usable:
                 self._reset_interval()
                 return Estimate(t_s, np.eye(3), self.config.missing_variance_rad2 * np.eye(3),
                                 status | Status.NOT_INITIALISED)
@@ -324,7 +337,7 @@ class Smoother(Backend):
         graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
         R_wc_pred = self._predicted_R_wc(visual)
         try:
-            if visual is not None:
+            if usable:
                 visual = self._labelled(t_s, visual, R_wc_pred)
                 self._add_visual(graph, k, t_s, visual)
             self._add_motion_factors(graph, values, stamps, k, t_s, visual)
