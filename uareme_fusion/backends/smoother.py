@@ -135,11 +135,19 @@ class SmootherConfig(GyroNoiseConfig):
     sets normals / lines / both: 0.02 gave ARE 1.01 / 0.87 / 0.63 deg against `single`'s 0.65 / 0.72 /
     1.16 (a yaw drift of the unlearnt bias), 0.03 0.80 / 0.71 / 0.63 with NEES 0.85 / 1.04 / 1.52;
     0.05 0.57 / 0.52 / 0.61 but NEES 0.62 / 0.70 / 1.37; 0.1 made the window indeterminate (23 restarts)."""
-    accel_std_rad: float = Field(0.03, ge=1e-6, le=10.0)
-    """Std of the gravity direction from the mean accelerometer reading when the camera is still, rad."""
+    accel_std_rad: float = Field(0.02, ge=1e-6, le=10.0)
+    """Std of the gravity direction from the mean accelerometer reading when the camera is still, rad.
+    Real EuRoC V1_01 micro (static drone), normals / lines / both: 0.03 gave NEES 0.85 / 1.04 / 1.52 and
+    tilt 0.82 / 0.91 / 1.04 deg, 0.02 NEES 1.06 / 1.19 / 1.66 and tilt 0.77 / 0.83 / 0.93 (IMU alone 1.78)."""
     accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0, le=100.0)
-    """Added to `accel_std_rad` per m/s^2 of | |a_mean| - g |; the mean's standard error (the samples'
-    RMS spread / sqrt(N), over g, rad) is added too."""
+    """Added to `accel_std_rad` per m/s^2 of | |a_mean| - g |, and of the samples' RMS spread while the
+    platform turns (`still_rate_rad_s`; still: the mean's standard error, spread / sqrt(N) / g rad)."""
+    still_rate_rad_s: float = Field(0.15, ge=0, le=100.0)
+    """Gyro mode: below this bias-corrected rate (rad/s, the EKF's `source_trust.STILL_RATE_RAD_S`) the
+    platform counts as still and the accelerometer's spread as noise or vibration, which averages out of
+    the mean (its standard error); above it the spread inflates the gravity factor as the platform's own
+    acceleration. Real EuRoC V1_01 micro (a static drone, motors shaking it 0.2-1.8 m/s^2 RMS): weighed by
+    the spread there, tilt 2.8-3.8 deg against the IMU alone's 1.78."""
     gravity_huber_k: float | None = Field(1.345, ge=1e-3, le=1e6)
     """Huber threshold on the whitened gravity residual; None for Gaussian."""
     gravity_m_s2: float = Field(9.81, ge=1.0, le=100.0)

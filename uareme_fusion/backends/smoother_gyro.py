@@ -34,6 +34,7 @@ class GyroSmoother(Smoother):
             self._pim_params.setGyroscopeCovariance(self.config.gyro_noise_rad_s_sqrt_hz**2 * np.eye(3))
         self._pim = gtsam.PreintegratedAhrsMeasurements(self._pim_params, self._bias)
         self._accel_c: list[np.ndarray] = []
+        self._gyro_c: list[np.ndarray] = []
 
     def process_imu(self, t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> None:
         """Preintegrate gyro samples and collect accelerometer samples.
@@ -53,6 +54,7 @@ class GyroSmoother(Smoother):
                 self._pim.integrateMeasurement(w_c, t - self._t_imu)
             self._t_imu = t
             self._accel_c.append(a_c)
+            self._gyro_c.append(w_c)
 
     def _gravity_factor(self, key: int) -> gtsam.NonlinearFactor | None:
         """Paper-free addition: accelerometer up direction since the last frame, noise inflated by motion."""
@@ -65,10 +67,15 @@ class GyroSmoother(Smoother):
             return None
         spread = np.sqrt(np.mean(np.sum((accel - mean) ** 2, axis=1)))
         cfg = self.config
-        # The mean's own scatter (vibration averages over the samples: its standard error, rad) and
-        # the platform's acceleration (|a| away from g, inflated per m/s^2).
-        sigma = (cfg.accel_std_rad + cfg.accel_inflation_rad_per_m_s2 * abs(norm - cfg.gravity_m_s2)
-                 + spread / (cfg.gravity_m_s2 * np.sqrt(len(accel))))
+        # Still (the bias-corrected gyro below `still_rate_rad_s`): the spread is noise or a vibrating
+        # platform's shaking, which averages out of the mean (its standard error, rad); turning: it is
+        # taken as the platform's own acceleration, inflated per m/s^2 with |a| away from g.
+        rate = np.linalg.norm(np.mean(self._gyro_c, axis=0) - self._bias) if self._gyro_c else np.inf
+        if rate < cfg.still_rate_rad_s:
+            sigma = (cfg.accel_std_rad + cfg.accel_inflation_rad_per_m_s2 * abs(norm - cfg.gravity_m_s2)
+                     + spread / (cfg.gravity_m_s2 * np.sqrt(len(accel))))
+        else:
+            sigma = cfg.accel_std_rad + cfg.accel_inflation_rad_per_m_s2 * (abs(norm - cfg.gravity_m_s2) + spread)
         noise = _robust(cfg.gravity_huber_k, gtsam.noiseModel.Isotropic.Sigma(2, sigma))
         # Error: up_w (x) R_wc @ up_c, with up_c the measured specific-force direction.
         return gtsam.AttitudeFactorRot3(key, gtsam.Unit3(WORLD_UP), noise, gtsam.Unit3(mean / norm))
