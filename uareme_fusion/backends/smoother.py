@@ -29,9 +29,10 @@ RGB 44.6 deg ARE against `single`'s 19.0, 15.7 with it), and those frames' f^z u
 Gyro-aided mode (`mode: gyro`): the between factors are `AHRSFactor`s from gyro preintegration
 (`PreintegratedAhrsMeasurements`) with one gyro-bias variable `B(k)` per frame linked by a random
 walk; an `AttitudeFactorRot3` per frame from the mean accelerometer direction since the previous
-frame, with a noise inflated by how far |a| is from gravity plus the mean's standard error (vibration
-averages out: weighed by the samples' RMS, the quiet accelerometer of a static drone with running motors,
-real EuRoC V1_01, lost to the gyro bias: tilt 2.8-3.8 deg against the IMU alone's 1.78, now 1.0-1.2). The world is
+frame, with a noise inflated by how far |a| is from gravity and by the samples' spread: while the gyro
+says still (`still_rate_rad_s`) only by the mean's standard error (vibration averages out: weighed by the
+samples' RMS, the quiet accelerometer of a static drone with running motors, real EuRoC V1_01, lost to
+the gyro bias: tilt 2.8-3.8 deg against the IMU alone's 1.78, now 0.8-0.9). The world is
 gravity aligned, so `R_wm` is no longer the identity: it is a variable `M` kept in the window
 (its timestamp is refreshed every frame), and each visual rotation enters as a
 `BetweenFactorRot3(M, X(k), R_cm^T)` (the measurement `R_mc = R_wm^T R_wc`). `R_wm` gets a prior at
