@@ -18,11 +18,21 @@ covariance rotated to `R_cm @ cov @ R_cm^T` and a Huber(`visual_huber_k`) kernel
 identity `BetweenFactorRot3` with isotropic `between_std_rad` between consecutive frames (f^s); the
 oldest frame's marginal prior (f^p) is what the fixed-lag smoother leaves when it marginalises.
 The world is the Manhattan frame as labelled on the first frame: `R_wm = I`.
+Two departures when the frames carry the image rotation since the previous frame (`VisualRotation.R_cp`,
+`uses_image_motion`; docs/departures.md): f^s is that rotation, `X(j)^-1 X(k) = R_cp^T` from the latest
+frame `j` with a visual rotation, with a rate bias `C(k)` estimated in the window
+(`smoother_image_motion.py`: the identity could not follow a handheld camera, real TUM fr1 rpy eval
+RGB 44.6 deg ARE against `single`'s 19.0, 15.7 with it), and those frames' f^z use
+`image_motion_visual_huber_k`; frames are labelled by the labelling track (`labelling_track.py`, as
+`single`), not nearest the smoother's own estimate. Without `R_cp` the graph is the paper's.
 
 Gyro-aided mode (`mode: gyro`): the between factors are `AHRSFactor`s from gyro preintegration
 (`PreintegratedAhrsMeasurements`) with one gyro-bias variable `B(k)` per frame linked by a random
 walk; an `AttitudeFactorRot3` per frame from the mean accelerometer direction since the previous
-frame, with a noise inflated by how far |a| is from gravity and how much it varied. The world is
+frame, with a noise inflated by how far |a| is from gravity and by the samples' spread: while the gyro
+says still (`still_rate_rad_s`) only by the mean's standard error (vibration averages out: weighed by the
+samples' RMS, the quiet accelerometer of a static drone with running motors, real EuRoC V1_01, lost to
+the gyro bias: tilt 2.8-3.8 deg against the IMU alone's 1.78, now 0.8-0.9). The world is
 gravity aligned, so `R_wm` is no longer the identity: it is a variable `M` kept in the window
 (its timestamp is refreshed every frame), and each visual rotation enters as a
 `BetweenFactorRot3(M, X(k), R_cm^T)` (the measurement `R_mc = R_wm^T R_wc`). `R_wm` gets a prior at
@@ -51,6 +61,8 @@ from ..rotations import is_rotation, manhattan_symmetries
 from ..types import Estimate, Status, VisualRotation, visual_R_wc_covariance
 from .base import Backend
 from .imu_noise import GyroNoiseConfig
+from .labelling_track import LabellingTrack
+from .smoother_image_motion import ImageMotionFactors, has_image_rotation
 from .visual_noise_share import VisualNoiseShare
 
 try:  # BatchFixedLagSmoother moved from gtsam_unstable into gtsam in 4.3/5.0.
@@ -105,15 +117,38 @@ class SmootherConfig(GyroNoiseConfig):
     the reported covariance (0 = off). Real ICSL corridor, RGB only: ARE 2.178 -> 2.143 deg against
     `single`'s 2.141 (NEES 2.90 -> 3.13); ICL kt3 0.289 unchanged; simulated walks without IMU
     1.966 / 1.920 -> 1.959 / 1.913."""
+    image_motion_visual_huber_k: float | None = Field(1.345, ge=1e-3, le=1e6)
+    """Paper mode: `visual_huber_k` of a frame whose between factor comes from its image rotation
+    (`smoother_image_motion.py`). Tied that tightly to its neighbours, a frame weighed as by the paper's
+    0.1 (nearly every frame down-weighted) lets the chain of image rotations drift away from accurate
+    frames (real ICSL corridor_more, learned normals + lines: ARE 3.81 against `single`'s 1.44); 1.345
+    (the usual 95 % efficiency) follows them. None: Gaussian."""
+    image_rotation_bias_initial_std_rad_s: float = Field(0.2, ge=1e-6, le=100.0)
+    """Paper mode: prior std of the image rotations' rate bias at a window's start, rad/s
+    (`smoother_image_motion.py`)."""
+    image_rotation_bias_rw_rad_s2_sqrt_hz: float = Field(0.1, ge=1e-9, le=100.0)
+    """Paper mode: random-walk density of that bias, rad/s^2/sqrt(Hz)."""
     # Gyro-aided mode: gyro noise from `GyroNoiseConfig`; the smoother's bias prior default is wider.
     gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-4, ge=1e-9, le=1.0)
     """Gyro bias random-walk density, rad/s^2/sqrt(Hz) (> 0: a gtsam sigma)."""
-    gyro_bias_initial_std_rad_s: float = Field(0.02, ge=1e-6, le=10.0)
-    """Prior std of the gyro bias on the first frame, rad/s."""
-    accel_std_rad: float = Field(0.03, ge=1e-6, le=10.0)
-    """Std of the gravity direction from the mean accelerometer reading when the camera is still, rad."""
+    gyro_bias_initial_std_rad_s: float = Field(0.03, ge=1e-6, le=10.0)
+    """Prior std of the gyro bias on the first frame, rad/s. Real EuRoC V1_01 micro (z bias 0.076), cue
+    sets normals / lines / both: 0.02 gave ARE 1.01 / 0.87 / 0.63 deg against `single`'s 0.65 / 0.72 /
+    1.16 (a yaw drift of the unlearnt bias), 0.03 0.80 / 0.71 / 0.63 with NEES 0.85 / 1.04 / 1.52;
+    0.05 0.57 / 0.52 / 0.61 but NEES 0.62 / 0.70 / 1.37; 0.1 made the window indeterminate (23 restarts)."""
+    accel_std_rad: float = Field(0.02, ge=1e-6, le=10.0)
+    """Std of the gravity direction from the mean accelerometer reading when the camera is still, rad.
+    Real EuRoC V1_01 micro (static drone), normals / lines / both: 0.03 gave NEES 0.85 / 1.04 / 1.52 and
+    tilt 0.82 / 0.91 / 1.04 deg, 0.02 NEES 1.06 / 1.19 / 1.66 and tilt 0.77 / 0.83 / 0.93 (IMU alone 1.78)."""
     accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0, le=100.0)
-    """Added to `accel_std_rad` per m/s^2 of | |a_mean| - g | plus the RMS spread of the samples."""
+    """Added to `accel_std_rad` per m/s^2 of | |a_mean| - g |, and of the samples' RMS spread while the
+    platform turns (`still_rate_rad_s`; still: the mean's standard error, spread / sqrt(N) / g rad)."""
+    still_rate_rad_s: float = Field(0.15, ge=0, le=100.0)
+    """Gyro mode: below this bias-corrected rate (rad/s, the EKF's `source_trust.STILL_RATE_RAD_S`) the
+    platform counts as still and the accelerometer's spread as noise or vibration, which averages out of
+    the mean (its standard error); above it the spread inflates the gravity factor as the platform's own
+    acceleration. Real EuRoC V1_01 micro (a static drone, motors shaking it 0.2-1.8 m/s^2 RMS): weighed by
+    the spread there, tilt 2.8-3.8 deg against the IMU alone's 1.78."""
     gravity_huber_k: float | None = Field(1.345, ge=1e-3, le=1e6)
     """Huber threshold on the whitened gravity residual; None for Gaussian."""
     gravity_m_s2: float = Field(9.81, ge=1.0, le=100.0)
@@ -133,6 +168,11 @@ class SmootherConfig(GyroNoiseConfig):
         if not is_rotation(value):
             raise ValueError("R_ci must be a 3x3 rotation matrix (orthonormal rows, det +1)")
         return value
+
+
+def _finite(visual: VisualRotation) -> bool:
+    """Whether a frame's rotation and covariance are finite."""
+    return bool(np.isfinite(visual.R_cm).all() and np.isfinite(visual.cov).all())
 
 
 class OptimiserFailure(RuntimeError):
@@ -188,37 +228,67 @@ class Smoother(Backend):
         self._dropped_imu = 0
         self._noise_share = VisualNoiseShare(self.config.visual_noise_share_frames
                                              if self.config.mode is SmootherMode.PAPER else 0.0)
+        self.track = LabellingTrack()
+        """Paper mode: the stream's labelling (`labelling_track.py`, as `single`'s), turned by the image
+        rotations; gyro mode labels nearest the gyro-propagated estimate instead."""
+        self._k_visual: int | None = None  # latest frame in the window with a visual rotation
+        self.rejected_nonfinite = 0
+        """Visual rotations with a non-finite rotation or covariance, not fused."""
+        self._t_visual = float("nan")  # its time, s
+        self._image_motion = ImageMotionFactors(self.config.image_rotation_bias_initial_std_rad_s,
+                                                self.config.image_rotation_bias_rw_rad_s2_sqrt_hz)
         self._reset_interval()
 
     # ----------------------------------------------------------------------------- variant hooks
     def _reset_interval(self) -> None:
         """Start collecting the IMU of the next frame interval (nothing in the paper's graph)."""
 
-    def _predicted_R_wc(self) -> np.ndarray:
-        """`R_wc` (3, 3) predicted at the next frame: the last estimate (paper)."""
+    def _predicted_R_wc(self, visual: VisualRotation | None = None) -> np.ndarray:
+        """`R_wc` (3, 3) predicted at the next frame (paper: the last estimate turned by `visual`'s image
+        rotation when it has one, `R_wc = R_wc_p R_cp^T`)."""
+        if visual is not None and has_image_rotation(visual):
+            return self._last.R_wc @ visual.R_cp.T
         return self._last.R_wc
+
+    def _labelled(self, t_s: float, visual: VisualRotation, R_wc_pred: np.ndarray) -> VisualRotation:
+        """`visual` in the labelling the graph fuses (paper: the labelling track's, `LabellingTrack.label`)."""
+        return self.track.label(t_s, visual)
 
     def _visual_factor(self, k: int, visual: VisualRotation, noise) -> gtsam.NonlinearFactor:
         """f^z of paper eq. 9: the single-frame rotation as a robust prior on X(k) (`noise`: `_add_visual`)."""
         return gtsam.PriorFactorRot3(X(k), gtsam.Rot3(visual.R_cm.T), noise)
 
-    def _add_motion_factors(self, graph, values, stamps, k: int, t_s: float) -> None:
-        """f^s of paper eq. 9: identity between consecutive frames, isotropic sigma."""
-        graph.add(self._smoothness_factor(k))
+    def _add_motion_factors(self, graph, values, stamps, k: int, t_s: float, visual: VisualRotation | None) -> None:
+        """f^s of paper eq. 9 between the frame and the previous one: the image rotation `R_cp` since the
+        latest frame with a visual rotation (`X(j)^-1 X(k) = R_cp^T`, isotropic `R_cp_std_rad`) when the
+        frame has one and that frame is still in the window; else the paper's identity with `between_std_rad`."""
+        j = self._k_visual
+        if (visual is not None and has_image_rotation(visual) and j is not None
+                and k - j < self.config.window_frames - 1):
+            self._image_motion.add(graph, values, stamps, j, k, t_s - self._t_visual, t_s - self._t_frame, visual)
+        else:
+            graph.add(self._smoothness_factor(k))
+            self._image_motion.add_walk(graph, values, stamps, k, t_s - self._t_frame)
 
     def _window_stamps(self, stamps, k: int) -> None:
         """Timestamps of variables kept in the window besides X(k) (none in the paper's graph)."""
 
-    def _start_priors(self, graph, values, stamps, visual: VisualRotation) -> VisualRotation:
+    def _start_priors(self, graph, values, stamps, t_s: float, visual: VisualRotation) -> VisualRotation:
         """Priors of the first frame besides its visual factor; returns the visual rotation as labelled
-        for it (the paper's: as the solver gave it; the world is that Manhattan frame)."""
+        for it (the paper's: as the solver gave it, the labelling track starts there; the world is that
+        Manhattan frame)."""
+        self.track.start(t_s, visual)
+        self._image_motion.start(graph, values, stamps, 0)
         return visual
 
     def _restart_priors(self, graph, values, stamps, k: int) -> None:
-        """Priors a restarted window needs besides X(k) (none in the paper's graph)."""
+        """Priors a restarted window needs besides X(k) (paper: the image rotations' rate bias)."""
+        self._image_motion.start(graph, values, stamps, k)
 
     def _world_and_bias(self, values) -> tuple[np.ndarray, np.ndarray | None]:
-        """`(R_wm (3, 3), gyro bias (3,) rad/s camera frame, or None)` from the optimised values."""
+        """`(R_wm (3, 3), gyro bias (3,) rad/s camera frame, or None)` from the optimised values (paper:
+        the image rotations' rate bias is kept, not reported)."""
+        self._image_motion.take(values, self._k)
         return np.eye(3), None
 
     # ----------------------------------------------------------------------------- shared factors
@@ -229,9 +299,16 @@ class Smoother(Backend):
         (`visual_noise_share.py`; nothing in gyro mode)."""
         R_wc_cov = visual_R_wc_covariance(visual)
         noise = gtsam.noiseModel.Gaussian.Covariance(self._noise_share.share * R_wc_cov)
-        graph.add(self._visual_factor(k, visual, _robust(self.config.visual_huber_k, noise)))
+        graph.add(self._visual_factor(k, visual, _robust(self._visual_huber_k(visual), noise)))
         if self._noise_share.enabled:
             self._noise_share.take(t_s, visual, R_wc_cov)
+
+    def _visual_huber_k(self, visual: VisualRotation) -> float | None:
+        """The Huber threshold of `visual`'s factor (paper: `image_motion_visual_huber_k` when its between
+        factor is its image rotation, else the paper's `visual_huber_k`)."""
+        if has_image_rotation(visual):
+            return self.config.image_motion_visual_huber_k
+        return self.config.visual_huber_k
 
     def _smoothness_factor(self, k: int) -> gtsam.NonlinearFactor:
         return gtsam.BetweenFactorRot3(X(k - 1), X(k), gtsam.Rot3(), self._between_noise)
@@ -247,13 +324,19 @@ class Smoother(Backend):
 
     def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
         """Add frame `t_s` (its visual rotation, or None) to the window, optimise, and return the
-        estimate of `R_wc` with its marginal covariance (right perturbation, rad^2)."""
+        estimate of `R_wc` with its marginal covariance (right perturbation, rad^2). A visual rotation
+        whose rotation or covariance is not finite is not fused (`Status.VISUAL_REJECTED`, counted in
+        `rejected_nonfinite`); its image rotation still ties the frame to the previous one."""
         status = Status.OK if visual is not None else Status.VISUAL_MISSING
+        usable = visual is not None and _finite(visual)
+        if visual is not None and not usable:
+            self.rejected_nonfinite += 1
+            status |= Status.VISUAL_REJECTED
         if self._dropped_imu:
             status |= Status.IMU_DROPPED
             self._dropped_imu = 0
         if self._last is None:
-            if visual is None:
+            if not usable:
                 self._reset_interval()
                 return Estimate(t_s, np.eye(3), self.config.missing_variance_rad2 * np.eye(3),
                                 status | Status.NOT_INITIALISED)
@@ -261,18 +344,20 @@ class Smoother(Backend):
 
         k = self._k + 1
         graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
-        R_wc_pred = self._predicted_R_wc()
+        R_wc_pred = self._predicted_R_wc(visual)
         try:
-            if visual is not None:
-                visual = visual.symmetric_to(R_wc_pred.T @ self._R_wm)
+            if usable:
+                visual = self._labelled(t_s, visual, R_wc_pred)
                 self._add_visual(graph, k, t_s, visual)
-            self._add_motion_factors(graph, values, stamps, k, t_s)
+            self._add_motion_factors(graph, values, stamps, k, t_s, visual)
             values.insert(X(k), gtsam.Rot3(R_wc_pred))
             stamps[X(k)] = float(k)
             self._window_stamps(stamps, k)
             self._optimise(graph, values, stamps)
             self._k, self._t_frame = k, t_s
             est = self._estimate(t_s, status)
+            if visual is not None:
+                self._k_visual, self._t_visual = k, t_s
         except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
             log.warning("smoother optimisation failed at t=%.6f s (%s); window restarted from the last "
                         "good estimate", t_s, exc)
@@ -289,12 +374,12 @@ class Smoother(Backend):
         """First visual rotation: X(0) (and M, B(0) in gyro mode) with their priors."""
         self._smoother = self._new_smoother()
         graph, values, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
-        visual = self._start_priors(graph, values, stamps, visual)
+        visual = self._start_priors(graph, values, stamps, t_s, visual)
         self._add_visual(graph, 0, t_s, visual)
         values.insert(X(0), gtsam.Rot3(self._R_wm @ visual.R_cm.T))
         stamps[X(0)] = 0.0
         self._smoother.update(graph, values, stamps)
-        self._k, self._t_frame = 0, t_s
+        self._k, self._t_frame, self._k_visual, self._t_visual = 0, t_s, 0, t_s
         est = self._estimate(t_s, status)
         self._reset_interval()
         self._last = est
@@ -311,6 +396,7 @@ class Smoother(Backend):
         values.insert(X(k), gtsam.Rot3(R_wc_pred))
         stamps[X(k)] = float(k)
         self._restart_priors(graph, values, stamps, k)
+        self._k_visual = None  # the earlier frames left with the old window
         try:
             self._smoother.update(graph, values, stamps)
             self._k, self._t_frame = k, t_s
@@ -339,6 +425,8 @@ class Smoother(Backend):
 
 
 class PaperSmoother(Smoother):
-    """The paper's graph (Sec. 3.2): visual priors and identity smoothness factors; IMU ignored."""
+    """The paper's graph (Sec. 3.2): visual priors and smoothness factors (from the image rotations when
+    the frames carry them); IMU ignored."""
 
     name = "smoother"
+    uses_image_motion = True  # the labelling track and the between factors

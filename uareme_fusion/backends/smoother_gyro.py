@@ -34,6 +34,7 @@ class GyroSmoother(Smoother):
             self._pim_params.setGyroscopeCovariance(self.config.gyro_noise_rad_s_sqrt_hz**2 * np.eye(3))
         self._pim = gtsam.PreintegratedAhrsMeasurements(self._pim_params, self._bias)
         self._accel_c: list[np.ndarray] = []
+        self._gyro_c: list[np.ndarray] = []
 
     def process_imu(self, t_s: np.ndarray, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> None:
         """Preintegrate gyro samples and collect accelerometer samples.
@@ -53,6 +54,7 @@ class GyroSmoother(Smoother):
                 self._pim.integrateMeasurement(w_c, t - self._t_imu)
             self._t_imu = t
             self._accel_c.append(a_c)
+            self._gyro_c.append(w_c)
 
     def _gravity_factor(self, key: int) -> gtsam.NonlinearFactor | None:
         """Paper-free addition: accelerometer up direction since the last frame, noise inflated by motion."""
@@ -65,13 +67,21 @@ class GyroSmoother(Smoother):
             return None
         spread = np.sqrt(np.mean(np.sum((accel - mean) ** 2, axis=1)))
         cfg = self.config
-        sigma = cfg.accel_std_rad + cfg.accel_inflation_rad_per_m_s2 * (abs(norm - cfg.gravity_m_s2) + spread)
+        # Still (the bias-corrected gyro below `still_rate_rad_s`): the spread is noise or a vibrating
+        # platform's shaking, which averages out of the mean (its standard error, rad); turning: it is
+        # taken as the platform's own acceleration, inflated per m/s^2 with |a| away from g.
+        rate = np.linalg.norm(np.mean(self._gyro_c, axis=0) - self._bias) if self._gyro_c else np.inf
+        if rate < cfg.still_rate_rad_s:
+            sigma = (cfg.accel_std_rad + cfg.accel_inflation_rad_per_m_s2 * abs(norm - cfg.gravity_m_s2)
+                     + spread / (cfg.gravity_m_s2 * np.sqrt(len(accel))))
+        else:
+            sigma = cfg.accel_std_rad + cfg.accel_inflation_rad_per_m_s2 * (abs(norm - cfg.gravity_m_s2) + spread)
         noise = _robust(cfg.gravity_huber_k, gtsam.noiseModel.Isotropic.Sigma(2, sigma))
         # Error: up_w (x) R_wc @ up_c, with up_c the measured specific-force direction.
         return gtsam.AttitudeFactorRot3(key, gtsam.Unit3(WORLD_UP), noise, gtsam.Unit3(mean / norm))
 
     # ----------------------------------------------------------------------------- variant hooks
-    def _predicted_R_wc(self) -> np.ndarray:
+    def _predicted_R_wc(self, visual: VisualRotation | None = None) -> np.ndarray:
         """The last estimate propagated by the gyro preintegrated since its frame."""
         R_wc = self._last.R_wc
         if self._pim.deltaTij() > 0:
@@ -82,7 +92,16 @@ class GyroSmoother(Smoother):
         """f^z as a measurement of `R_mc = R_wm^T R_wc`, relative to the Manhattan variable M."""
         return gtsam.BetweenFactorRot3(MANHATTAN_KEY, X(k), gtsam.Rot3(visual.R_cm.T), noise)
 
-    def _add_motion_factors(self, graph, values, stamps, k: int, t_s: float) -> None:
+    def _labelled(self, t_s: float, visual: VisualRotation, R_wc_pred: np.ndarray) -> VisualRotation:
+        """`visual` relabelled nearest the gyro-propagated estimate (the gyro turns it better than the
+        image rotation would, and the gravity factors hold its tilt)."""
+        return visual.symmetric_to(R_wc_pred.T @ self._R_wm)
+
+    def _visual_huber_k(self, visual: VisualRotation) -> float | None:
+        """`visual_huber_k` (the gyro, not the image rotation, ties the frames)."""
+        return self.config.visual_huber_k
+
+    def _add_motion_factors(self, graph, values, stamps, k: int, t_s: float, visual: VisualRotation | None) -> None:
         """Gyro preintegration (or the paper's smoothness factor when no gyro sample came), the bias
         random walk and the gravity factor."""
         if self._pim.deltaTij() > 0:
@@ -101,7 +120,7 @@ class GyroSmoother(Smoother):
     def _window_stamps(self, stamps, k: int) -> None:
         stamps[MANHATTAN_KEY] = float(k)  # keep R_wm inside the window
 
-    def _start_priors(self, graph, values, stamps, visual: VisualRotation) -> VisualRotation:
+    def _start_priors(self, graph, values, stamps, t_s: float, visual: VisualRotation) -> VisualRotation:
         """World priors and the first gravity factor; the first visual rotation relabelled so that its
         z axis is the Manhattan axis nearest the measured up."""
         if self._accel_c:
