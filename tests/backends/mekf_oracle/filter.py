@@ -34,8 +34,9 @@ from .motion import ConstantRateMotion, GyroMotion
 from uareme_fusion.backends.mekf.source_trust import (note_accel_information, note_visual_information, squared_rate, tilt_shares,
                            update_visual_trust, vertical_variance, visual_vertical_innovation)
 from uareme_fusion.backends.mekf.status_bits import status_of
-from uareme_fusion.backends.mekf.state import (BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject,
-                                               orthonormal, reset_jacobian)
+from uareme_fusion.backends.mekf.state import (BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, orthonormal,
+                                               reset_jacobian)
+from .state import inject
 from uareme_fusion.backends.mekf.state_buffer import (BufferArray, BufferScalar, S_ACCEL_VAR_RATE, S_IMU_T, S_PRODUCTS,
                                                       S_REJECTIONS, S_T_STATE, S_T_VISUAL, S_VISUAL_INFO_RATE, X_B_C, X_P,
                                                       X_R_WC, X_R_WM, field_views, new_state_buffer)
