@@ -14,7 +14,6 @@ import numpy as np
 
 from ...config import load_config, preset_names
 from ...errors import InputError
-from ...rotations import angle_between
 from ...types import Estimate, Estimates, ImuBatch, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
@@ -24,16 +23,16 @@ from . import status_bits
 from .accel import AccelPeriod
 from . import kernels
 from .compiled import (STAGE_ROWS, accel_update, harvest_kernel_counters, integrate_staged, stage, update,
-                       visual_distance, visual_update)
+                       visual_update)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .gravity_only import GravityOnly
-from .measurements import vertical_distance2
 from .motion import ConstantRateMotion, GyroMotion
 from .parameters import KernelParameters
+from .scene import finite, ignored_too_long, initialise_manhattan
 from .segments import process_imu_segments
 from .source_trust import tilt_shares
 from .status_bits import status_of
-from .state import I3, MF, N_STATE, TH, orthonormal
+from .state import I3, N_STATE, TH
 from .state_buffer import (BufferArray, BufferScalar, S_IMU_T, S_IN_GAP, S_PRODUCTS, S_REJECTIONS, S_T_STATE,
                            S_T_VISUAL, S_VISUAL_INFO_RATE, X_B_C, X_P, X_R_WC, X_R_WM, field_views, new_state_buffer)
 
@@ -47,11 +46,6 @@ one `take` copies them."""
 
 _CAMERA_ONLY = (float("nan"), 1.0)
 """`Estimate.tilt_shares` without an IMU: the camera alone."""
-
-
-def _finite(visual: VisualRotation) -> bool:
-    """Whether a frame's rotation and covariance are finite (checked only for a gated-out frame)."""
-    return bool(np.isfinite(visual.R_cm).all() and np.isfinite(visual.cov).all())
 
 
 def _shape(a) -> tuple:
@@ -326,7 +320,7 @@ class Mekf(Backend):
             if fuses_visual:
                 self.flags |= status_bits.VISUAL_MISSING
                 self.x[S_VISUAL_INFO_RATE] = 0.0  # no share while the camera gives nothing
-        elif not _finite(visual):  # never a start
+        elif not finite(visual):  # never a start
             self.flags |= status_bits.VISUAL_REJECTED
             self.counters["visual_rejected"] += 1
             self.counters["visual_nonfinite"] += 1
@@ -401,7 +395,7 @@ class Mekf(Backend):
             rejected = visual_update(self, visual, self.noise_share.share if shared else 1.0, rows)
             if not rejected and shared:
                 self.noise_share.take(self.t_state, visual)  # labelled by the track (`labelling_track.py`)
-        if rejected and not _finite(visual):  # gated out, counted, and no sign of a new scene alignment
+        if rejected and not finite(visual):  # gated out, counted, and no sign of a new scene alignment
             self._count_nonfinite()
         if not rejected or self.rejections < self.config.reinit_after_rejections:
             return self.motion.uses_imu
@@ -409,41 +403,9 @@ class Mekf(Backend):
         return False
 
     def _ignored_too_long(self, t_s: float, visual: VisualRotation) -> bool | None:
-        """Whether the camera has been ignored long enough to re-initialise from `visual`, decided once
-        per frame before either update path (reference or compiled) runs. A frame disagrees when its
-        `R_cm`, labelled nearest the prediction, is further from it than the prediction's and its own
-        covariance allow (d^2 over `disagreement_chi2` and angle over `disagreement_min_deg`): the gate
-        then rejects it, or the Huber weight lets it move the estimate little, and persistent disagreement is drift the
-        other flags do not show. Such a frame is flagged `VISUAL_IGNORED`; after
-        `reinit_after_disagreement_s` (s) of them in a row, True (re-initialise). None: fuse the frame
-        as usual (it agrees, or the IMU's gate and Huber weight handle it). False: skip it, without an
-        IMU, where fusing a large innovation would also corrupt the constant-rate model's rate and
-        spin the estimate away; the filter coasts. A non-finite frame changes nothing."""
-        if not _finite(visual):
-            return None
-        cfg = self.config
-        # During a run, the covariance of its start: coasting grows P, and must not let the wrong
-        # rotations in as a jump.
-        P = self.P if self.disagree_since_s is None else self._disagree_P
-        angle, d2 = visual_distance(self, visual, P, self.motion.uses_imu)
-        # Without an IMU a gated-out frame is a disagreement too: the filter coasts through both alike.
-        chi2 = cfg.disagreement_chi2 if self.motion.uses_imu else min(cfg.disagreement_chi2, cfg.visual_gate_chi2)
-        if not (angle > np.radians(cfg.disagreement_min_deg) and not d2 <= chi2):
-            self.disagree_since_s = self._disagree_R_cm = None
-            return None
-        # Without an IMU, a run re-initialises only on frames that agree with each other (the camera
-        # turned, or the filter drifted): two wrong minima in a row point different ways.
-        previous, self._disagree_R_cm = self._disagree_R_cm, visual.R_cm
-        consistent = self.motion.uses_imu or (
-            previous is not None and float(angle_between(previous, visual.R_cm)) < 0.5 * angle)
-        self.flags |= status_bits.VISUAL_IGNORED
-        self._counters["visual_ignored"] += 1
-        if self.disagree_since_s is None:
-            self.disagree_since_s, self._disagree_P = t_s, self.P.copy()
-        limit_s = cfg.reinit_after_disagreement_s if self.motion.uses_imu else cfg.visual_only_reinit_after_s
-        if t_s - self.disagree_since_s >= limit_s and consistent:
-            return True
-        return None if self.motion.uses_imu else False
+        """`scene.ignored_too_long`: whether to re-initialise from `visual` (True), fuse it (None) or,
+        visual only, skip it (False)."""
+        return ignored_too_long(self, t_s, visual)
 
     def _reinitialise(self, visual: VisualRotation) -> None:
         """After `reinit_after_rejections` frames gated out in a row, or `reinit_after_disagreement_s`
@@ -466,30 +428,9 @@ class Mekf(Backend):
 
     # ------------------------------------------------------------------ initialisation
     def initialise_manhattan(self, visual: VisualRotation, R_wm_ref: np.ndarray | None = None) -> bool:
-        """`R_wm = R_wc R_cm`, labelled nearest `R_wm_ref` (3, 3; identity: m's z nearest up), with
-        its covariance from the camera's and the measurement's: `dtheta_m = R_cm^T dtheta_c + delta`.
-        The first frame with an IMU is refused (returns False, state kept) when its z axis is near
-        up but fails the vertical pseudo-measurement's gate (`visual_gate_chi2`): it contradicts the
-        accelerometer's tilt, and the pseudo-measurement would tilt the camera to it. A
-        re-initialisation is not gated: then the filter's own tilt may be the wrong one."""
-        cfg = self.config
-        R_wm_ref = np.eye(3) if R_wm_ref is None else R_wm_ref
-        visual = visual.symmetric_to(self.R_wc.T @ R_wm_ref)
-        R_wm = orthonormal(self.R_wc @ visual.R_cm)
-        T = np.eye(N_STATE)
-        T[MF, MF] = 0.0
-        T[MF, TH] = visual.R_cm.T
-        P = T @ self.P @ T.T
-        P[MF, MF] += visual.cov
-        if self.motion.uses_imu and not self.manhattan_initialised:
-            d2 = vertical_distance2(R_wm, P[MF, MF], cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad)
-            if d2 is not None and not d2 <= cfg.visual_gate_chi2:
-                return False
-        self.R_wm = R_wm
-        self.P = 0.5 * (P + P.T)
-        self.manhattan_initialised = True
-        self.rejections = 0
-        return True
+        """`scene.initialise_manhattan`: `R_wm = R_wc R_cm`, labelled nearest `R_wm_ref`; False when the
+        first frame with an IMU contradicts the accelerometer's tilt."""
+        return initialise_manhattan(self, visual, R_wm_ref)
 
     # ------------------------------------------------------------------ output
     def _estimate(self, t_s: float) -> Estimate:

@@ -42,14 +42,21 @@ def chunk_steps(s, t, gyro, saturated, extra_s, last_gyro, gap_limit_s, unknown_
     n, m = t.shape[0], dt.shape[0]
     resumed = n > 0 and s[S_IN_GAP] > 0
     any_saturated = False
+    T_elapsed, longest = 0.0, 0.0
     g[0] = last_gyro
-    for k in range(n):
+    t_prev = s[S_T_STATE]
+    for k in range(n):  # one pass: readings, steps, their sum and the longest
         if saturated[k] > 0:
             any_saturated = True
             g[k + 1] = g[k]  # the last reading below the range
         else:
-            g[k + 1] = gyro[k]
-        dt[k] = t[k] - (s[S_T_STATE] if k == 0 else t[k - 1])
+            g[k + 1, 0], g[k + 1, 1], g[k + 1, 2] = gyro[k, 0], gyro[k, 1], gyro[k, 2]
+        h = t[k] - t_prev
+        t_prev = t[k]
+        dt[k] = h
+        T_elapsed += h
+        if h > longest:
+            longest = h
     if n:
         s[S_IMU_T] = t[n - 1]
         s[S_IN_GAP] = 0.0
@@ -57,14 +64,11 @@ def chunk_steps(s, t, gyro, saturated, extra_s, last_gyro, gap_limit_s, unknown_
     if m > n:
         g[m] = g[n]
         dt[m - 1] = extra_s
+        T_elapsed += extra_s
+        longest = max(longest, extra_s)
         stale = abs(s[S_IMU_T]) < np.inf and s[S_T_STATE] + extra_s - s[S_IMU_T] > gap_limit_s
     if resumed:  # the reading before the gap is stale: the step to the first new one is unknown
         g[0] = g[1]
-    T_elapsed = 0.0
-    longest = 0.0
-    for k in range(m):
-        T_elapsed += dt[k]
-        longest = max(longest, dt[k])
     if not (stale or resumed or longest > gap_limit_s or any_saturated):
         return T_elapsed, 0.0, 0
     unknown_var, gaps, any_gap = 0.0, 0, False
@@ -148,16 +152,20 @@ def gyro_predict_in_place(P, C, A_bias):
     P[:, 0:3] = cols
 
 
-def integrate_chunks(x, t, gyro, accel, saturated, bounds, extra_s, p, record_R, record_P):
+def scratch(n):
+    """Work arrays for `integrate_chunks` of up to n samples: rotations (n, 3, 3), readings (n + 2, 3),
+    steps (n + 1,)."""
+    return np.empty((n, 3, 3)), np.empty((n + 2, 3)), np.empty(n + 1)
+
+
+def integrate_chunks(x, t, gyro, accel, saturated, bounds, extra_s, p, record_R, record_P, C_buf, g_buf, dt_buf):
     """Integrate a batch chunk by chunk (`bounds`, `accel.chunk_bounds`), the last chunk extrapolated
     by `extra_s`, with the accelerometer updates falling due (one due at the end left to a frame with
-    `p.defer`); see `integrate_batch`. Returns the `DOWNWEIGHTED` | `IMU_GAP` | `GYRO_SATURATED` bits."""
+    `p.defer`); see `integrate_batch`. `C_buf`, `g_buf`, `dt_buf`: work arrays (`scratch`). Returns the
+    `DOWNWEIGHTED` | `IMU_GAP` | `GYRO_SATURATED` bits."""
     s, R_wc, R_wm, b_c, P, last_gyro, accel_sum, lp, lp_J, rest_sums, _ = state_views(x)
     n_chunks = bounds.shape[0] - 1
     code = 0
-    C_buf = np.empty((t.shape[0], 3, 3))
-    g_buf = np.empty((t.shape[0] + 2, 3))
-    dt_buf = np.empty(t.shape[0] + 1)
     for c in range(n_chunks):
         a, b = bounds[c], bounds[c + 1]
         n = b - a
@@ -263,7 +271,9 @@ def integrate_batch(x, rows, extra_s, params, record_R, record_P):
     t = rows[:, 0]
     nonfinite_before = s[S_NONFINITE]
     bounds = chunk_bounds(t, s[S_T_STATE], s[S_ACCEL_ELAPSED], p.period_s)
-    code = integrate_chunks(x, t, rows[:, 1:4], rows[:, 4:7], rows[:, 7], bounds, extra_s, p, record_R, record_P)
+    C_buf, g_buf, dt_buf = scratch(t.shape[0])
+    code = integrate_chunks(x, t, rows[:, 1:4], rows[:, 4:7], rows[:, 7], bounds, extra_s, p, record_R, record_P,
+                            C_buf, g_buf, dt_buf)
     return code | (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
 
 
@@ -300,6 +310,7 @@ def integrate_segments(x, t, gyro, accel, ends, params, record_R, record_P, out_
     p = params[0]
     s, R_wc, _, b_c, P = state_views(x)[:5]
     not_saturated = np.zeros(t.shape[0])
+    C_buf, g_buf, dt_buf = scratch(t.shape[0])
     start = 0
     for i in range(ends.shape[0]):
         end = ends[i]
@@ -307,7 +318,7 @@ def integrate_segments(x, t, gyro, accel, ends, params, record_R, record_P, out_
         bounds = chunk_bounds(seg_t, s[S_T_STATE], s[S_ACCEL_ELAPSED], p.period_s)
         nonfinite_before = s[S_NONFINITE]
         bits = integrate_chunks(x, seg_t, gyro[start:end], accel[start:end], not_saturated[start:end], bounds, 0.0,
-                                p, record_R[start:end], record_P[start:end])
+                                p, record_R[start:end], record_P[start:end], C_buf, g_buf, dt_buf)
         out_R[i] = R_wc
         out_cov[i] = 0.5 * (P[0:3, 0:3] + P[0:3, 0:3].T)
         out_b[i] = b_c

@@ -36,7 +36,7 @@ _INNER = (kernel_update.state_views, kernel_update.accel_measurement, kernel_upd
           kernel_update.matmul_into, kernel_update.solve_into, kernel_update.kalman_update,
           kernel_update.isotropic_update, kernel_update.inject_and_reset, kernel_update.accel_rows,
           kernel_update.accel_and_rest_update, kernel_imu.chunk_steps, kernel_imu.propagate_chunk,
-          kernel_imu.gyro_predict_in_place, kernel_imu.integrate_chunks, kernel_imu.carry_lowpass_in_place,
+          kernel_imu.gyro_predict_in_place, kernel_imu.scratch, kernel_imu.integrate_chunks, kernel_imu.carry_lowpass_in_place,
           kernel_visual.visual_measurement)
 DRIVERS = dict(
     INTEGRATE=kernel_imu.integrate_batch, STAGE=kernel_imu.stage_batch, INTEGRATE_STAGED=kernel_imu.integrate_staged,
