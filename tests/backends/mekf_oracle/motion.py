@@ -1,10 +1,9 @@
-"""The two motion strategies of `Mekf`, chosen once when its mode is known.
+"""The oracle's motion: the reference propagation (numpy chunks, filterpy `predict`) in the motion
+strategies of the package, whose scheduling (release, initialisation, re-initialisation) it keeps.
 
-- `GyroMotion` (modes `visual_imu`, `imu_only`): IMU samples are released from the reorder buffer,
-  integrated chunk by chunk (`propagation.gyro_chunk`) and the accelerometer updates fall due per
-  `accel_update_period_s`.
-- `ConstantRateMotion` (mode `visual_only`): `propagation.constant_rate_model` between frames; the
-  world is the first Manhattan frame; IMU samples are ignored.
+- `GyroMotion`: samples integrated chunk by chunk (`propagation.gyro_chunk`), gaps, saturated samples
+  and stale extrapolations as unknown rotations, the accelerometer updates falling due per period;
+- `ConstantRateMotion`: `propagation.constant_rate_model` between frames.
 """
 
 from __future__ import annotations
@@ -13,31 +12,22 @@ import math
 
 import numpy as np
 from filterpy.kalman import predict as kf_predict
-from scipy.spatial.transform import Rotation
 
-from uareme_fusion.rotations import R_CM_UPRIGHT, WORLD_UP
-from uareme_fusion.types import IMU_COLUMNS as COLUMNS, ImuBatch, VisualRotation, visual_R_wc_covariance
+from uareme_fusion.backends.mekf import motion as production
 from uareme_fusion.backends.mekf import status_bits
-from .accel import PERIOD_TOLERANCE_S, chunk_bounds, tilt_direction
-from uareme_fusion.backends.mekf.config import MekfMode
+from uareme_fusion.backends.mekf.accel import PERIOD_TOLERANCE_S, chunk_bounds
+from uareme_fusion.backends.mekf.state import MF, N_STATE, TH, ZERO_STATE, orthonormal
+from uareme_fusion.types import IMU_COLUMNS as COLUMNS
+from uareme_fusion.types import ImuBatch
+
 from .propagation import constant_rate_model, gyro_chunk, gyro_process_noise, gyro_rates, gyro_transition
 from .propagation import manhattan_walk_noise
-from uareme_fusion.backends.mekf.source_trust import note_accel_information
-from uareme_fusion.backends.mekf.state import BG, I3, MF, N_STATE, RATE, TH, ZERO_STATE, orthonormal
 
 _NO_ROWS = np.zeros((0, COLUMNS))
 
 
-class ConstantRateMotion:
-    """Visual only: constant-rate model between frames; the world is the first Manhattan frame
-    labelled with its z the axis nearest image up (`R_wm = I`)."""
-
-    uses_imu = False
-    estimates_rate = True
-
-    def __init__(self, mode: MekfMode = MekfMode.VISUAL_ONLY):
-        self.mode = mode
-        self.fuses_visual = True
+class ConstantRateMotion(production.ConstantRateMotion):
+    """Visual only, the reference constant-rate prediction."""
 
     def propagate_to(self, filt, t_s: float) -> None:
         """`R_wc <- R_wc Exp(omega_c dt)` and the covariance prediction, to `t_s` (s)."""
@@ -47,41 +37,9 @@ class ConstantRateMotion:
             _, filt.P = kf_predict(np.zeros(N_STATE), filt.P, F, Q)
             filt.t_state = t_s
 
-    def start_from_visual(self, filt, t_s: float, visual: VisualRotation) -> None:
-        """`R_wc` from the first frame's `R_cm` labelled upright; the rate starts at 0."""
-        visual = visual.symmetric_to(R_CM_UPRIGHT)
-        filt.labelling.start(t_s, visual)
-        filt.R_wm = np.eye(3)
-        filt.R_wc = visual.R_cm.T
-        self._restart(filt, visual)
-        filt.t_state = t_s
-        filt.initialised = filt.manhattan_initialised = True
 
-    def reinitialise(self, filt, visual: VisualRotation) -> None:
-        """A new scene alignment: `R_wc` from `R_cm`, as the track labelled it (`labelling_track.py`), against
-        the kept world (= Manhattan) frame."""
-        filt.R_wc = filt.R_wm @ visual.R_cm.T
-        self._restart(filt, visual)
-
-    def _restart(self, filt, visual: VisualRotation) -> None:
-        filt.P = np.zeros((N_STATE, N_STATE))
-        filt.P[TH, TH] = visual_R_wc_covariance(visual)
-        filt.P[RATE, RATE] = filt.config.rate_initial_std_rad_s**2 * I3
-        filt.omega_c = np.zeros(3)
-        filt.rejections = 0
-
-
-
-class GyroMotion:
-    """Gyro-driven: IMU samples propagate the attitude; world z is up from the accelerometer.
-    `fuses_visual` False in `imu_only` mode."""
-
-    uses_imu = True
-    estimates_rate = False
-
-    def __init__(self, mode: MekfMode):
-        self.mode = mode
-        self.fuses_visual = mode != MekfMode.IMU_ONLY
+class GyroMotion(production.GyroMotion):
+    """Gyro-driven, the reference integration."""
 
     def propagate_to(self, filt, t_s: float) -> None:
         """Integrate IMU samples up to `t_s` (camera clock, s), then hold the last rate."""
@@ -89,41 +47,12 @@ class GyroMotion:
         filt.queue(ImuBatch.from_rows(rows))
         self.integrate_pending(filt, extrapolate_to_s=t_s, force_init=True)
 
-    def start_from_visual(self, filt, t_s: float, visual: VisualRotation) -> None:
-        """No attitude before the accelerometer gives gravity: the frame waits."""
-        filt.flags |= status_bits.VISUAL_MISSING
-
-    def reinitialise(self, filt, visual: VisualRotation) -> None:
-        """A new scene alignment: the Manhattan frame re-initialised nearest the old one."""
-        filt.initialise_manhattan(visual, R_wm_ref=filt.R_wm)
-
-    # ------------------------------------------------------------------ IMU integration
-    def integrate_pending(self, filt, extrapolate_to_s: float | None = None, force_init: bool = False) -> None:
-        """Integrate the released samples; with `extrapolate_to_s`, then hold the last gyro rate up
-        to that time (a synthetic sample that carries no accelerometer weight)."""
-        batches, filt.pending, filt.pending_span_s = filt.pending, [], 0.0
-        rows = ImuBatch.concat(batches).rows if batches else _NO_ROWS
-        if not filt.imu_is_camera:
-            rows = rows_in_camera(rows, filt.R_ci)
-        if not filt.initialised:
-            if rows.shape[0] == 0:
-                return
-            rows = self._initialise_from_accel(filt, rows, force_init)
-            if not filt.initialised:
-                return
+    def integrate_rows(self, filt, rows: np.ndarray, extra_s: float, defer: bool) -> None:
+        """The reference integration of camera-frame rows: chunk by chunk, the updates falling due."""
         t, gyro_c, accel_c, saturated = rows[:, 0], rows[:, 1:4], rows[:, 4:7], rows[:, 7]
-        last_t = float(t[-1]) if t.size else filt.t_state
-        extra_s = extrapolate_to_s - last_t if extrapolate_to_s is not None and extrapolate_to_s > last_t else 0.0
-        if t.size == 0 and extra_s == 0.0:
-            return
         acc = filt.accel
-        if acc.due:  # a deferred update that no frame took: apply it before moving on
-            filt.accel_update()
         period = filt.config.accel_update_period_s
         due_s = period - PERIOD_TOLERANCE_S
-        # Propagating to a frame: an update due at its end waits for the frame's visual update (IMU-only
-        # there is none: the frame would apply it at once, so it is applied here, in the same order).
-        defer = extrapolate_to_s is not None and filt.motion.fuses_visual
         bounds = chunk_bounds(t, filt.t_state, filt.accel.elapsed_s, period).tolist()
         # A long batch is split at accelerometer-update boundaries: every chunk but the last one
         # crossed one and ends with an update (each update then averages between `period` and
@@ -220,37 +149,3 @@ class GyroMotion:
         index = np.where(saturated > 0, -1, np.arange(saturated.size))
         np.maximum.accumulate(index, out=index)
         return np.where((index >= 0)[:, None], gyro_c[np.maximum(index, 0)], last_gyro_c)
-
-    def _initialise_from_accel(self, filt, rows: np.ndarray, force: bool = False) -> np.ndarray:
-        """Tilt from the mean of the first `init_accel_window_s` of accelerometer samples (`rows`
-        (n, 8), camera frame, as `ImuBatch.rows`); yaw is the gauge (variance 0). Returns the rows
-        still to integrate."""
-        cfg = filt.config
-        filt.init_samples.append(ImuBatch.from_rows(rows))
-        held = ImuBatch.concat(filt.init_samples)
-        t_all = held.t_s
-        if t_all[-1] - t_all[0] < cfg.init_accel_window_s and not force:
-            return rows[:0]
-        filt.init_samples = []
-        window = t_all <= t_all[0] + cfg.init_accel_window_s
-        up_c = tilt_direction(held.accel_m_s2[window].mean(axis=0))
-        rot, _ = Rotation.align_vectors(WORLD_UP[None], up_c[None])
-        filt.R_wc = rot.as_matrix()
-        filt.P = np.zeros((N_STATE, N_STATE))
-        filt.P[TH, TH] = cfg.initial_tilt_std_rad**2 * (I3 - np.outer(up_c, up_c))
-        filt.P[BG, BG] = cfg.gyro_bias_initial_std_rad_s**2 * I3
-        note_accel_information(filt.views["s"], cfg.accel_tilt_noise_rad_sqrt_s**2, 1.0)  # before its first update
-        filt.t_state = filt.imu_t_s = float(t_all[0])
-        filt.last_gyro_c = held.gyro_rad_s[0]
-        filt.initialised = True
-        filt.resolve_mode(MekfMode.VISUAL_IMU)
-        return held.rows[1:]
-
-
-def rows_in_camera(rows: np.ndarray, R_ci: np.ndarray) -> np.ndarray:
-    """IMU rows (n, 8) (`types.IMU_COLUMNS`) with gyro and accelerometer turned into the camera frame
-    (`R_ci` (3, 3) maps IMU to camera): a copy."""
-    out = rows.copy()
-    out[:, 1:4] = rows[:, 1:4] @ R_ci.T
-    out[:, 4:7] = rows[:, 4:7] @ R_ci.T
-    return out

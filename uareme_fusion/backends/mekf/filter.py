@@ -23,7 +23,7 @@ from . import status_bits
 from .accel import AccelPeriod
 from . import kernels
 from .compiled import (STAGE_ROWS, accel_update, harvest_kernel_counters, integrate_staged, stage, update,
-                       visual_update)
+                       visual_distance, visual_update)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .gravity_only import GravityOnly
 from .motion import ConstantRateMotion, GyroMotion
@@ -406,6 +406,11 @@ class Mekf(Backend):
         """`scene.ignored_too_long`: whether to re-initialise from `visual` (True), fuse it (None) or,
         visual only, skip it (False)."""
         return ignored_too_long(self, t_s, visual)
+
+    def visual_distance(self, visual: VisualRotation, P: np.ndarray) -> tuple[float, float]:
+        """`(angle rad, d2)` of a frame's rotation against the prediction under the error covariance
+        `P` (12, 12) (`kernel_visual.visual_distance`; labelled nearest the prediction with an IMU)."""
+        return visual_distance(self, visual, P, self.motion.uses_imu)
 
     def _reinitialise(self, visual: VisualRotation) -> None:
         """After `reinit_after_rejections` frames gated out in a row, or `reinit_after_disagreement_s`

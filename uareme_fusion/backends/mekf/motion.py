@@ -118,7 +118,12 @@ class GyroMotion:
             filt.accel_update()
         # Propagating to a frame: an update due at its end waits for the frame's visual update (IMU-only
         # there is none: the frame would apply it at once, so it is applied here, in the same order).
-        integrate(filt, rows, extra_s, extrapolate_to_s is not None and filt.motion.fuses_visual)
+        self.integrate_rows(filt, rows, extra_s, extrapolate_to_s is not None and filt.motion.fuses_visual)
+
+    def integrate_rows(self, filt, rows: np.ndarray, extra_s: float, defer: bool) -> None:
+        """Integrate camera-frame rows (n, 8) and extrapolate `extra_s` s (`compiled.integrate`); `defer`:
+        an update due at the end waits for the frame."""
+        integrate(filt, rows, extra_s, defer)
 
     def _initialise_from_accel(self, filt, rows: np.ndarray, force: bool = False) -> np.ndarray:
         """Tilt from the mean of the first `init_accel_window_s` of accelerometer samples (`rows`

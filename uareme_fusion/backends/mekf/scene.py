@@ -14,7 +14,6 @@ import numpy as np
 from ...rotations import angle_between
 from ...types import VisualRotation
 from . import status_bits
-from .compiled import visual_distance
 from .measurements import vertical_distance2
 from .state import MF, N_STATE, TH, orthonormal
 
@@ -41,7 +40,7 @@ def ignored_too_long(filt, t_s: float, visual: VisualRotation) -> bool | None:
     # During a run, the covariance of its start: coasting grows P, and must not let the wrong
     # rotations in as a jump.
     P = filt.P if filt.disagree_since_s is None else filt._disagree_P
-    angle, d2 = visual_distance(filt, visual, P, filt.motion.uses_imu)
+    angle, d2 = filt.visual_distance(visual, P)
     # Without an IMU a gated-out frame is a disagreement too: the filter coasts through both alike.
     chi2 = cfg.disagreement_chi2 if filt.motion.uses_imu else min(cfg.disagreement_chi2, cfg.visual_gate_chi2)
     if not (angle > np.radians(cfg.disagreement_min_deg) and not d2 <= chi2):
