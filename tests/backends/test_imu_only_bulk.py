@@ -11,7 +11,7 @@ import pytest
 
 from uareme_fusion.backends.base import Backend
 from uareme_fusion.backends.mekf import Mekf, MekfConfig
-from uareme_fusion.backends.mekf import compiled as mekf_compiled
+from uareme_fusion.backends.mekf import segments as mekf_segments
 from uareme_fusion.config import load_config
 from uareme_fusion.drivers.base import Source, SourceInfo
 from uareme_fusion.drivers.interleave import split_by_span
@@ -44,11 +44,10 @@ def batch_ends(t: np.ndarray) -> np.ndarray:
     return np.cumsum([len(b) for b in split_by_span(t, zeros, zeros, 1.0 / 30.0)])
 
 
-@pytest.mark.parametrize("compiled", [True, False])
 @pytest.mark.parametrize("R_ci", [np.eye(3), np.array([[0.0, -1, 0], [0, 0, -1], [1, 0, 0]])])
-def test_bulk_estimates_are_those_of_batch_by_batch(compiled, R_ci):
+def test_bulk_estimates_are_those_of_batch_by_batch(R_ci):
     t, gyro, accel = imu_log()
-    cfg = load_config("imu_only", MekfConfig).model_copy(update={"compiled": compiled, "R_ci": R_ci.tolist()})
+    cfg = load_config("imu_only", MekfConfig).model_copy(update={"R_ci": R_ci.tolist()})
     bulk, one_by_one = Mekf(cfg), Mekf(cfg)
     ends = batch_ends(t)
     a = bulk.process_imu_segments(t, gyro, accel, ends)
@@ -66,15 +65,13 @@ def test_bulk_estimates_are_those_of_batch_by_batch(compiled, R_ci):
     assert bulk.counters["accel_updates"] > 50 and bulk.stream.counts.nonfinite == 2
 
 
-@pytest.mark.skipif(not mekf_compiled.kernels_available(), reason="numba not installed: no compiled path")
-def test_clean_stream_takes_one_compiled_call_per_bulk(monkeypatch):
+def test_clean_stream_takes_one_kernel_call_per_bulk(monkeypatch):
     t, gyro, accel = imu_log(bad=False)
     filt = Mekf(load_config("imu_only", MekfConfig))
-    filt.process_imu_segments(t[:100], gyro[:100], accel[:100], [50, 100])  # initialises (reference path)
+    filt.process_imu_segments(t[:100], gyro[:100], accel[:100], [50, 100])  # initialises (segment by segment)
     calls = []
-    real = mekf_compiled.integrate_segments_compiled
-    monkeypatch.setattr("uareme_fusion.backends.mekf.segments.integrate_segments_compiled",
-                        lambda *a: calls.append(1) or real(*a))
+    real = mekf_segments.integrate_segments
+    monkeypatch.setattr(mekf_segments, "integrate_segments", lambda *a: calls.append(1) or real(*a))
     ends = 100 + batch_ends(t[100:])
     out = filt.process_imu_segments(t[100:], gyro[100:], accel[100:], ends - 100)
     assert calls == [1] and len(out) == ends.size and not (out.status & ~int(Status.ACCEL_DOWNWEIGHTED)).any()

@@ -14,6 +14,8 @@ from uareme_fusion.rotations import WORLD_UP, align_yaw, angle_between, exp_so3,
 from uareme_fusion.rotations import tilt_error_deg, up_in_camera
 from uareme_fusion.types import Status, VisualRotation
 
+from mekf_oracle import OracleMekf  # tests/backends/mekf_oracle: pytest puts tests/backends on sys.path
+
 RATE_HZ = 200.0
 FPS = 20.0
 R_CM_UPRIGHT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -37,14 +39,15 @@ def visual_measurement(R_cm_true, cov, rng, relabel=True, noisy=True):
     return vis
 
 
-def run_fused(omega_c, duration_s, seed, gyro_noise=2e-4, bias=np.zeros(3), visual_std_rad=0.01, config=None):
+def run_fused(omega_c, duration_s, seed, gyro_noise=2e-4, bias=np.zeros(3), visual_std_rad=0.01, config=None,
+              make=Mekf):
     """Fused run over a constant-rate rotation; returns (frame times, estimates, true R_wc)."""
     rng = np.random.default_rng(seed)
     t, R_wc = constant_rate_truth(np.asarray(omega_c, float), duration_s)
     gyro = np.asarray(omega_c, float) + bias + rng.standard_normal((t.size, 3)) * gyro_noise * np.sqrt(RATE_HZ)
     accel = np.einsum("nji,j->ni", R_wc, 9.81 * WORLD_UP)
     cfg = config or MekfConfig(gyro_noise_rad_s_sqrt_hz=gyro_noise, gyro_bias_rw_rad_s2_sqrt_hz=1e-6)
-    filt = Mekf(cfg)
+    filt = make(cfg)
     cov = visual_std_rad**2 * np.diag([1.0, 0.5, 2.0])
     step = int(RATE_HZ / FPS)
     ests, truth = [], []
@@ -274,12 +277,12 @@ def test_rate_proportional_gyro_noise_grows_the_attitude_variance():
     assert traces[0.01] - traces[0.0] == pytest.approx(3 * 0.01**2 * 9.0 * (t[-1] - t[0]), rel=1e-9)
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_accelerometer_update_due_at_a_frame_rides_in_its_visual_update(compiled):
+@pytest.mark.parametrize("make", [Mekf, OracleMekf], ids=["kernels", "oracle"])
+def test_accelerometer_update_due_at_a_frame_rides_in_its_visual_update(make):
     """With the accelerometer period equal to the frame period every update falls due at a frame:
     each frame's visual update takes it (none is left pending, none is applied on its own)."""
-    cfg = MekfConfig(gyro_noise_rad_s_sqrt_hz=2e-4, accel_update_period_s=1.0 / FPS, compiled=compiled)
-    ests, truth, filt = run_fused([0.1, 0.2, -0.1], 2.0, seed=6, config=cfg)
+    cfg = MekfConfig(gyro_noise_rad_s_sqrt_hz=2e-4, accel_update_period_s=1.0 / FPS)
+    ests, truth, filt = run_fused([0.1, 0.2, -0.1], 2.0, seed=6, config=cfg, make=make)
     assert not filt.accel.due
     assert filt.counters["accel_updates"] >= len(ests) - 3
     assert filt.counters["visual_updates"] == len(ests) - 1  # the first frame initialises m
@@ -287,17 +290,17 @@ def test_accelerometer_update_due_at_a_frame_rides_in_its_visual_update(compiled
     assert err < 1.0
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_a_non_finite_update_is_dropped_counted_and_flagged(compiled):
+@pytest.mark.parametrize("make", [Mekf, OracleMekf], ids=["kernels", "oracle"])
+def test_a_non_finite_update_is_dropped_counted_and_flagged(make):
     """An absurd accelerometer reading (1e200 m/s^2, finite, so the stream keeps it) makes the update's
     variance overflow: the update changes nothing, is counted and flags the next estimate."""
     t = np.arange(1, 101) / RATE_HZ
     accel = np.tile([0.0, -9.81, 0.0], (t.size, 1))
-    ok = Mekf(MekfConfig(mode="imu_only", compiled=compiled))
+    ok = make(MekfConfig(mode="imu_only"))
     ok.process_imu(t, np.zeros((t.size, 3)), accel)
     ok.flush()
     accel[60:70] = [0.0, -1e200, 0.0]
-    bad = Mekf(MekfConfig(mode="imu_only", compiled=compiled))
+    bad = make(MekfConfig(mode="imu_only"))
     with np.errstate(over="ignore", invalid="ignore"):
         bad.process_imu(t, np.zeros((t.size, 3)), accel)
         bad.flush()

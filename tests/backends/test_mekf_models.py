@@ -1,6 +1,8 @@
-"""The EKF's models against finite differences, through the package's own functions: every
-measurement model's H, the gyro and constant-rate transitions F, the reset Jacobian, the low-pass
-bias sensitivity; and stacking measurements into one update equals applying them in turn.
+"""The EKF's models against finite differences: every measurement model's H (the kernels' visual
+model, the vertical, gravity and zero-rate models, all as plain Python), the gyro and constant-rate
+transitions F of the kernels, the reset Jacobian; and, on the oracle (`mekf_oracle`, which the
+kernels are cross-tested against), the low-pass bias sensitivity and a stacked update against
+updates in turn.
 
 Convention (`mekf.state`): a state `x (+) dx` has `R_wc Exp(dtheta_c)`, `b_c + db`, `R_wm Exp(dtheta_m)`,
 `omega_c + domega`; a model's H satisfies `residual(x) - residual(x (+) dx) = H dx` to first order
@@ -14,13 +16,28 @@ from filterpy.kalman import update as kf_update
 
 from jacobians import fd_jacobian
 
-from uareme_fusion.backends.mekf.accel import AccelPeriod
-from uareme_fusion.backends.mekf.measurements import gravity_model, stack, vertical_model, visual_model
-from uareme_fusion.backends.mekf.measurements import zero_rate_model
-from uareme_fusion.backends.mekf.propagation import constant_rate_model, gyro_chunk, gyro_rates, gyro_transition
-from uareme_fusion.backends.mekf.propagation import prefix_products
-from uareme_fusion.backends.mekf.state import BG, MF, N_STATE, RATE, TH, ZERO_STATE, inject, reset_jacobian
+from uareme_fusion.backends.mekf import kernel_imu, kernel_visual
+from uareme_fusion.backends.mekf.measurements import gravity_model, vertical_model, zero_rate_model
+from uareme_fusion.backends.mekf.state import BG, MF, N_STATE, RATE, TH, ZERO_STATE, reset_jacobian
+from uareme_fusion.backends.mekf.state_buffer import S_T_STATE, field_views, new_state_buffer
 from uareme_fusion.rotations import WORLD_UP, angle_between, exp_so3, log_so3
+
+from mekf_oracle.accel import AccelPeriod  # tests/backends/mekf_oracle: pytest puts tests/backends on sys.path
+from mekf_oracle.measurements import stack, visual_model
+from mekf_oracle.propagation import gyro_chunk, gyro_rates, prefix_products
+from mekf_oracle.state import inject
+
+
+def plain(f):
+    """A kernel as plain Python (numba's `py_func`), so that the test runs it with any argument."""
+    return getattr(f, "py_func", f)
+
+
+def visual_rows(R_wc, R_wm, R_cm, cov, relabel=True):
+    """The kernels' visual model (`kernel_visual.visual_measurement`): `(residual, R, H)`."""
+    r, R, H = np.zeros(3), np.zeros((3, 3)), np.zeros((3, 12))
+    plain(kernel_visual.visual_measurement)(R_wc, R_wm, R_cm, np.asarray(cov, float), relabel, r, R, H)
+    return r, R, H
 
 GRAVITY_ARGS = dict(gravity_m_s2=9.81, noise_rad_sqrt_s=0.02, norm_scale=0.05, innovation_scale_rad=0.05,
                     flag_ratio=2.0)
@@ -42,24 +59,33 @@ def test_fd_jacobian_of_a_known_map():
                                A + np.array([[1.0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]]), atol=1e-8)
 
 
-def test_prefix_products_match_sequential_products():
-    rng = np.random.default_rng(0)
-    M = exp_so3(rng.normal(size=(11, 3)))
-    C = prefix_products(M)
-    acc = np.eye(3)
-    for k in range(11):
-        acc = acc @ M[k]
-        np.testing.assert_allclose(C[k], acc, atol=1e-12)
-
-
-def test_visual_model_H():
+@pytest.mark.parametrize("relabel", [True, False])
+def test_visual_model_H(relabel):
     R_wc, R_wm, b, w = random_state(3)
-    R_cm_meas = R_wc.T @ R_wm
-    r0, _, H = visual_model(R_wc, R_wm, R_cm_meas, 1e-4 * np.eye(3))
+    R_cm_meas = R_wc.T @ R_wm  # H is the Jacobian at a zero residual
+    r0, R, H = visual_rows(R_wc, R_wm, R_cm_meas, 1e-4 * np.eye(3), relabel)
     assert np.abs(r0).max() < 1e-12
-    fd = fd_jacobian(lambda dx: r0 - visual_model(*perturbed(R_wc, R_wm, b, w, dx)[:2], R_cm_meas, np.eye(3))[0],
-                     N_STATE)
+    np.testing.assert_allclose(R, 1e-4 * np.eye(3))
+    fd = fd_jacobian(lambda dx: r0 - visual_rows(*perturbed(R_wc, R_wm, b, w, dx)[:2], R_cm_meas, np.eye(3),
+                                                 relabel)[0], N_STATE)
     np.testing.assert_allclose(fd, H, atol=1e-8)
+
+
+def test_visual_model_relabels_nearest_the_prediction_and_its_covariance_with_it():
+    """A rotation labelled by another cube symmetry gives the same residual, and its covariance turned
+    with the relabelling; the oracle's model (scipy) agrees."""
+    from uareme_fusion.rotations import manhattan_symmetries
+
+    R_wc, R_wm, _, _ = random_state(13)
+    R_cm = R_wc.T @ R_wm @ exp_so3([0.01, -0.02, 0.005])
+    cov = np.diag([1e-4, 2e-4, 3e-4])
+    G = manhattan_symmetries()[7]
+    r0, R0, _ = visual_rows(R_wc, R_wm, R_cm, cov)
+    r, R, H = visual_rows(R_wc, R_wm, R_cm @ G, G.T @ cov @ G)
+    np.testing.assert_allclose(r, r0, atol=1e-12)
+    np.testing.assert_allclose(R, R0, atol=1e-15)
+    for mine, oracle in zip((r, R, H), visual_model(R_wc, R_wm, R_cm @ G, G.T @ cov @ G)):
+        np.testing.assert_allclose(mine, oracle, atol=1e-12)
 
 
 def test_vertical_model_H():
@@ -102,9 +128,8 @@ def test_zero_rate_model_H():
     rng = np.random.default_rng(8)
     gyro = b + 1e-4 * rng.normal(size=(50, 3))
     accel = np.tile([0.0, -9.81, 0.0], (50, 1))
-    period = AccelPeriod()
-    period.add_rest(gyro, accel)
-    args = (period.rest_sums, period.rest_n, 0.25)
+    sums = np.r_[gyro.sum(axis=0), (gyro**2).sum(), accel.sum(axis=0), (accel**2).sum()]
+    args = (sums, 50, 0.25)
     limits = (4e-6, 0.035, 0.5, 5e-4)
     at_rest, r0, var, H = zero_rate_model(*args, b, *limits)
     assert at_rest and var == pytest.approx(4e-6 / 0.25 + 5e-4**2)
@@ -112,25 +137,38 @@ def test_zero_rate_model_H():
     fd = fd_jacobian(lambda dx: r0 - zero_rate_model(*args, perturbed(R_wc, R_wm, b, w, dx)[2], *limits)[1],
                      N_STATE)
     np.testing.assert_allclose(fd, H, atol=1e-9)
-    moving = AccelPeriod()
-    moving.add_rest(gyro + [0.1, 0.0, 0.0], accel)
-    assert not zero_rate_model(moving.rest_sums, moving.rest_n, 0.25, b, *limits)[0]
+    moving = gyro + [0.1, 0.0, 0.0]
+    sums_moving = np.r_[moving.sum(axis=0), (moving**2).sum(), sums[4:]]
+    assert not zero_rate_model(sums_moving, 50, 0.25, b, *limits)[0]
+
+
+def kernel_chunk(gyro, dt, b, trapezoid, P=np.zeros((12, 12))):
+    """`kernel_imu.propagate_chunk` over readings `gyro` (n + 1, 3) and steps `dt` (n,): `(C_N, F, P_pred)`
+    with the transition `F` (12, 12) it applies (identity but `F[TH, TH] = C_N^T`, `F[TH, BG] = -A_bias`)."""
+    C_out = np.empty((dt.size, 3, 3))
+    C_N, A_bias, P_pred = plain(kernel_imu.propagate_chunk)(b, P, gyro, dt, trapezoid, 0.0, 0.0, 0.0, float(dt.sum()),
+                                                            0.0, C_out)
+    F = np.eye(N_STATE)
+    F[TH, TH], F[TH, BG] = C_N.T, -A_bias
+    return C_N, F, P_pred
 
 
 @pytest.mark.parametrize("trapezoid", [False, True])
 def test_gyro_transition_F(trapezoid):
-    """Attitude and bias columns of the chunk transition against re-integration of a perturbed state."""
+    """Attitude and bias columns of the kernels' chunk transition against re-integration of a perturbed
+    state, and the covariance it predicts is `F P F^T` (no process noise here)."""
     rng = np.random.default_rng(1)
     dt = np.full(9, 0.005)
     gyro = rng.normal(size=(10, 3))  # the reading before the chunk, then its 9 samples
     R0, _, b0, _ = random_state(9)
 
     def end_attitude(dth, db):
-        C, _ = gyro_chunk(gyro_rates(gyro, b0 + db, trapezoid), dt)
-        return R0 @ exp_so3(dth) @ C[-1]
+        return R0 @ exp_so3(dth) @ kernel_chunk(gyro, dt, b0 + db, trapezoid)[0]
 
-    C, A_bias = gyro_chunk(gyro_rates(gyro, b0, trapezoid), dt)
-    F = gyro_transition(C[-1], A_bias)
+    A = rng.normal(size=(12, 12))
+    P = A @ A.T
+    _, F, P_pred = kernel_chunk(gyro, dt, b0, trapezoid, P)
+    np.testing.assert_allclose(P_pred, F @ P @ F.T, rtol=1e-12, atol=1e-12)
     R_N = end_attitude(np.zeros(3), np.zeros(3))
     fd = fd_jacobian(lambda d: log_so3(R_N.T @ end_attitude(d[:3], d[3:])), 6)
     np.testing.assert_allclose(fd[:, :3], F[TH, TH], atol=1e-8)
@@ -140,20 +178,39 @@ def test_gyro_transition_F(trapezoid):
     np.testing.assert_array_equal(F[3:, :], np.eye(N_STATE)[3:, :])
 
 
+def constant_rate_step(R_wc, omega, P, dt_s, q_rate):
+    """`kernel_visual.constant_rate_predict` from a state buffer holding `R_wc`, `omega`, `P` at t = 0:
+    `(R_wc, P)` at `dt_s`."""
+    x = new_state_buffer()
+    views = field_views(x)
+    views["R_wc"][...], views["omega_c"][...], views["P"][...] = R_wc, omega, P
+    x[S_T_STATE] = 0.0
+    plain(kernel_visual.constant_rate_predict)(x, dt_s, q_rate)
+    return views["R_wc"].copy(), views["P"].copy()
+
+
 def test_constant_rate_transition_F():
+    """The kernels' constant-rate prediction: the attitude it reaches, and the covariance it predicts,
+    `F P F^T + Q`, against the transition `F` of a perturbed state (finite differences) and the
+    integrated random walk `Q`."""
     R0, _, _, omega = random_state(10)
-    M, F, Q = constant_rate_model(omega, 0.05, 3.0**2)
+    R_N, Q = constant_rate_step(R0, omega, np.zeros((12, 12)), 0.05, 3.0**2)
 
     def end_attitude(d):
         return R0 @ exp_so3(d[:3]) @ exp_so3((omega + d[3:]) * 0.05)
 
-    R_N = end_attitude(np.zeros(6))
-    np.testing.assert_allclose(R_N, R0 @ M, atol=1e-12)
+    np.testing.assert_allclose(R_N, end_attitude(np.zeros(6)), atol=1e-12)
     fd = fd_jacobian(lambda d: log_so3(R_N.T @ end_attitude(d)), 6)
-    np.testing.assert_allclose(fd[:, :3], F[TH, TH], atol=1e-8)
+    F = np.eye(N_STATE)
+    F[TH, TH], F[TH, RATE] = fd[:, :3], 0.05 * np.eye(3)  # the kernel keeps dt I (below)
+    np.testing.assert_allclose(Q, Q.T)
+    np.testing.assert_allclose(np.diag(Q)[[0, 9]], [9.0 * 0.05**3 / 3, 9.0 * 0.05])
+    A = np.random.default_rng(14).normal(size=(12, 12))
+    P = 1e-3 * A @ A.T
+    _, P_pred = constant_rate_step(R0, omega, P, 0.05, 3.0**2)
+    np.testing.assert_allclose(P_pred, F @ P @ F.T + Q, rtol=1e-6, atol=1e-9)
     # F keeps dt I: the right Jacobian of Exp(omega dt) is dropped, an error of |omega| dt^2 / 2.
     np.testing.assert_allclose(fd[:, 3:], F[TH, RATE], atol=np.linalg.norm(omega) * 0.05**2 / 2)
-    np.testing.assert_allclose(Q, Q.T)
 
 
 def test_reset_jacobian_against_finite_differences():
@@ -168,8 +225,18 @@ def test_reset_jacobian_against_finite_differences():
     np.testing.assert_array_equal(reset_jacobian(dx, False)[MF, MF], np.eye(3))
 
 
+def test_prefix_products_match_sequential_products_in_the_oracle():
+    rng = np.random.default_rng(0)
+    M = exp_so3(rng.normal(size=(11, 3)))
+    C = prefix_products(M)
+    acc = np.eye(3)
+    for k in range(11):
+        acc = acc @ M[k]
+        np.testing.assert_allclose(C[k], acc, atol=1e-12)
+
+
 def test_lowpass_bias_sensitivity_matches_finite_differences():
-    """`AccelPeriod.lp_J` (how the low-passed accelerometer, carried along by the gyro, depends on the
+    """The oracle's `AccelPeriod.lp_J` (how the low-passed accelerometer, carried along by the gyro, depends on the
     gyro bias) against re-running the same samples with a perturbed bias."""
     rng = np.random.default_rng(4)
     gyro = 0.5 * rng.normal(size=(401, 3))
@@ -201,7 +268,7 @@ def test_stacked_update_matches_sequential_updates():
     R_cm = R_wc.T @ R_wm @ exp_so3(0.003 * rng.normal(size=3))
     acc = R_wc.T @ (9.81 * WORLD_UP) + [0.05, 0.0, 0.02]
 
-    def visual_rows(R_wc, R_wm):
+    def visual(R_wc, R_wm):
         return visual_model(R_wc, R_wm, R_cm, 1e-4 * np.eye(3))
 
     def accel_rows(R_wc):
@@ -214,8 +281,8 @@ def test_stacked_update_matches_sequential_updates():
         return inject(*state, dx, True, False), G @ P @ G.T
 
     x = (R_wc, R_wm, b, w)
-    stacked, P_stacked = update(x, P, stack([visual_rows(R_wc, R_wm), accel_rows(R_wc)]))
+    stacked, P_stacked = update(x, P, stack([visual(R_wc, R_wm), accel_rows(R_wc)]))
     mid, P_mid = update(x, P, accel_rows(R_wc))
-    sequential, P_seq = update(mid, P_mid, visual_rows(mid[0], mid[1]))
+    sequential, P_seq = update(mid, P_mid, visual(mid[0], mid[1]))
     assert np.degrees(angle_between(stacked[0], sequential[0])) < 1e-4
     np.testing.assert_allclose(P_stacked, P_seq, rtol=1e-3, atol=1e-12)

@@ -12,6 +12,8 @@ from uareme_fusion.backends.mekf import source_trust
 from uareme_fusion.backends.mekf.state_buffer import S_SIZE, S_TRUST_FRAMES, S_VISUAL_SCALE, new_state_buffer
 from uareme_fusion.types import Status, VisualRotation
 
+from mekf_oracle import OracleMekf  # tests/backends/mekf_oracle: pytest puts tests/backends on sys.path
+
 R_CM = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # camera upright, scene aligned with the world
 R_WC = R_CM.T
 UP_C = R_WC[2]
@@ -107,10 +109,10 @@ def _biased(tilt_deg=8.0, std_deg=5.0, seed=0):
     return at
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_a_camera_that_keeps_disagreeing_with_a_quiet_accelerometer_loses_the_tilt(compiled):
-    trusted = _stream(Mekf(MekfConfig(mode="visual_imu", visual_trust_frames=0, compiled=compiled)), 5.0, _biased())
-    learned = _stream(Mekf(MekfConfig(mode="visual_imu", visual_trust_frames=30, compiled=compiled)), 5.0, _biased())
+@pytest.mark.parametrize("make", [Mekf, OracleMekf], ids=["kernels", "oracle"])
+def test_a_camera_that_keeps_disagreeing_with_a_quiet_accelerometer_loses_the_tilt(make):
+    trusted = _stream(make(MekfConfig(mode="visual_imu", visual_trust_frames=0)), 5.0, _biased())
+    learned = _stream(make(MekfConfig(mode="visual_imu", visual_trust_frames=30)), 5.0, _biased())
     tilt_trusted = np.mean([_tilt_deg(e.R_wc) for e in trusted[20:]])
     tilt_learned = np.mean([_tilt_deg(e.R_wc) for e in learned[20:]])
     assert tilt_trusted > 2.0  # the old filter: 8 deg of persistent error pulls tilt
@@ -120,22 +122,22 @@ def test_a_camera_that_keeps_disagreeing_with_a_quiet_accelerometer_loses_the_ti
 
 
 def test_both_paths_agree_with_the_trust():
-    a = _stream(Mekf(MekfConfig(mode="visual_imu", visual_trust_frames=30, compiled=True)), 3.0, _biased())
-    b = _stream(Mekf(MekfConfig(mode="visual_imu", visual_trust_frames=30, compiled=False)), 3.0, _biased())
+    a = _stream(Mekf(MekfConfig(mode="visual_imu", visual_trust_frames=30)), 3.0, _biased())
+    b = _stream(OracleMekf(MekfConfig(mode="visual_imu", visual_trust_frames=30)), 3.0, _biased())
     for ea, eb in zip(a, b):
         np.testing.assert_allclose(ea.R_wc, eb.R_wc, atol=1e-9)
         np.testing.assert_allclose(ea.cov, eb.cov, rtol=1e-6, atol=1e-14)
         np.testing.assert_allclose(ea.tilt_shares, eb.tilt_shares, rtol=1e-6)
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_nan_covariances_are_gated_out_counted_and_never_fused(compiled):
+@pytest.mark.parametrize("make", [Mekf, OracleMekf], ids=["kernels", "oracle"])
+def test_nan_covariances_are_gated_out_counted_and_never_fused(make):
     good = _biased(tilt_deg=0.0, std_deg=1.0)
 
     def at(t):
         v = good(t)
         return VisualRotation(v.R_cm, np.full((3, 3), np.nan), 0.0, 1, 1000) if 1.0 < t <= 3.0 else v
-    filt = Mekf(MekfConfig(mode="visual_imu", compiled=compiled))
+    filt = make(MekfConfig(mode="visual_imu"))
     est = _stream(filt, 4.0, at)
     assert all(np.isfinite(e.R_wc).all() and np.isfinite(e.cov).all() for e in est)
     assert filt.counters["visual_nonfinite"] == 40
@@ -144,9 +146,9 @@ def test_nan_covariances_are_gated_out_counted_and_never_fused(compiled):
     assert max(_tilt_deg(e.R_wc) for e in est) < 1.0
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_an_imu_that_stops_mid_recording_goes_on_with_vision_and_says_so(compiled):
-    filt = Mekf(MekfConfig(mode="visual_imu", compiled=compiled))
+@pytest.mark.parametrize("make", [Mekf, OracleMekf], ids=["kernels", "oracle"])
+def test_an_imu_that_stops_mid_recording_goes_on_with_vision_and_says_so(make):
+    filt = make(MekfConfig(mode="visual_imu"))
     est = _stream(filt, 6.0, _biased(tilt_deg=0.0, std_deg=1.0), imu_until_s=2.0)
     after = est[50:]
     assert any(Status.IMU_GAP in e.status for e in est[40:45])
@@ -155,10 +157,10 @@ def test_an_imu_that_stops_mid_recording_goes_on_with_vision_and_says_so(compile
     assert filt.counters["visual_updates"] >= 100
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_a_camera_black_for_two_seconds_goes_on_with_the_imu_and_comes_back(compiled):
+@pytest.mark.parametrize("make", [Mekf, OracleMekf], ids=["kernels", "oracle"])
+def test_a_camera_black_for_two_seconds_goes_on_with_the_imu_and_comes_back(make):
     good = _biased(tilt_deg=0.0, std_deg=1.0)
-    filt = Mekf(MekfConfig(mode="visual_imu", compiled=compiled))
+    filt = make(MekfConfig(mode="visual_imu"))
     est = _stream(filt, 6.0, lambda t: None if 2.0 < t <= 4.0 else good(t))
     black, back = est[41:80], est[85:]
     assert all(Status.VISUAL_MISSING in e.status for e in black)
@@ -251,8 +253,8 @@ def test_noiseless_inputs_converge_to_the_truth():
 
 
 def test_both_paths_agree_with_correlated_errors_and_blocks():
-    a = _stream(Mekf(MekfConfig(mode="visual_imu", compiled=True)), 4.0, _correlated(seed=3))
-    b = _stream(Mekf(MekfConfig(mode="visual_imu", compiled=False)), 4.0, _correlated(seed=3))
+    a = _stream(Mekf(MekfConfig(mode="visual_imu")), 4.0, _correlated(seed=3))
+    b = _stream(OracleMekf(MekfConfig(mode="visual_imu")), 4.0, _correlated(seed=3))
     assert a[-1].tilt_shares[1] != b[0].tilt_shares[1]  # the share moved in the run
     for ea, eb in zip(a, b):
         np.testing.assert_allclose(ea.R_wc, eb.R_wc, atol=1e-9)

@@ -1,10 +1,12 @@
 """Multiplicative (error-state) EKF fusing visual Manhattan rotations with a gyro and accelerometer.
 
-Modules: `config` (MekfConfig), `state` (error state, injection, reset), `propagation` (gyro and
-constant-rate process models), `motion` (the motion strategy of a mode), `measurements` (visual,
-vertical, gravity and zero-rate models), `accel` (averaging, low-pass, rest detection), `filter`
-(`Mekf`, the scheduler), `kernels`/`compiled` (numba IMU path), `state_buffer` (the one array
-holding the state, which the kernels update in place), `offline` (forward-backward).
+Modules: `config` (MekfConfig), `state` (error state, reset), `motion` (the motion strategy of a
+mode), `measurements` (vertical, gravity and zero-rate models), `accel` (the accelerometer period),
+`scene` (Manhattan-frame initialisation and re-initialisation), `filter` (`Mekf`, the scheduler),
+`kernels` (the one implementation: `kernel_imu`, `kernel_update`, `kernel_visual`, numba-compiled or
+plain Python), `compiled` (the filter's calls into them), `parameters` (their named parameter record),
+`state_buffer` (the one array holding the state, which the kernels update in place), `offline`
+(forward-backward).
 
 See docs/design.md "Backends". Conventions:
 - Nominal state: `R_wc` (camera to world, world z up), gyro bias `b_c` (rad/s, held in the camera
@@ -12,9 +14,8 @@ See docs/design.md "Backends". Conventions:
   the camera's angular rate `omega_c` (rad/s, camera frame).
 - Error state (12,): `[dtheta_c, db_c, dtheta_m, domega_c]` with RIGHT perturbations,
   `R_wc = R_wc_hat @ Exp(dtheta_c)`, `R_wm = R_wm_hat @ Exp(dtheta_m)`; covariance `P` in rad^2,
-  (rad/s)^2. filterpy's `predict`/`update` (Joseph form) do the covariance algebra; the nominal
-  rotations live in scipy/numpy and take the correction after each update (error reset with its
-  Jacobian `I - skew(dtheta)/2`).
+  (rad/s)^2. The kernels (`kernels.py`) do the covariance algebra (Joseph form) and correct the
+  nominal rotations after each update (error reset with its Jacobian `I - skew(dtheta)/2`).
 - World yaw is a gauge: it is the camera's heading at initialisation (its yaw variance starts at 0).
   With an IMU, world z is up from the accelerometer; without one, the world is the first Manhattan
   frame labelled with its z the axis nearest image up (`R_wm = I`).
@@ -23,7 +24,7 @@ See docs/design.md "Backends". Conventions:
   IMU sample stamped `t` measures the camera time `t + imu_time_offset_s`.
 - Updates: gyro samples are integrated in one chunk per frame (or per accelerometer period in a long
   batch); the accelerometer updates once per `accel_update_period_s`, and an update that falls due
-  at a frame is stacked into that frame's visual update (one filterpy update, same state time). With
+  at a frame is stacked into that frame's visual update (one Kalman update, same state time). With
   `accel_lowpass_tau_s` the update measures the low-passed direction, whose sensitivity to the gyro
   bias (it was carried along by the gyro) enters H; with `rest_gyro_max_rad_s` the mean gyro reading
   at rest measures the bias (zero-rate update).

@@ -190,9 +190,6 @@ class MekfConfig(GyroNoiseConfig):
     """Magnitude of gravity, m/s^2."""
     record_imu_estimates: bool = False
     """Keep `R_wc` after every IMU sample (see `Mekf.imu_trajectory`)."""
-    compiled: bool = True
-    """Integrate gap-free IMU batches with the compiled kernels (`mekf.kernels`) when numba is
-    available; False (or no numba) runs the numpy/filterpy reference path."""
 
     @field_validator("R_ci")
     @classmethod

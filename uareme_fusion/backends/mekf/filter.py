@@ -1,20 +1,19 @@
 """`Mekf`: the multiplicative (error-state) EKF, scheduling its models.
 
 See docs/design.md "Backends" and the package docstring for the conventions. The filter holds the
-nominal state and its covariance, and schedules: IMU samples and frames propagate through the motion
-strategy chosen once for its mode (`motion.py`); a frame's visual rotation, the vertical
-pseudo-measurement and a due accelerometer update are fused in one stacked filterpy update
-(`measurements.py`); every update is injected and reset through `state.py`.
+nominal state and its covariance in one state buffer (`state_buffer.py`), and schedules: IMU samples
+and frames propagate through the motion strategy chosen once for its mode (`motion.py`); a frame's
+visual rotation, the vertical pseudo-measurement and a due accelerometer update (or, visual only, the
+gravity of an accelerometer without gyro) are fused in one stacked update. The maths run in the
+kernels (`kernels.py`, called through `compiled.py`), the filter's one implementation.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from filterpy.kalman import update as kf_update
 
 from ...config import load_config, preset_names
 from ...errors import InputError
-from ...rotations import angle_between
 from ...types import Estimate, Estimates, ImuBatch, VisualRotation
 from ..base import Backend
 from ..imu_stream import ImuStream, check_imu_arrays
@@ -22,19 +21,19 @@ from ..labelling_track import LabellingTrack
 from ..visual_noise_share import VisualNoiseShare
 from . import status_bits
 from .accel import AccelPeriod
-from .compiled import (STAGE_ROWS, accel_update_compiled, harvest_kernel_counters, integrate_staged_compiled,
-                       kernels_available, stage_compiled, to_reference_path, visual_update_compiled)
+from . import kernels
+from .compiled import (STAGE_ROWS, accel_update, harvest_kernel_counters, integrate_staged, stage, update,
+                       visual_distance, visual_update)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .gravity_only import GravityOnly
-from .measurements import (correlated_noise_scale, gravity_model, stack, vertical_distance2, vertical_model,
-                           visual_model)
 from .motion import ConstantRateMotion, GyroMotion
+from .parameters import KernelParameters
+from .scene import finite, ignored_too_long, initialise_manhattan
 from .segments import process_imu_segments
-from .source_trust import (note_accel_information, note_visual_information, squared_rate, tilt_shares,
-                           update_visual_trust, vertical_variance, visual_vertical_innovation)
+from .source_trust import tilt_shares
 from .status_bits import status_of
-from .state import BG, I3, MF, N_STATE, ORTHONORMALISE_EVERY, TH, ZERO_STATE, inject, orthonormal, reset_jacobian
-from .state_buffer import (BufferArray, BufferScalar, S_ACCEL_VAR_RATE, S_IMU_T, S_PRODUCTS, S_REJECTIONS, S_T_STATE,
+from .state import I3, N_STATE, TH
+from .state_buffer import (BufferArray, BufferScalar, S_IMU_T, S_IN_GAP, S_PRODUCTS, S_REJECTIONS, S_T_STATE,
                            S_T_VISUAL, S_VISUAL_INFO_RATE, X_B_C, X_P, X_R_WC, X_R_WM, field_views, new_state_buffer)
 
 
@@ -47,11 +46,6 @@ one `take` copies them."""
 
 _CAMERA_ONLY = (float("nan"), 1.0)
 """`Estimate.tilt_shares` without an IMU: the camera alone."""
-
-
-def _finite(visual: VisualRotation) -> bool:
-    """Whether a frame's rotation and covariance are finite (checked only for a gated-out frame)."""
-    return bool(np.isfinite(visual.R_cm).all() and np.isfinite(visual.cov).all())
 
 
 def _shape(a) -> tuple:
@@ -104,11 +98,13 @@ class Mekf(Backend):
     b_c = BufferArray("b_c")
     P = BufferArray("P")
     last_gyro_c = BufferArray("last_gyro")
+    omega_c = BufferArray("omega_c")  # visual only: the camera's angular rate, rad/s (camera frame)
     t_state = BufferScalar(S_T_STATE, optional=True)
     imu_t_s = BufferScalar(S_IMU_T)  # time of the newest integrated IMU sample (camera clock), s; -inf before any
     products_unnormalised = BufferScalar(S_PRODUCTS, int)
     t_visual_s = BufferScalar(S_T_VISUAL, optional=True)  # time of the previous visual update (camera clock), s
     rejections = BufferScalar(S_REJECTIONS, int)  # consecutive frames gated out
+    in_imu_gap = BufferScalar(S_IN_GAP, bool)  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
 
     def __init__(self, config: MekfConfig | str | None = None):
         """`config`: a `MekfConfig`, a preset name or YAML path (`Mekf("vehicle")`), or None for the defaults."""
@@ -125,18 +121,15 @@ class Mekf(Backend):
         self.q_rate = cfg.gyro_rate_noise_sqrt_s**2
         self.manhattan_walks = bool(cfg.manhattan_yaw_rw_rad_per_sqrt_s or cfg.manhattan_tilt_rw_rad_per_sqrt_s)
         self.trapezoid = cfg.gyro_sampling == GyroSampling.INSTANT
-        self.compiled = cfg.compiled and kernels_available()
         self._stream = ImuStream(cfg.reorder_window_s, cfg.gyro_range_rad_s)
-        self._stage = np.empty((STAGE_ROWS, 8)) if self.compiled else None  # a frame's samples (`process_imu`)
+        self._stage = np.empty((STAGE_ROWS, 8))  # a frame's samples (`process_imu`)
         self._staged = 0  # how many
         self.stage_span_s = cfg.accel_update_period_s + self._stream.reorder_window_s  # a staged batch spans less
+        self.x = new_state_buffer()  # R_wc = R_wm = I, b_c = 0, P = 0, t_state None
+        self.estimate_out = np.empty((4, 3, 3))  # the estimate after a visual update with an IMU
+        self.views = field_views(self.x)
         self.set_motion(motion_for(cfg.mode))
         self._mode_resolved = cfg.mode != MekfMode.AUTO
-        self.x = new_state_buffer()  # R_wc = R_wm = I, b_c = 0, P = 0, t_state None
-        self.estimate_out = np.empty((4, 3, 3))  # the estimate after a compiled visual update
-        self.views = field_views(self.x)
-        self.omega_c = np.zeros(3)
-        self.F_buffer = np.eye(N_STATE)  # gyro transition: only its TH rows change between chunks
         self.initialised = False
         self.manhattan_initialised = False
         self._counters = dict(visual_rejected=0, visual_nonfinite=0, visual_ignored=0, reinitialised=0,
@@ -147,7 +140,6 @@ class Mekf(Backend):
         self.disagree_since_s: float | None = None  # first frame of the current run of ignored visual rotations, s
         self._disagree_R_cm = None  # visual only: the previous frame of that run (labelled)
         self._disagree_P = None  # the error-state covariance at that frame
-        self.in_imu_gap = False  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
         self.pending: list[ImuBatch] = []
         self.pending_span_s = 0.0
         self.init_samples: list[ImuBatch] = []
@@ -163,8 +155,8 @@ class Mekf(Backend):
 
     @property
     def counters(self) -> dict[str, int]:
-        """What happened so far, by name (updates applied, skipped, rejected, ...); the compiled
-        kernels' counts (kept in `x`) are added in when read."""
+        """What happened so far, by name (updates applied, skipped, rejected, ...); the kernels' counts
+        (kept in `x`) are added in when read."""
         harvest_kernel_counters(self.x, self._counters)
         if self.gravity_only.active:
             self._counters.update(self.gravity_only.counts)
@@ -182,12 +174,11 @@ class Mekf(Backend):
             self.set_motion(motion_for(mode))
 
     def set_motion(self, motion) -> None:
-        """Use `motion` (a strategy of `motion.py`) and the compiled paths that apply to it."""
+        """Use `motion` (a strategy of `motion.py`), with the kernels' parameters that go with it."""
         self.motion = motion
-        # Whether a frame's IMU batch may wait in the stage for the frame's one compiled call (`process_imu`).
-        self._stages_frames = self.compiled and self.imu_is_camera and motion.uses_imu and motion.fuses_visual
-        # Whether a frame's visual update is one compiled call (`compiled.visual_update_compiled`).
-        self._visual_compiled = self.compiled and motion.uses_imu and motion.fuses_visual
+        self.kernel_parameters = KernelParameters(self)
+        # Whether a frame's IMU batch may wait in the stage for the frame's one kernel call (`process_imu`).
+        self._stages_frames = self.imu_is_camera and motion.uses_imu and motion.fuses_visual
 
     # ------------------------------------------------------------------ public API
     def process_imu(self, t_s, gyro_rad_s, accel_m_s2) -> None:
@@ -204,9 +195,9 @@ class Mekf(Backend):
         if self._stages_frames and self.initialised and not self.pending and not self._stream.held_count:
             t, gyro, accel = check_imu_arrays(t_s, gyro_rad_s, accel_m_s2)
             # A frame's worth, clean, nothing else waiting: checked and copied into the stage in one
-            # compiled call, where it waits for the frame's one compiled call (`propagate_to`); any
-            # other use of the stream adds it first, as below (a batch this short releases nothing).
-            self._staged = stage_compiled(self, t, gyro, accel)
+            # kernel call, where it waits for the frame's one kernel call (`propagate_to`); any other
+            # use of the stream adds it first, as below (a batch this short releases nothing).
+            self._staged = stage(self, t, gyro, accel)
             if self._staged:
                 return
             t_s, gyro_rad_s, accel_m_s2 = t, gyro, accel  # checked: `ImuStream.add` takes them as they are
@@ -239,7 +230,7 @@ class Mekf(Backend):
         """`_gravity_rows` alone, for a frame without a visual update."""
         rows = self._gravity_rows()
         if rows is not None:
-            self._kalman_update(*rows)
+            update(self, *rows)
 
     def _add(self, t_s, gyro_rad_s, accel_m_s2) -> None:
         """`process_imu`'s samples into the reorder buffer, released once they span an update period."""
@@ -284,16 +275,13 @@ class Mekf(Backend):
             self.accel_update()
 
     def warm_up(self, has_imu: bool, has_frames: bool) -> None:
-        """`Backend.warm_up`: load the compiled kernels of the stream to come (`load_kernels`) unless
-        this filter runs without them."""
-        if has_imu and self.compiled and self.motion.uses_imu:
+        """`Backend.warm_up`: load the compiled kernels of the stream to come (`load_kernels`)."""
+        if has_imu and self.motion.uses_imu:
             load_kernels(has_frames)
-            if not kernels_available():  # a kernel failed there (`compiled.fall_back`)
-                to_reference_path(self)
 
     def process_imu_segments(self, t_s, gyro_rad_s, accel_m_s2, ends) -> Estimates:
         """`Backend.process_imu_segments` (an IMU-only stream in bulk), with clean stretches of the
-        stream in one compiled call (`segments.py`)."""
+        stream in one kernel call (`segments.py`)."""
         return process_imu_segments(self, t_s, gyro_rad_s, accel_m_s2, ends)
 
     def process_frame(self, t_s: float, visual: VisualRotation | None) -> Estimate:
@@ -332,7 +320,7 @@ class Mekf(Backend):
             if fuses_visual:
                 self.flags |= status_bits.VISUAL_MISSING
                 self.x[S_VISUAL_INFO_RATE] = 0.0  # no share while the camera gives nothing
-        elif not _finite(visual):  # never a start
+        elif not finite(visual):  # never a start
             self.flags |= status_bits.VISUAL_REJECTED
             self.counters["visual_rejected"] += 1
             self.counters["visual_nonfinite"] += 1
@@ -354,10 +342,9 @@ class Mekf(Backend):
     def propagate_to(self, t_s: float) -> None:
         """Propagate the state to `t_s` (s, camera clock) with the mode's motion strategy."""
         if self._staged:
-            # A frame's batch, staged by `process_imu`: integrated in one compiled call (after an IMU gap
-            # or saturation, or with a sample past the frame, the reference path takes it).
-            if (not self.in_imu_gap and not self._stream.saturation_seen
-                    and integrate_staged_compiled(self, self._staged, t_s)):
+            # A frame's batch, staged by `process_imu`: integrated in one kernel call (with a sample past
+            # the frame, or an update waiting, the stream takes it).
+            if integrate_staged(self, self._staged, t_s):
                 self._staged = 0
                 return
             self._add_staged()
@@ -389,184 +376,41 @@ class Mekf(Backend):
             self.pending.append(batch)
             self.pending_span_s = float(rows[-1, 0] - self.pending[0].rows[0, 0]) + 1e-12
 
-    def count_product(self) -> None:
-        """One more product into R_wc / R_wm: re-orthonormalise them every `ORTHONORMALISE_EVERY`."""
-        self.products_unnormalised += 1
-        if self.products_unnormalised >= ORTHONORMALISE_EVERY:
-            self.R_wc = orthonormal(self.R_wc)
-            self.R_wm = orthonormal(self.R_wm)
-            self.products_unnormalised = 0
-
     # ------------------------------------------------------------------ updates
     def accel_update(self) -> None:
         """Apply the accelerometer (and zero-rate) update of the period just completed."""
-        if self.compiled and accel_update_compiled(self):
-            return
-        rows = self._take_accel_rows()
-        if rows is not None:
-            self._kalman_update(*rows)
-
-    def _take_accel_rows(self):
-        """The due accelerometer update's `_accel_rows`, for a stacked update (no longer due)."""
-        self.accel.due = False
-        return self._accel_rows()
-
-    def _accel_rows(self):
-        """The period's zero-rate update (applied at once, with `rest_gyro_max_rad_s`), then the
-        gravity measurement of its mean (or low-passed) direction: `(residual, R, H)` or None (near
-        free fall). Consumes the period. The reference path: compiled, `kernels.accel_rows` does this
-        inside the update that takes it."""
-        cfg = self.config
-        accel_c, T = self.accel.take_mean()
-        if cfg.rest_gyro_max_rad_s > 0:
-            rows = self.accel.rest_measurement(T, self.t_state, self.b_c, cfg, self.q_gyro)
-            if rows is not None:
-                self._kalman_update(*rows)
-                self.counters["rest_updates"] += 1
-        accel_c = self.accel.lowpass(accel_c, T, cfg.accel_lowpass_tau_s)
-        use_lp_J = cfg.accel_lowpass_tau_s > 0
-        ok, r, var, H, downweighted = gravity_model(
-            accel_c, T, self.R_wc, self.accel.lp_J[1], use_lp_J, cfg.gravity_m_s2,
-            cfg.accel_tilt_noise_rad_sqrt_s, cfg.accel_norm_scale, cfg.accel_innovation_scale_rad,
-            cfg.accel_downweight_flag_ratio)
-        if not ok:
-            self.counters["accel_skipped"] += 1
-            return None
-        note_accel_information(self.views["s"], var, T)
-        if downweighted:
-            self.flags |= status_bits.ACCEL_DOWNWEIGHTED
-            self.counters["accel_downweighted"] += 1
-        self.counters["accel_updates"] += 1
-        return r, var * I3, H
+        accel_update(self)
 
     def _fuse_visual(self, visual: VisualRotation) -> bool:
-        """A frame's visual update, a due accelerometer update stacked in: one compiled call with an IMU
-        (`compiled.visual_update_compiled`), else `_visual_update`. True when the compiled call wrote
-        the estimate after it (`estimate_out`)."""
-        rejected = visual_update_compiled(self, visual) if self._visual_compiled else None
-        if rejected is None:  # the reference path (also after a kernel failed: `compiled.fall_back`)
-            self._visual_update(visual)
-            return False
-        if rejected and not _finite(visual):  # gated out, counted, and no sign of a new scene alignment
+        """A frame's visual update in one kernel call (`compiled.visual_update`): with an IMU, a due
+        accelerometer update stacked in; visual only, the gravity rows of an accelerometer without gyro
+        (`_gravity_rows`) stacked in and the covariance cut to its independent share
+        (`VisualNoiseShare`). Re-initialises after `reinit_after_rejections` frames gated out. True
+        when the kernel's estimate (`estimate_out`) is the frame's (with an IMU)."""
+        if self.motion.uses_imu:
+            rejected = visual_update(self, visual)
+        else:
+            rows = self._gravity_rows()
+            shared = self.noise_share.enabled
+            rejected = visual_update(self, visual, self.noise_share.share if shared else 1.0, rows)
+            if not rejected and shared:
+                self.noise_share.take(self.t_state, visual)  # labelled by the track (`labelling_track.py`)
+        if rejected and not finite(visual):  # gated out, counted, and no sign of a new scene alignment
             self._count_nonfinite()
         if not rejected or self.rejections < self.config.reinit_after_rejections:
-            return True
+            return self.motion.uses_imu
         self._reinitialise(visual)
         return False
 
-    def _visual_update(self, visual: VisualRotation) -> None:
-        """The frame's rotation as a measurement of `R_cm`, gated and Huber-weighted, its covariance
-        and the vertical pseudo-measurement's variance as far as the camera is trusted
-        (`source_trust.py`), stacked with the vertical pseudo-measurement and a due accelerometer
-        update (`_accel_rows`) into one update; past the gate, the accelerometer rows alone."""
-        cfg = self.config
-        r, R_vis, H = self._visual_model(visual)
-        t_s, t_prev_s = self.t_state, self.t_visual_s
-        self.t_visual_s = t_s
-        trust, var_v = (self._visual_trust(r, R_vis, t_s, t_prev_s) if self.motion.uses_imu
-                        else (1.0, cfg.manhattan_vertical_std_rad**2))
-        accel_rows = None
-        if self.accel.due:
-            rest_before = self.counters["rest_updates"]
-            accel_rows = self._take_accel_rows()
-            if self.counters["rest_updates"] > rest_before:  # the zero-rate update moved the state
-                r, R_vis, H = self._visual_model(visual)
-        else:
-            accel_rows = self._gravity_rows()  # an accelerometer without gyro (visual only)
-        if t_prev_s is not None:
-            R_vis = R_vis * correlated_noise_scale(t_s - t_prev_s, cfg.visual_error_correlation_s)
-        S = H @ self.P @ H.T + R_vis  # the gate and Huber weigh the frame's full error
-        try:
-            d2 = float(r @ np.linalg.solve(S, r))
-        except np.linalg.LinAlgError:  # a singular innovation covariance: no usable measurement
-            d2 = np.inf
-        if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
-            self._count_rejection()
-            self.x[S_VISUAL_INFO_RATE] = 0.0
-            if not _finite(visual):
-                self._count_nonfinite()
-            if accel_rows is not None:
-                self._kalman_update(*accel_rows)
-            if self.rejections >= cfg.reinit_after_rejections:
-                self._reinitialise(visual)
-            return
-        self.rejections = 0
-        shared = not self.motion.uses_imu and self.noise_share.enabled
-        if shared:  # fuse the independent share only (as estimated over the previous frames)
-            R_vis = R_vis * self.noise_share.share
-            self.noise_share.take(t_s, visual)  # labelled by the track (`labelling_track.py`)
-        d = np.sqrt(d2)
-        if d > cfg.visual_huber_k:  # Huber weight w = k / d  ->  covariance / w
-            R_vis = R_vis * (d / cfg.visual_huber_k)
-        if trust != 1.0:  # the independent share of the frame's error (gated on the full one)
-            R_vis = R_vis * trust
-        # "m's z is up" only where the world is not the Manhattan frame itself (visual only).
-        vertical = (vertical_model(self.R_wm, np.sqrt(var_v), cfg.manhattan_vertical_max_rad)
-                    if self.motion.uses_imu and var_v < np.inf else None)
-        self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
-        self.counters["visual_updates"] += 1
-
-    def _visual_model(self, visual: VisualRotation):
-        """`measurements.visual_model` of the frame: labelled nearest the prediction with an IMU, as the
-        track labelled it without (`labelling_track.py`)."""
-        return visual_model(self.R_wc, self.R_wm, visual.R_cm, visual.cov, relabel=self.motion.uses_imu)
-
-    def _visual_trust(self, r: np.ndarray, R_vis: np.ndarray, t_s: float, t_prev_s: float | None):
-        """The camera's vertical against a quiet accelerometer's, taken into the running trust
-        (`source_trust.py`): `(share, vertical_var)`, the factor on this frame's visual covariance and the
-        vertical pseudo-measurement's variance (rad^2; inf: not applied)."""
-        cfg, s = self.config, self.views["s"]
-        var_v = cfg.manhattan_vertical_std_rad**2
-        quiet = (cfg.accel_downweight_flag_ratio * cfg.accel_tilt_noise_rad_sqrt_s) ** 2
-        e, v = visual_vertical_innovation(self.R_wc, self.R_wm, r, R_vis, self.accel.sum_c, self.accel.time_s,
-                                          s[S_ACCEL_VAR_RATE], quiet, var_v)
-        share, _ = update_visual_trust(s, e, v, cfg.visual_trust_frames, cfg.visual_trust_min_share,
-                                       squared_rate(self.last_gyro_c, self.b_c))
-        var_v = vertical_variance(s, var_v, cfg.visual_trust_frames)
-        note_visual_information(s, R_vis, share, var_v, 0.0 if t_prev_s is None else t_s - t_prev_s)
-        return share, var_v
-
     def _ignored_too_long(self, t_s: float, visual: VisualRotation) -> bool | None:
-        """Whether the camera has been ignored long enough to re-initialise from `visual`, decided once
-        per frame before either update path (reference or compiled) runs. A frame disagrees when its
-        `R_cm`, labelled nearest the prediction, is further from it than the prediction's and its own
-        covariance allow (d^2 over `disagreement_chi2` and angle over `disagreement_min_deg`): the gate
-        then rejects it, or the Huber weight lets it move the estimate little, and persistent disagreement is drift the
-        other flags do not show. Such a frame is flagged `VISUAL_IGNORED`; after
-        `reinit_after_disagreement_s` (s) of them in a row, True (re-initialise). None: fuse the frame
-        as usual (it agrees, or the IMU's gate and Huber weight handle it). False: skip it, without an
-        IMU, where fusing a large innovation would also corrupt the constant-rate model's rate and
-        spin the estimate away; the filter coasts. A non-finite frame changes nothing."""
-        if not _finite(visual):
-            return None
-        cfg = self.config
-        r, R_vis, H = self._visual_model(visual)
-        angle = float(np.linalg.norm(r))
-        try:
-            # During a run, the covariance of its start: coasting grows P, and must not let the wrong
-            # rotations in as a jump.
-            P = self.P if self.disagree_since_s is None else self._disagree_P
-            d2 = float(r @ np.linalg.solve(H @ P @ H.T + R_vis, r))
-        except np.linalg.LinAlgError:
-            d2 = np.inf
-        # Without an IMU a gated-out frame is a disagreement too: the filter coasts through both alike.
-        chi2 = cfg.disagreement_chi2 if self.motion.uses_imu else min(cfg.disagreement_chi2, cfg.visual_gate_chi2)
-        if not (angle > np.radians(cfg.disagreement_min_deg) and not d2 <= chi2):
-            self.disagree_since_s = self._disagree_R_cm = None
-            return None
-        # Without an IMU, a run re-initialises only on frames that agree with each other (the camera
-        # turned, or the filter drifted): two wrong minima in a row point different ways.
-        previous, self._disagree_R_cm = self._disagree_R_cm, visual.R_cm
-        consistent = self.motion.uses_imu or (
-            previous is not None and float(angle_between(previous, visual.R_cm)) < 0.5 * angle)
-        self.flags |= status_bits.VISUAL_IGNORED
-        self._counters["visual_ignored"] += 1
-        if self.disagree_since_s is None:
-            self.disagree_since_s, self._disagree_P = t_s, self.P.copy()
-        limit_s = cfg.reinit_after_disagreement_s if self.motion.uses_imu else cfg.visual_only_reinit_after_s
-        if t_s - self.disagree_since_s >= limit_s and consistent:
-            return True
-        return None if self.motion.uses_imu else False
+        """`scene.ignored_too_long`: whether to re-initialise from `visual` (True), fuse it (None) or,
+        visual only, skip it (False)."""
+        return ignored_too_long(self, t_s, visual)
+
+    def visual_distance(self, visual: VisualRotation, P: np.ndarray) -> tuple[float, float]:
+        """`(angle rad, d2)` of a frame's rotation against the prediction under the error covariance
+        `P` (12, 12) (`kernel_visual.visual_distance`; labelled nearest the prediction with an IMU)."""
+        return visual_distance(self, visual, P, self.motion.uses_imu)
 
     def _reinitialise(self, visual: VisualRotation) -> None:
         """After `reinit_after_rejections` frames gated out in a row, or `reinit_after_disagreement_s`
@@ -587,48 +431,11 @@ class Mekf(Backend):
         self.counters["visual_rejected"] += 1
         self.rejections += 1
 
-    def _kalman_update(self, residual: np.ndarray, R: np.ndarray, H: np.ndarray) -> None:
-        """filterpy update (Joseph form) of the zero-mean error state, then inject and reset. A
-        non-finite result changes nothing; it is counted and flagged."""
-        dx, P = kf_update(ZERO_STATE, self.P, residual, R, H)
-        if not (np.isfinite(dx).all() and np.isfinite(P).all()):
-            self.counters["nonfinite_updates"] += 1
-            self.flags |= status_bits.UPDATE_NONFINITE
-            return
-        G = reset_jacobian(dx, self.manhattan_initialised)
-        self.R_wc, self.R_wm, self.b_c, self.omega_c = inject(
-            self.R_wc, self.R_wm, self.b_c, self.omega_c, dx, self.manhattan_initialised, self.motion.estimates_rate)
-        self.count_product()
-        self.accel.reinject(dx[BG])
-        P = G @ P @ G.T
-        self.P = 0.5 * (P + P.T)
-
     # ------------------------------------------------------------------ initialisation
     def initialise_manhattan(self, visual: VisualRotation, R_wm_ref: np.ndarray | None = None) -> bool:
-        """`R_wm = R_wc R_cm`, labelled nearest `R_wm_ref` (3, 3; identity: m's z nearest up), with
-        its covariance from the camera's and the measurement's: `dtheta_m = R_cm^T dtheta_c + delta`.
-        The first frame with an IMU is refused (returns False, state kept) when its z axis is near
-        up but fails the vertical pseudo-measurement's gate (`visual_gate_chi2`): it contradicts the
-        accelerometer's tilt, and the pseudo-measurement would tilt the camera to it. A
-        re-initialisation is not gated: then the filter's own tilt may be the wrong one."""
-        cfg = self.config
-        R_wm_ref = np.eye(3) if R_wm_ref is None else R_wm_ref
-        visual = visual.symmetric_to(self.R_wc.T @ R_wm_ref)
-        R_wm = orthonormal(self.R_wc @ visual.R_cm)
-        T = np.eye(N_STATE)
-        T[MF, MF] = 0.0
-        T[MF, TH] = visual.R_cm.T
-        P = T @ self.P @ T.T
-        P[MF, MF] += visual.cov
-        if self.motion.uses_imu and not self.manhattan_initialised:
-            d2 = vertical_distance2(R_wm, P[MF, MF], cfg.manhattan_vertical_std_rad, cfg.manhattan_vertical_max_rad)
-            if d2 is not None and not d2 <= cfg.visual_gate_chi2:
-                return False
-        self.R_wm = R_wm
-        self.P = 0.5 * (P + P.T)
-        self.manhattan_initialised = True
-        self.rejections = 0
-        return True
+        """`scene.initialise_manhattan`: `R_wm = R_wc R_cm`, labelled nearest `R_wm_ref`; False when the
+        first frame with an IMU contradicts the accelerometer's tilt."""
+        return initialise_manhattan(self, visual, R_wm_ref)
 
     # ------------------------------------------------------------------ output
     def _estimate(self, t_s: float) -> Estimate:
@@ -671,7 +478,7 @@ def load_kernels(with_frames: bool = True) -> None:
     frames or IMU-only in bulk (`with_frames` False), by running a scratch filter through them (one or
     two seconds at rest), once per process. numba loads a kernel at its first call (about 0.4 s for
     the fused ones here), which would otherwise stall a live stream's first frames."""
-    if with_frames in _KERNELS_LOADED or not kernels_available():
+    if with_frames in _KERNELS_LOADED or not kernels.compiled_now():
         return
     t_imu = np.arange(1, 401) / 200.0
     gyro, accel = np.zeros((t_imu.size, 3)), np.tile([0.0, -9.81, 0.0], (t_imu.size, 1))

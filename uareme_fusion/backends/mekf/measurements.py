@@ -1,10 +1,11 @@
-"""Measurement models of `Mekf`: pure functions returning residual, noise and H.
+"""Measurement models of `Mekf`: plain-array functions returning residual, noise and H, which the
+kernels (`kernels.py`) compile.
 
 Each model compares a measurement with its prediction from the nominal state and returns
 `(residual (3,), noise, H (3, 12))` with `residual ~ H dx + noise` for the error state `dx` (right
-perturbations, `state.py`). The gravity and zero-rate models take plain arrays and scalars and
-return an isotropic variance, so the compiled kernels (`kernels.py`) call the same functions.
-- visual: the solver's `R_cm` measures `R_wc^T R_wm` (residual `Log(R_cm_pred^T R_cm)`);
+perturbations, `state.py`), the noise an isotropic variance.
+- visual: the solver's `R_cm` measures `R_wc^T R_wm` (residual `Log(R_cm_pred^T R_cm)`;
+  `kernel_visual.visual_measurement`, which writes into the rows of a stacked update);
 - vertical: "the Manhattan z axis is world up" (`e_z - R_wm^T up`);
 - gravity: the accelerometer direction measures up in the camera frame (`z - R_wc^T up`);
 - zero rate: at rest the mean gyro reading measures the bias (`g_mean - b_c`).
@@ -15,30 +16,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from ...rotations import nearest_symmetric
-from .state import I3, MF, N_STATE, TH
-
-
-def visual_model(R_wc: np.ndarray, R_wm: np.ndarray, R_cm: np.ndarray, cov_rad2: np.ndarray, relabel: bool = True):
-    """The solver's rotation `R_cm` (3, 3) with covariance `cov_rad2` (3, 3, rad^2, right
-    perturbation) as a measurement of `R_cm = R_wc^T R_wm`, its Manhattan labelling resolved
-    against the prediction (`relabel`; False: as labelled, e.g. by `backends.labelling_track`):
-    `(residual (3,) rad, R (3, 3) rad^2, H (3, 12))`."""
-    R_cm_pred = R_wc.T @ R_wm
-    if relabel:
-        R_cm, P_sym = nearest_symmetric(R_cm, R_cm_pred)  # as VisualRotation.symmetric_to
-    else:
-        P_sym = I3
-    # Log of a product of rotations: scipy may skip its orthogonalisation (assume_valid).
-    r = Rotation.from_matrix(R_cm_pred.T @ R_cm, assume_valid=True).as_rotvec()
-    H = np.zeros((3, N_STATE))
-    H[:, TH] = -R_cm_pred.T
-    H[:, MF] = I3
-    cov_rad2 = np.asarray(cov_rad2, float)
-    R_vis = P_sym.T @ (0.5 * (cov_rad2 + cov_rad2.T)) @ P_sym
-    return r, R_vis, H
+from .state import I3, MF
 
 
 def correlated_noise_scale(dt_s: float, correlation_s: float) -> float:
@@ -136,15 +115,3 @@ def zero_rate_model(rest_sums, rest_n, T_s, b_c, q_gyro, rest_gyro_max_rad_s, re
     for i in range(3):
         H[i, 3 + i] = 1.0
     return True, g_mean - b_c, q_gyro / T_s + rest_rate_std_rad_s**2, H
-
-
-def stack(blocks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One measurement from several `(residual, R, H)` blocks (None entries skipped): residuals and
-    H stacked, R block-diagonal."""
-    blocks = [b for b in blocks if b is not None]
-    if len(blocks) == 1:
-        return blocks[0]
-    R_all = np.zeros((3 * len(blocks), 3 * len(blocks)))
-    for i, b in enumerate(blocks):
-        R_all[3 * i:3 * i + 3, 3 * i:3 * i + 3] = b[1]
-    return np.concatenate([b[0] for b in blocks]), R_all, np.vstack([b[2] for b in blocks])

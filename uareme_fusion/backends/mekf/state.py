@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...rotations import exp_so3
 
 TH, BG, MF, RATE = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
 """Blocks of the 12-dimensional error state: camera attitude, gyro bias, Manhattan attitude, rate."""
@@ -23,8 +22,6 @@ ZERO_STATE.setflags(write=False)
 ROTATION_BLOCKS = (TH.start, MF.start)
 """Where the two rotation blocks (camera attitude, Manhattan frame) of the error state start (Python
 ints: compile-time constants in the kernels); the reset acts on them alone."""
-_TH_AND_MF = np.stack([np.arange(N_STATE)[TH], np.arange(N_STATE)[MF]])
-"""Indices that gather the two rotation blocks of the error state as a (2, 3) stack."""
 ORTHONORMALISE_EVERY = 16
 """Products (integration chunks and update corrections) between re-orthonormalisations of R_wc and
 R_wm: rounding drift grows by ~1e-16 per product, far below anything that matters in 16."""
@@ -50,16 +47,3 @@ def reset_jacobian(dx, with_manhattan):
         G[offset + 2, offset] += b
         G[offset + 2, offset + 1] -= a
     return G
-
-
-def inject(R_wc, R_wm, b_c, omega_c, dx: np.ndarray, with_manhattan: bool, with_rate: bool):
-    """The nominal state `(R_wc (3, 3), R_wm (3, 3), b_c (3,) rad/s, omega_c (3,) rad/s)` corrected by
-    the error estimate `dx` (12,) (right perturbations): the Manhattan block only `with_manhattan`
-    (once that frame is known), the rate only `with_rate` (constant-rate model)."""
-    if with_manhattan:
-        dR_c, dR_m = exp_so3(dx[_TH_AND_MF])
-        R_wm = R_wm @ dR_m
-    else:
-        dR_c = exp_so3(dx[TH])
-    omega_c = omega_c + dx[RATE] if with_rate else omega_c
-    return R_wc @ dR_c, R_wm, b_c + dx[BG], omega_c

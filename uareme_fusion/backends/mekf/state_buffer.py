@@ -7,7 +7,8 @@ array, and nothing is packed or unpacked between the two paths.
 
 Layout (offsets `X_*`, shapes in `FIELDS`): `s` (S_SIZE,) scalars indexed by `S_*`, `R_wc` (3, 3),
 `R_wm` (3, 3), `b_c` (3,) rad/s, `P` (12, 12), `last_gyro` (3,) rad/s (the previous gyro reading,
-camera frame), `accel_sum` (3,) m/s, `lp` (2, 3) m/s^2, `lp_J` (2, 3, 3), `rest_sums` (8,). Units and
+camera frame), `accel_sum` (3,) m/s, `lp` (2, 3) m/s^2, `lp_J` (2, 3, 3), `rest_sums` (8,), `omega_c`
+(3,) rad/s (the visual-only model's rate). Units and
 meanings as in `filter.Mekf` and `accel.AccelPeriod`. A scalar that may be absent (`t_state`,
 `rest_since_s`, `t_visual_s`) is NaN while it is None.
 """
@@ -27,20 +28,23 @@ import numpy as np
 # (`source_trust.py`: running weight, count, mean innovation (3), mean variance, the share, mean square,
 # persistent variance, frames seen), each source's tilt information per second (accelerometer, camera),
 # the accelerometer's variance rate, and the trust's block moments (the open block's sum (3) and frames,
-# the running mean (3) and mean square of the block means, their weight and count).
+# the running mean (3) and mean square of the block means, their weight and count); whether frames are
+# extrapolated past an IMU gap (0/1) and the IMU gaps the kernels count (harvested as the others).
 S_T_STATE, S_ACCEL_TIME, S_ACCEL_ELAPSED, S_PRODUCTS, S_LP_VALID, S_REST_N, S_REST_SINCE = range(7)
 S_ACCEL_UPDATES, S_ACCEL_SKIPPED, S_ACCEL_DOWNWEIGHTED, S_REST_UPDATES, S_ACCEL_DUE, S_NONFINITE = range(7, 13)
 S_IMU_T, S_T_VISUAL, S_REJECTIONS, S_VISUAL_UPDATES, S_VISUAL_REJECTED = range(13, 18)
 S_TRUST_WEIGHT, S_TRUST_COUNT, S_TRUST_MEAN, S_TRUST_VAR, S_VISUAL_SCALE = 18, 19, 20, 23, 24
 S_ACCEL_INFO_RATE, S_VISUAL_INFO_RATE, S_TRUST_SQUARE, S_TRUST_PERSISTENT, S_ACCEL_VAR_RATE = 25, 26, 27, 28, 29
 S_TRUST_FRAMES, S_BLOCK_SUM, S_BLOCK_N, S_BLOCK_MEAN, S_BLOCK_SQUARE, S_BLOCK_WEIGHT, S_BLOCK_COUNT = 30, 31, 34, 35, 38, 39, 40
-S_SIZE = 41
+S_IN_GAP, S_IMU_GAPS = 41, 42
+S_SIZE = 43
 
 FIELDS = (("s", (S_SIZE,)), ("R_wc", (3, 3)), ("R_wm", (3, 3)), ("b_c", (3,)), ("P", (12, 12)),
-          ("last_gyro", (3,)), ("accel_sum", (3,)), ("lp", (2, 3)), ("lp_J", (2, 3, 3)), ("rest_sums", (8,)))
+          ("last_gyro", (3,)), ("accel_sum", (3,)), ("lp", (2, 3)), ("lp_J", (2, 3, 3)), ("rest_sums", (8,)),
+          ("omega_c", (3,)))
 """Fields of `x` in order, with their shapes."""
 _OFFSETS = np.cumsum([0] + [math.prod(shape) for _, shape in FIELDS]).tolist()
-X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACCEL_SUM, X_LP, X_LP_J, X_REST_SUMS, X_SIZE = _OFFSETS
+X_S, X_R_WC, X_R_WM, X_B_C, X_P, X_LAST_GYRO, X_ACCEL_SUM, X_LP, X_LP_J, X_REST_SUMS, X_OMEGA_C, X_SIZE = _OFFSETS
 """Where each field of `FIELDS` starts in `x` (Python ints: compile-time constants in the kernels), and its size."""
 
 

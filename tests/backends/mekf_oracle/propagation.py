@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...rotations import WORLD_UP, exp_so3
-from .state import BG, I3, N_STATE, RATE, TH
+from uareme_fusion.rotations import WORLD_UP, exp_so3
+from uareme_fusion.backends.mekf.state import BG, I3, N_STATE, RATE, TH
 
 
 def _block_pattern(*blocks: tuple[slice, slice]) -> np.ndarray:

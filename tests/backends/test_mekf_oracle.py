@@ -1,5 +1,7 @@
-"""The compiled IMU path of the EKF (issue 17) against the numpy/filterpy reference: same estimates
-on seeded streams, with frames, with bad samples, gaps and saturation; fallback without numba."""
+"""The EKF's kernels (the production filter) against the oracle (`mekf_oracle`: the numpy/scipy/filterpy
+reference filter, in the tests only): same estimates on seeded simulated streams, with frames, with bad
+samples, gaps and saturation, R_ci not identity, a time offset, visual only; the same functions as
+plain Python without numba or after a kernel failed to compile; the cache keyed by the sources."""
 
 from __future__ import annotations
 
@@ -11,16 +13,17 @@ import numpy as np
 import pytest
 
 from uareme_fusion import jit
-from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels, state, state_buffer
-from uareme_fusion.backends.mekf import compiled as mekf_compiled
+from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernel_update, kernels, state, state_buffer
 from uareme_fusion.config import load_config
 from uareme_fusion.rotations import angle_between, exp_so3
 from uareme_fusion.sim.imu import simulate_imu
 from uareme_fusion.sim.trajectory import make_trajectory
 from uareme_fusion.types import Status, VisualRotation
 
-needs_numba = pytest.mark.skipif(not mekf_compiled.kernels_available(),
-                                 reason="numba not installed: no compiled path")
+from mekf_oracle import OracleMekf  # tests/backends/mekf_oracle: pytest puts tests/backends on sys.path
+
+needs_numba = pytest.mark.skipif(not kernels.compiled_now(),
+                                 reason="numba not installed: the plain-Python kernels are too slow for these streams")
 
 
 def fresh_python(code: str, timeout_s: float) -> subprocess.CompletedProcess:
@@ -37,10 +40,10 @@ def stream(seed: int, duration_s: float = 30.0, rate_hz: float = 200.0):
     return traj, t, gyro + np.array([0.01, -0.02, 0.015]), accel  # a gyro bias to estimate
 
 
-def run(config: MekfConfig, t, gyro, accel, step: int, frames=None):
-    """Feed `step` samples per call (a frame after each call when `frames` gives R_cm(t)); returns
-    the filter and its estimates."""
-    filt = Mekf(config)
+def run(make, t, gyro, accel, step: int, frames=None):
+    """Feed `step` samples per call (a frame after each call when `frames` gives R_cm(t)) to the filter
+    `make()`; returns the filter and its estimates."""
+    filt = make()
     ests = []
     for i in range(0, t.size, step):
         filt.process_imu(t[i:i + step], gyro[i:i + step], accel[i:i + step])
@@ -69,7 +72,8 @@ def assert_same_filters(a: Mekf, b: Mekf, ests_a=(), ests_b=()):
 
 
 def both(config: MekfConfig):
-    return config.model_copy(update={"compiled": True}), config.model_copy(update={"compiled": False})
+    """The production filter and the oracle, as makers for `run`."""
+    return (lambda: Mekf(config)), (lambda: OracleMekf(config))
 
 
 @needs_numba
@@ -78,7 +82,7 @@ def test_both_paths_re_orthonormalise_after_the_same_products():
     the count wraps before `ORTHONORMALISE_EVERY` (it has wrapped many times here) and R_wc stays
     orthonormal to rounding."""
     _, t, gyro, accel = stream(0, duration_s=5.0)
-    compiled, reference = (Mekf(c) for c in both(load_config("imu_only", MekfConfig)))
+    compiled, reference = (make() for make in both(load_config("imu_only", MekfConfig)))
     counts = []
     for i in range(0, t.size, 7):
         for filt in (compiled, reference):
@@ -187,8 +191,8 @@ def test_bad_samples_gaps_and_saturation_same_estimates_counts_and_flags():
     t, gyro, accel = t[keep], gyro[keep], accel[keep]
     cfg = load_config("imu_only", MekfConfig).model_copy(update={"record_imu_estimates": True})
     results = []
-    for c in both(cfg):
-        filt = Mekf(c)
+    for make in both(cfg):
+        filt = make()
         flags = Status.OK
         for i in range(0, t.size, 20):
             filt.process_imu(t[i:i + 20], gyro[i:i + 20], accel[i:i + 20])
@@ -203,7 +207,7 @@ def test_bad_samples_gaps_and_saturation_same_estimates_counts_and_flags():
     assert_same_filters(a, b)
 
 
-def test_without_numba_the_reference_runs_after_one_warning_line():
+def test_without_numba_the_plain_python_kernels_run_after_one_warning_line():
     code = ("import sys, warnings; sys.modules['numba'] = None\n"
             "warnings.simplefilter('always')\n"
             "import numpy as np\n"
@@ -227,7 +231,7 @@ def test_frame_batch_held_for_its_frame_is_a_copy_and_counted_when_read():
     traj, t, gyro, accel = stream(3, duration_s=6.0)
     gyro = gyro.copy()
     gyro[400, 1] = np.nan
-    filt, ref = (Mekf(c) for c in both(load_config("handheld", MekfConfig)))
+    filt, ref = (make() for make in both(load_config("handheld", MekfConfig)))
     buf_t, buf_g, buf_a = np.empty(7), np.empty((7, 3)), np.empty((7, 3))
     for i in range(0, t.size - 7, 7):  # one reused buffer; a frame after one batch or after two
         buf_t[:], buf_g[:], buf_a[:] = t[i:i + 7], gyro[i:i + 7], accel[i:i + 7]
@@ -253,7 +257,7 @@ def test_update_due_at_a_frame_same_as_reference_with_or_without_a_rotation():
     traj, t, gyro, accel = stream(6, duration_s=10.0)
     rng = np.random.default_rng(8)
     deltas = rng.normal(scale=0.01, size=(t.size, 3))
-    filt, ref = (Mekf(c) for c in both(load_config("handheld", MekfConfig)))
+    filt, ref = (make() for make in both(load_config("handheld", MekfConfig)))
     ests = ([], [])
     waiting = 0
     for k, i in enumerate(range(0, t.size - 7, 7)):
@@ -279,67 +283,34 @@ def _broken_kernel(*args):
 
 
 @needs_numba
-def test_kernels_that_fail_to_compile_fall_back_to_the_reference_after_one_warning(monkeypatch):
-    """numba compiles a kernel at its first call. Should that fail (here every kernel raises as a
-    failed compilation does), the filter warns once and goes on on the reference path with the
-    reference's estimates, counts and flags, and later filters start on it; nothing crashes."""
+def test_kernels_that_fail_to_compile_run_as_plain_python_after_one_warning(monkeypatch):
+    """numba compiles a kernel at its first call. Should that fail (here every driver raises as a
+    failed compilation does), the filter warns once and goes on with the same functions as plain
+    Python, with the same estimates, counts and flags; nothing crashes."""
     from uareme_fusion.backends import imu_stream
 
-    for name in ("KERNEL", "ACCEL_UPDATE", "SEGMENTS", "STAGE", "INTEGRATE_STAGED", "VISUAL_UPDATE"):
-        monkeypatch.setattr(kernels, name, _broken_kernel)  # restored after the test, as is what follows
-    monkeypatch.setattr(imu_stream, "_ROWS_IF_CLEAN", _broken_kernel)
-    monkeypatch.setattr(jit, "_warned", False)
-    monkeypatch.delenv("UAREME_NO_JIT", raising=False)
-    traj, t, gyro, accel = stream(9, duration_s=4.0)
+    traj, t, gyro, accel = stream(9, duration_s=2.0)
 
     def frames(t_f, filt):
         R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0]
         return VisualRotation(R_cm=R_cm, cov=1e-4 * np.eye(3), cost=0.01, iterations=3, n_valid=100)
 
-    cfg_compiled, cfg_reference = both(load_config("handheld", MekfConfig))
-    with pytest.warns(RuntimeWarning) as caught:
-        a, ea = run(cfg_compiled, t, gyro, accel, 7, frames)
-    assert sum("compiled kernels unavailable" in str(w.message) for w in caught) == 1
-    b, eb = run(cfg_reference, t, gyro, accel, 7, frames)
-    assert not a.compiled and not Mekf(cfg_compiled).compiled and a.counters["visual_updates"] > 50
-    assert_same_filters(a, b, ea, eb)
-
-
-def test_a_kernel_that_fails_in_the_warm_up_moves_the_filter_to_the_reference(monkeypatch):
-    """`warm_up` runs the kernels on a scratch filter; should one fail there, the filter that asked is on
-    the reference path before its first sample (one warning line), not only the scratch one."""
-    from uareme_fusion.backends.mekf import filter as mekf_filter
-
-    for name in ("KERNEL", "ACCEL_UPDATE", "SEGMENTS", "STAGE", "INTEGRATE_STAGED", "VISUAL_UPDATE"):
-        monkeypatch.setattr(kernels, name, _broken_kernel)  # restored after the test, as is what follows
-    monkeypatch.setattr(mekf_filter, "_KERNELS_LOADED", set())
+    cfg = load_config("handheld", MekfConfig)
+    a, ea = run(lambda: Mekf(cfg), t, gyro, accel, 7, frames)  # compiled, for the figures
+    for name in kernels.DRIVERS:
+        monkeypatch.setattr(kernels, name, _broken_kernel)  # restored after the test
+    monkeypatch.setattr(imu_stream, "_ROWS_IF_CLEAN", _broken_kernel)
     monkeypatch.setattr(jit, "_warned", False)
     monkeypatch.delenv("UAREME_NO_JIT", raising=False)
-    filt = Mekf("handheld")
-    assert filt.compiled
-    with pytest.warns(RuntimeWarning) as caught:
-        filt.warm_up(has_imu=True, has_frames=True)
-    assert sum("compiled kernels unavailable" in str(w.message) for w in caught) == 1
-    assert not filt.compiled
-    # Its IMU batches, accelerometer and visual updates run on the reference path (every kernel still
-    # raises, and a second warning would fail here), with the reference filter's estimates.
-    traj, t, gyro, accel = stream(10, duration_s=2.0)
-
-    def frames(t_f, _filt):
-        R_cm = traj.sample(np.array([t_f])).R_wc[0].T @ traj.R_wm(np.array([t_f]))[0]
-        return VisualRotation(R_cm=R_cm, cov=1e-4 * np.eye(3), cost=0.01, iterations=3, n_valid=100)
-
-    reference = Mekf(load_config("handheld", MekfConfig).model_copy(update={"compiled": False}))
-    ests, ests_reference = [], []
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        for i in range(0, t.size, 7):
-            for one, out in ((filt, ests), (reference, ests_reference)):
-                one.process_imu(t[i:i + 7], gyro[i:i + 7], accel[i:i + 7])
-                t_f = float(t[min(i + 7, t.size) - 1]) + 0.001
-                out.append(one.process_frame(t_f, frames(t_f, one)))
-    assert filt.counters["visual_updates"] > 20
-    assert_same_filters(filt, reference, ests, ests_reference)
+    try:
+        with pytest.warns(RuntimeWarning) as caught:
+            b, eb = run(lambda: Mekf(cfg), t, gyro, accel, 7, frames)
+        assert sum("compiled kernels unavailable" in str(w.message) for w in caught) == 1
+        assert not kernels.compiled_now() and b.counters["visual_updates"] > 20
+    finally:
+        monkeypatch.undo()
+        kernels._compile()  # the compiled kernels back for the other tests (loaded from the cache)
+    assert_same_filters(a, b, ea, eb)
 
 
 def _doubled(x):
@@ -364,39 +335,31 @@ def test_a_kernel_compiles_where_no_cache_folder_is_writable(tmp_path, monkeypat
     assert not_a_folder.is_file() and list(tmp_path.iterdir()) == [not_a_folder]  # and nothing was cached
 
 
-def test_kernel_caches_older_than_any_module_they_draw_on_are_dropped(tmp_path):
-    """numba checks a cache against its own source only: `jit.drop_stale_caches` deletes the cache
-    files beside the listed modules that are older than the newest of them (an edited state-buffer
-    layout must not leave kernels with the old one), and keeps newer ones and other files."""
-    import os
-
-    kernels_py, layout_py = tmp_path / "kernels.py", tmp_path / "sub" / "layout.py"
-    layout_py.parent.mkdir()
-    kernels_py.write_text("")
-    layout_py.write_text("")
-    cache, other_cache = tmp_path / "__pycache__", tmp_path / "sub" / "__pycache__"
-    cache.mkdir()
-    other_cache.mkdir()
-    old = [cache / "kernels.f-1.py311.nbi", cache / "kernels.f-1.py311.1.nbc", other_cache / "layout.g-2.py311.nbi"]
-    kept = [cache / "kernels.h-3.py311.nbi", cache / "kernels.cpython-311.pyc"]
-    for path in old + kept:
-        path.write_text("")
-    for path in old + [kept[1]]:
-        os.utime(path, (1_000, 1_000))
-    os.utime(kernels_py, (2_000, 2_000))
-    os.utime(layout_py, (3_000, 3_000))  # the layout edited after the caches were written
-    os.utime(kept[0], (4_000, 4_000))
-    jit.drop_stale_caches([kernels_py, layout_py])
-    assert not any(path.exists() for path in old) and all(path.exists() for path in kept)
+def test_a_kernel_cache_is_keyed_by_the_sources_it_draws_on(tmp_path):
+    """numba checks a cache against its own source only: `jit.key_cache_by_sources` keys it by the
+    contents of every listed module instead, so an edit to any of them (a state-buffer layout) gives
+    another key, and no file is deleted on the way."""
+    kernels_py, layout_py = tmp_path / "kernels.py", tmp_path / "layout.py"
+    kernels_py.write_text("x = 1\n")
+    layout_py.write_text("N = 3\n")
+    before = jit.sources_stamp([kernels_py, layout_py])
+    assert jit.sources_stamp([layout_py, kernels_py]) == before  # the order does not matter
+    layout_py.write_text("N = 4\n")
+    jit._STAMPS.clear()  # a new process
+    assert jit.sources_stamp([kernels_py, layout_py]) != before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kernels.py", "layout.py"]
+    if kernels.compiled_now():  # the kernels' dispatchers carry the stamp of their sources
+        stamp = jit.sources_stamp(kernels._sources())
+        assert kernels.INTEGRATE._cache._cache_file._source_stamp == stamp
 
 
 def test_kernels_see_the_fields_that_python_sees():
-    """`kernels.state_views` (the kernels' fields of the state buffer) and `state_buffer.field_views`
+    """`kernel_update.state_views` (the kernels' fields of the state buffer) and `state_buffer.field_views`
     (Python's) are the same views of `x`, field by field, in the order of `state_buffer.FIELDS`."""
     x = state_buffer.new_state_buffer()
     x[:] = np.arange(x.size)
     python_views = state_buffer.field_views(x)
-    kernel_views = getattr(kernels.state_views, "py_func", kernels.state_views)(x)
+    kernel_views = getattr(kernel_update.state_views, "py_func", kernel_update.state_views)(x)
     assert len(kernel_views) == len(state_buffer.FIELDS)
     for view, (name, shape) in zip(kernel_views, state_buffer.FIELDS):
         assert view.shape == shape and np.shares_memory(view, x)
@@ -411,10 +374,11 @@ def test_warm_up_loads_every_kernel_a_filter_with_an_imu_calls():
     mode, it loads nothing."""
     code = ("from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernels\n"
             "from uareme_fusion.backends import imu_stream\n"
-            "names = ('KERNEL', 'ACCEL_UPDATE', 'SEGMENTS', 'STAGE', 'INTEGRATE_STAGED', 'VISUAL_UPDATE')\n"
+            "names = ('INTEGRATE', 'ACCEL_UPDATE', 'SEGMENTS', 'STAGE', 'INTEGRATE_STAGED', 'VISUAL_UPDATE',"
+            " 'VISUAL_DISTANCE')\n"
             "loaded = lambda: ''.join(str(len(getattr(kernels, n).signatures)) for n in names)\n"
             "Mekf('handheld').warm_up(False, True); Mekf(MekfConfig(mode='visual_only')).warm_up(True, True)\n"
             "print(loaded()); Mekf('imu_only').warm_up(True, False); print(loaded())\n"
             "Mekf('handheld').warm_up(True, True); print(loaded(), len(imu_stream._ROWS_IF_CLEAN.signatures))\n")
     # IMU-only: integrate, segments
-    assert fresh_python(code, timeout_s=300).stdout.split() == ["000000", "101000", "111111", "1"]
+    assert fresh_python(code, timeout_s=300).stdout.split() == ["0000000", "1010000", "1111111", "1"]

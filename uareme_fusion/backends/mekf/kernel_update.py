@@ -1,0 +1,255 @@
+"""The EKF's updates on the state buffer: the Joseph-form Kalman update with injection and reset, and
+the accelerometer period's zero-rate and gravity updates (numba-compiled by `kernels`, plain Python
+without numba). Measurement models are those of `measurements`; the reset that of `state`.
+
+Conventions as in `mekf`: right perturbations, error state `[dtheta_c, db_c, dtheta_m, domega_c]`,
+`R_wc` camera to world (z up), rates in rad/s in the camera frame, times in s. `p` is the filter's
+parameter record (`parameters.py`), `x` its state buffer (`state_buffer.py`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import status_bits
+from .matrix3 import exp3_into, matmul3_into
+from .measurements import gravity_model, zero_rate_model
+from .source_trust import note_accel_information
+from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
+from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_ELAPSED, S_ACCEL_SKIPPED, S_ACCEL_TIME, S_ACCEL_UPDATES,
+                           S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE, S_REST_UPDATES, S_T_STATE,
+                           X_ACCEL_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_OMEGA_C, X_P, X_REST_SUMS, X_R_WC, X_R_WM,
+                           X_S, X_SIZE)
+
+DOWNWEIGHTED, NONFINITE = status_bits.ACCEL_DOWNWEIGHTED, status_bits.UPDATE_NONFINITE
+"""An accelerometer update was down-weighted; an update's result was not finite (and dropped): the
+bits of the `Status` flags that say so, so that a result is or-ed into the filter's flags as it is."""
+
+
+def state_views(x):
+    """The fields of the state buffer `x` (`state_buffer.py`) as views: (s, R_wc, R_wm, b_c, P,
+    last_gyro, accel_sum, lp, lp_J, rest_sums, omega_c)."""
+    return (x[X_S:X_R_WC], x[X_R_WC:X_R_WM].reshape((3, 3)), x[X_R_WM:X_B_C].reshape((3, 3)), x[X_B_C:X_P],
+            x[X_P:X_LAST_GYRO].reshape((12, 12)), x[X_LAST_GYRO:X_ACCEL_SUM], x[X_ACCEL_SUM:X_LP],
+            x[X_LP:X_LP_J].reshape((2, 3)), x[X_LP_J:X_REST_SUMS].reshape((2, 3, 3)), x[X_REST_SUMS:X_OMEGA_C],
+            x[X_OMEGA_C:X_SIZE])
+
+
+def accel_measurement(accel_c, T, R_wc, lp_J1, use_lp_J, p):
+    """`measurements.gravity_model` with the parameters of `p`."""
+    return gravity_model(accel_c, T, R_wc, lp_J1, use_lp_J, p.gravity_m_s2, p.accel_tilt_noise, p.accel_norm_scale,
+                         p.accel_innovation_scale_rad, p.accel_downweight_flag_ratio)
+
+
+def zero_rate_measurement(rest_sums, rest_n, T, b_c, p):
+    """`measurements.zero_rate_model` with the parameters of `p`."""
+    return zero_rate_model(rest_sums, rest_n, T, b_c, p.q_gyro, p.rest_gyro_max_rad_s, p.rest_accel_max_m_s2,
+                           p.rest_rate_std_rad_s)
+
+
+def matmul_into(A, B, out):
+    """`out = A @ B` by scalar loops (small matrices: no BLAS call), summed in index order."""
+    for i in range(A.shape[0]):
+        for j in range(B.shape[1]):
+            acc = 0.0
+            for k in range(A.shape[1]):
+                acc += A[i, k] * B[k, j]
+            out[i, j] = acc
+    return out
+
+
+def solve_into(A, B, X):
+    """`X = A^-1 B` for `A` (m, m) and `B` (m, n), by Gauss-Jordan elimination with partial pivoting on
+    copies (m is at most 9 here: no LAPACK call); a singular or non-finite `A` gives non-finite `X`
+    instead of an exception, as the filter checks its results for that."""
+    m, n = A.shape[0], B.shape[1]
+    M = A.copy()
+    X[:, :] = B
+    for col in range(m):
+        pivot = col
+        for row in range(col + 1, m):
+            if abs(M[row, col]) > abs(M[pivot, col]):
+                pivot = row
+        if pivot != col:
+            for j in range(m):
+                M[col, j], M[pivot, j] = M[pivot, j], M[col, j]
+            for j in range(n):
+                X[col, j], X[pivot, j] = X[pivot, j], X[col, j]
+        inv = 1.0 / M[col, col]
+        for j in range(m):
+            M[col, j] *= inv
+        for j in range(n):
+            X[col, j] *= inv
+        for row in range(m):
+            f = M[row, col]
+            if row != col and f != 0.0:
+                for j in range(m):
+                    M[row, j] -= f * M[col, j]
+                for j in range(n):
+                    X[row, j] -= f * X[col, j]
+    return X
+
+
+def kalman_update(x, residual, R, H, p):
+    """Joseph-form update with the measurement `residual` (m,), noise `R` (m, m) and `H` (m, 12), then
+    injection into the nominal state and the reset of the error , all in
+    place; nothing changes but `s[S_NONFINITE]` when the result is not finite.
+    Scalar loops that use the structure (a BLAS call per small product costs more than the product,
+    and more still out of the caches, after a solver call): the Joseph form expanded,
+    `(I - K H) P (I - K H)^T + K R K^T = P - K (P H^T)^T - (P H^T) K^T + K S K^T` with `S` the
+    innovation covariance, and the reset `G P G^T` on the rotation blocks only."""
+    s, P = x[X_S:X_R_WC], x[X_P:X_LAST_GYRO].reshape((12, 12))
+    m = residual.shape[0]
+    PHt = matmul_into(P, H.T, np.empty((12, m)))
+    S = matmul_into(H, PHt, np.empty((m, m)))
+    for i in range(m):
+        for j in range(m):
+            S[i, j] += R[i, j]
+    K = solve_into(S, PHt.T, np.empty((m, 12))).T  # S symmetric: K^T = S^-1 (P H^T)^T
+    KS = matmul_into(K, S, np.empty((12, m)))
+    dx = np.zeros(12)
+    for i in range(12):
+        for k in range(m):
+            dx[i] += K[i, k] * residual[k]
+    P_new = np.empty((12, 12))
+    finite = True
+    for i in range(12):
+        finite &= abs(dx[i]) < np.inf
+        for j in range(12):
+            v = P[i, j]
+            for k in range(m):
+                v += -K[i, k] * PHt[j, k] - PHt[i, k] * K[j, k] + KS[i, k] * K[j, k]
+            P_new[i, j] = v
+            finite &= abs(v) < np.inf
+    if not finite:
+        s[S_NONFINITE] += 1
+        return
+    inject_and_reset(x, dx, P_new, p)
+
+
+def isotropic_update(x, residual, var, H, p):
+    """`kalman_update` of a 3-row measurement with isotropic noise `var`."""
+    kalman_update(x, residual, var * np.eye(3), H, p)
+
+
+def inject_and_reset(x, dx, P_new, p):
+    """After an update with error estimate `dx` (12,) and covariance `P_new` (12, 12): `dx` injected
+    into the nominal state (the rate only with `p.estimates_rate`, the Manhattan frame once known) and
+    the low-pass stages, and `P` set to the reset `G P_new G^T`, symmetrised, all in place."""
+    s, R_wc, R_wm, b_c, P, _, _, lp, lp_J, _, omega_c = state_views(x)
+    with_manhattan = p.manhattan_initialised > 0
+    G = reset_jacobian(dx, with_manhattan)
+    if with_manhattan:
+        R_wm[:, :] = matmul3_into(R_wm, exp3_into(dx[6], dx[7], dx[8], np.empty((3, 3))), np.empty((3, 3)))
+    R_wc[:, :] = matmul3_into(R_wc, exp3_into(dx[0], dx[1], dx[2], np.empty((3, 3))), np.empty((3, 3)))
+    s[S_PRODUCTS] += 1
+    if s[S_PRODUCTS] >= p.orthonormalise_every:
+        R_wc[:, :] = orthonormal(R_wc)
+        R_wm[:, :] = orthonormal(R_wm)
+        s[S_PRODUCTS] = 0
+    for i in range(3):
+        b_c[i] += dx[3 + i]
+    if p.estimates_rate > 0:
+        for i in range(3):
+            omega_c[i] += dx[9 + i]
+    if s[S_LP_VALID] > 0:
+        for st in range(2):
+            for i in range(3):
+                lp[st, i] += lp_J[st, i, 0] * dx[3] + lp_J[st, i, 1] * dx[4] + lp_J[st, i, 2] * dx[5]
+    # G is the identity but on the rotation blocks (`state.reset_jacobian`), the Manhattan one only
+    # `with_manhattan`.
+    GP = P_new.copy()  # G P_new: only the rotation blocks' rows change
+    n_blocks = 2 if with_manhattan else 1
+    for block in range(n_blocks):
+        o = ROTATION_BLOCKS[block]
+        for a in range(3):
+            for j in range(12):
+                GP[o + a, j] = (G[o + a, o] * P_new[o, j] + G[o + a, o + 1] * P_new[o + 1, j]
+                                + G[o + a, o + 2] * P_new[o + 2, j])
+    GPG = GP.copy()  # (G P_new) G^T: only their columns change
+    for block in range(n_blocks):
+        o = ROTATION_BLOCKS[block]
+        for i in range(12):
+            for b in range(3):
+                GPG[i, o + b] = GP[i, o] * G[o + b, o] + GP[i, o + 1] * G[o + b, o + 1] + GP[i, o + 2] * G[o + b, o + 2]
+    for i in range(12):
+        for j in range(12):
+            P[i, j] = 0.5 * (GPG[i, j] + GPG[j, i])
+
+
+def accel_rows(x, p):
+    """The end of an accelerometer period : the zero-rate update when at rest,
+    applied in place, then the (low-passed) accelerometer direction's measurement. Consumes the
+    period. Returns (ok, residual (3,), variance, H (3, 12), downweighted); `ok` False (no
+    measurement) near free fall."""
+    s, R_wc, _, b_c, _, _, accel_sum, lp, lp_J, rest_sums, _ = state_views(x)
+    T = s[S_ACCEL_TIME]
+    accel_c = accel_sum / T if T > 0 else accel_sum.copy()
+    accel_sum[:] = 0.0
+    s[S_ACCEL_TIME] = 0.0
+    s[S_ACCEL_ELAPSED] = 0.0
+    if p.rest_gyro_max_rad_s > 0:
+        n = s[S_REST_N]
+        if n >= 2 and T > 0:
+            at_rest, r, var, H = zero_rate_measurement(rest_sums, n, T, b_c, p)
+            if not at_rest:
+                s[S_REST_SINCE] = np.nan
+            else:
+                if math.isnan(s[S_REST_SINCE]):
+                    s[S_REST_SINCE] = s[S_T_STATE] - T
+                if s[S_T_STATE] - s[S_REST_SINCE] >= p.rest_min_duration_s:
+                    isotropic_update(x, r, var, H, p)
+                    s[S_REST_UPDATES] += 1
+        rest_sums[:] = 0.0
+        s[S_REST_N] = 0
+    tau = p.lowpass_tau_s
+    if tau > 0 and T > 0:
+        if s[S_LP_VALID] == 0:
+            lp[0], lp[1] = accel_c, accel_c
+            lp_J[:] = 0.0
+            s[S_LP_VALID] = 1
+        else:
+            alpha = 1.0 - math.exp(-T / tau)
+            lp[0] += alpha * (accel_c - lp[0])
+            lp[1] += alpha * (lp[0] - lp[1])
+            lp_J[0] *= 1.0 - alpha
+            lp_J[1] += alpha * (lp_J[0] - lp_J[1])
+        accel_c = lp[1].copy()
+    ok, r, var, H, downweighted = accel_measurement(accel_c, T, R_wc, lp_J[1], tau > 0, p)
+    if not ok:
+        s[S_ACCEL_SKIPPED] += 1
+        return False, r, var, H, False
+    note_accel_information(s, var, T)
+    if downweighted:
+        s[S_ACCEL_DOWNWEIGHTED] += 1
+    s[S_ACCEL_UPDATES] += 1
+    return True, r, var, H, downweighted
+
+
+def accel_and_rest_update(x, p):
+    """The update at the end of an accelerometer period , in place:
+    `accel_rows`, then its measurement's update. Returns whether it was down-weighted."""
+    ok, r, var, H, downweighted = accel_rows(x, p)
+    if ok:
+        isotropic_update(x, r, var, H, p)
+    return downweighted
+
+
+def accel_update_in_place(x, params):
+    """`accel_and_rest_update` on the state buffer `x`, in place: the `DOWNWEIGHTED` | `NONFINITE`
+    bits of what happened."""
+    p = params[0]
+    nonfinite_before = x[X_S + S_NONFINITE]
+    downweighted = accel_and_rest_update(x, p)
+    return (DOWNWEIGHTED if downweighted else 0) + (NONFINITE if x[X_S + S_NONFINITE] > nonfinite_before else 0)
+
+
+def update_in_place(x, residual, R, H, params):
+    """`kalman_update` of one measurement (`residual` (m,), `R` (m, m), `H` (m, 12)) on the state
+    buffer `x`, for the rows the filter builds in Python (the gravity of an accelerometer without
+    gyro): the `NONFINITE` bit when its result was dropped."""
+    nonfinite_before = x[X_S + S_NONFINITE]
+    kalman_update(x, residual, R, H, params[0])
+    return NONFINITE if x[X_S + S_NONFINITE] > nonfinite_before else 0
