@@ -115,3 +115,19 @@ def test_auto_falls_back_to_torch_where_the_export_cannot_be_made(tmp_path, monk
             LearnedNormals(config=LearnedNormalsConfig(engine="onnx"))  # asked for by name: the error is shown
     finally:
         learned.shipped_onnx.cache_clear()
+
+
+def test_a_session_built_for_the_run_size_gives_the_free_sessions_normals():
+    """`LearnedNormals` runs the shipped network at one size (160x120): its session is built for it
+    (ONNX Runtime's free-dimension overrides), with the free session's outputs, and refuses another size."""
+    from uareme_fusion.normals import onnx_model
+
+    free = onnx_model.shipped_onnx_model(DEFAULT_WEIGHTS)
+    sized = onnx_model.shipped_onnx_model(DEFAULT_WEIGHTS, run_size_hw=(120, 160))
+    assert free.run_size_hw is None and sized.run_size_hw == (120, 160)
+    assert free.input_size is None and sized.input_size is None  # the file leaves H and W free
+    x = np.random.default_rng(0).random((1, 3, 120, 160), np.float32)
+    assert np.abs(sized(x) - free(x)).max() < 1e-5
+    with pytest.raises(Exception, match="dimensions"):
+        sized(np.full((1, 3, 96, 128), 0.5, np.float32))
+    assert LearnedNormals(config=LearnedNormalsConfig(engine="onnx")).model.run_size_hw == (120, 160)

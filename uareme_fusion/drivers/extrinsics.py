@@ -85,11 +85,16 @@ def axis_letters_rotation(letters: str, option: str = OPTION) -> np.ndarray:
 
 
 def axis_letters(R_ci: np.ndarray) -> tuple[str, float]:
-    """The axis letters of the signed permutation nearest `R_ci`, and the angle between them, degrees."""
-    R_ci = np.asarray(R_ci, float)
-    angles = {code: _angle_deg(axis_letters_rotation(code), R_ci) for code in RIGHT_HANDED_CODES}
-    letters = min(angles, key=angles.get)
-    return letters, angles[letters]
+    """The axis letters of the signed permutation nearest `R_ci`, and the angle between them, degrees
+    (the first code in `RIGHT_HANDED_CODES` on a tie). All 24 angles in one scipy call: a run's
+    IMU-rotation check asks this every few frame pairs."""
+    angles_deg = np.degrees(Rotation.from_matrix(_CODE_ROTATIONS_T @ np.asarray(R_ci, float)).magnitude())
+    best = int(np.argmin(angles_deg))
+    return RIGHT_HANDED_CODES[best], float(angles_deg[best])
+
+
+_CODE_ROTATIONS_T = np.stack([axis_letters_rotation(code).T for code in RIGHT_HANDED_CODES])
+"""(24, 3, 3): the transposed `R_ci` of each code in `RIGHT_HANDED_CODES`, in order."""
 
 
 def convention_name(letters: str) -> str:
@@ -129,7 +134,3 @@ def with_imu_geometry(source, R_ci: np.ndarray | None = None, imu_time_offset_s:
     if changes:
         source.info = dataclasses.replace(source.info, **changes)
     return source
-
-
-def _angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
-    return float(np.degrees(Rotation.from_matrix(R_a.T @ R_b).magnitude()))

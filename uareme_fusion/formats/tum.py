@@ -193,7 +193,7 @@ class TumSequence:
         if self.depth_paths[i] is not None:
             raw = read_depth_png(self.depth_paths[i], 1.0, expected_shape=bgr.shape[:2])  # stored units
             depth = raw / np.float32(self.depth_scale)
-        return Frame(float(self.t_s[i]), bgr[..., ::-1].copy(), depth, self.K, i)
+        return Frame(float(self.t_s[i]), cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), depth, self.K, i)
 
     def frames(self) -> Iterator[Frame]:
         for i in range(len(self)):

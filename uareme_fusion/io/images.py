@@ -72,10 +72,43 @@ def image_size(path: str | Path) -> tuple[int, int] | None:
 EXIF_ORIENTATION_TAG = 0x0112
 
 
+_PNG_EXIF_TEXT_KEYWORDS = (b"Raw profile type exif", b"XML:com.adobe.xmp")
+"""Keywords of the PNG text chunks (tEXt, zTXt, iTXt) in which Pillow also finds an orientation."""
+
+
+def png_without_exif(path: str | Path) -> bool:
+    """True when `path` is a PNG none of whose chunks can hold an orientation for Pillow (an eXIf chunk,
+    or a text chunk named in `_PNG_EXIF_TEXT_KEYWORDS`), read from the chunk headers alone; False for
+    another format, such a chunk, or a file that ends before its IEND chunk. Pillow decodes a whole PNG
+    to look for EXIF after the pixels (3.8 ms of CPU per 640x480 depth map, as much as the decode itself)."""
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(8) != _PNG_SIGNATURE:
+                return False
+            while len(header := fh.read(8)) == 8:
+                length, kind = struct.unpack(">I4s", header)
+                if kind == b"IEND":
+                    return True
+                if kind == b"eXIf":
+                    return False
+                skip = length + 4  # the data and its CRC
+                if kind in (b"tEXt", b"zTXt", b"iTXt"):
+                    keyword = fh.read(min(length, 80)).split(b"\0", 1)[0]
+                    if keyword in _PNG_EXIF_TEXT_KEYWORDS:
+                        return False
+                    skip -= min(length, 80)
+                fh.seek(skip, 1)
+    except OSError:
+        pass
+    return False
+
+
 def exif_orientation(path: str | Path) -> int:
     """The EXIF orientation code (1-8; 1 = as stored) of an image file, 1 when it has none."""
     from PIL import Image, UnidentifiedImageError
 
+    if png_without_exif(path):
+        return 1
     try:
         with Image.open(path) as image:
             code = int(image.getexif().get(EXIF_ORIENTATION_TAG, 1))
