@@ -62,6 +62,7 @@ from rich.table import Table
 from ..errors import InputError
 from ..formats.datasets import ICL_NUIM_K_OPENCV, ICSL_CORRIDOR_K, read_icsl_depth
 from ..formats.images import natural_key
+from ..pinhole import focal_from_hfov
 from ..rotations import log_so3, nearest_symmetric
 from ..scoring.horizon import horizon_error
 
@@ -93,12 +94,44 @@ def level_horizon(height: int, width: int) -> np.ndarray:
     return np.array([0.0, -1.0, (height - 1) / 2.0])
 
 
+LABEL_FOCAL_MAX_STD = 0.05
+"""ECD photos whose labels fix f to this relative std take part in the focal error (`label_focal`)."""
+LABEL_HORIZON_STD_PX = 3.0
+LABEL_ZENITH_STD_RAD = 0.0035
+"""The label errors assumed: the labelled horizon's height (px) and the labelled zenith's direction
+from the camera (rad, 0.2 deg: dozens of hand-labelled vertical lines)."""
+
+
+def label_focal(path: Path, height: int, width: int) -> tuple[float, float]:
+    """(f px, its relative std) that an ECD photo's labels imply: the labelled zenith z (NNNVP.mat) and
+    horizon (NNNhor.mat) are orthogonal VPs, f^2 = d_h d_z with d_h, d_z their distances from the image
+    centre (principal point there, square pixels). The std from `LABEL_HORIZON_STD_PX` on d_h and
+    `LABEL_ZENITH_STD_RAD` on z's direction (d_z moves by d_z^2 / f of it), halved, in quadrature; a
+    horizon through the centre or a zenith near infinity leaves f open."""
+    zenith = scipy.io.loadmat(path.with_name(path.stem + "VP.mat"))["zenith"].ravel()
+    line = scipy.io.loadmat(path.with_name(path.stem + "hor.mat"))["horizon"].ravel()
+    c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    d_h = abs(float(line[:2] @ c + line[2])) / float(np.hypot(*line[:2]))
+    d_z = float(np.linalg.norm(zenith - c))
+    f = math.sqrt(d_h * d_z)
+    return f, 0.5 * math.hypot(LABEL_HORIZON_STD_PX / max(d_h, 1e-9), LABEL_ZENITH_STD_RAD * d_z / f)
+
+
+def focal_errors(label: list[tuple[float, float]], estimated: list[float]) -> dict:
+    """Percent errors |f / f_label - 1| over the photos whose label fixes f (`LABEL_FOCAL_MAX_STD`):
+    their number, median and 90th percentile."""
+    e = np.array([100.0 * abs(f / fl - 1.0) for (fl, std), f in zip(label, estimated) if std <= LABEL_FOCAL_MAX_STD])
+    if not len(e):
+        return {"photos": 0, "median_percent": float("nan"), "p90_percent": float("nan")}
+    return {"photos": int(len(e)), "median_percent": float(np.median(e)), "p90_percent": float(np.percentile(e, 90))}
+
+
 def ecd_scores(folder: Path, analyser, limit: int | None = None) -> dict:
     """Horizon errors of `analyser` (an `ImageAnalyser`) and of the level camera on ECD."""
     images = sorted(folder.glob("*.jpg"))[:limit]
     if not images:
         raise InputError(f"{folder}: no ECD images (NNN.jpg with NNNhor.mat)")
-    est, level, hfov, sources, ms, cpu_ms = [], [], [], [], [], []
+    est, level, hfov, sources, ms, cpu_ms, f_label, f_est, f_assumed = [], [], [], [], [], [], [], [], []
     for path in images:
         truth = scipy.io.loadmat(path.with_name(path.stem + "hor.mat"))["horizon"].ravel()
         t0, c0 = time.perf_counter(), time.process_time()
@@ -110,7 +143,11 @@ def ecd_scores(folder: Path, analyser, limit: int | None = None) -> dict:
         level.append(horizon_error(level_horizon(h, w), truth, h, w))
         hfov.append(result.focal.hfov_deg)
         sources.append(result.focal.source)
+        f_label.append(label_focal(path, h, w))
+        f_est.append(result.focal.f_px)
+        f_assumed.append(focal_from_hfov(w, analyser.focal_config.assumed_fov_deg))
     return {"images": len(images), "auc_percent": auc_percent(est), "level_auc_percent": auc_percent(level),
+            "focal_error": focal_errors(f_label, f_est), "assumed_focal_error": focal_errors(f_label, f_assumed),
             **parity_auc_percent([p.stem for p in images], est), "median_error": float(np.median(est)), "errors": est,
             "estimated_focal_fraction": float(np.mean([s == "estimated" for s in sources])),
             "median_hfov_deg": float(np.median(hfov)), "ms_per_image": float(np.median(ms)),
@@ -393,5 +430,10 @@ def _ecd_rows(table: Table, ecd: dict) -> None:
                   f"{ecd['auc_odd_percent']:.1f} % / {ecd['auc_even_percent']:.1f} %", "", "")
     table.add_row("ECD focal estimated / median HFOV", f"{100 * ecd['estimated_focal_fraction']:.0f} % / "
                   f"{ecd['median_hfov_deg']:.1f} deg", "", "")
+    fe, fa = ecd["focal_error"], ecd["assumed_focal_error"]
+    table.add_row(f"ECD focal error vs the labels' f ({fe['photos']} photos whose labelled zenith and horizon fix f "
+                  f"to {100 * LABEL_FOCAL_MAX_STD:.0f} %): median / 90th percentile",
+                  f"{fe['median_percent']:.1f} % / {fe['p90_percent']:.1f} %", "p90 <= 23.5 %",
+                  f"assumed FOV {fa['median_percent']:.1f} % / {fa['p90_percent']:.1f} %")
     table.add_row("ECD time per image (image, median): CPU / wall", f"{ecd['cpu_ms_per_image']:.0f} ms / "
                   f"{ecd['ms_per_image']:.0f} ms", "", CPU_TIME_NOTE)

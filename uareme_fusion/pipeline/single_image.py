@@ -29,12 +29,13 @@ from ..formats.images import IMAGE_SUFFIXES, images_in_folder, read_rgb
 from ..io.images import image_size, reduction_for
 from ..solver.line_detection import LineSegments, SegmentDetector
 from ..overlay import side_by_side
-from ..overlay.camera import DEFAULT_FOV_DEG, assumed_K, check_K
+from ..overlay.camera import DEFAULT_FOV_DEG, check_K
 from ..overlay.compose import draw_overlay
 from ..overlay.horizon import horizon_line
 from ..rotations import quat_xyzw
 from ..solver.atlanta import AtlantaHorizon, estimate_horizon
-from ..solver.focal import FocalConfig, FocalEstimate, solve_given_K, solve_with_focal, unknown_centre_floor
+from ..solver.focal import (FocalConfig, FocalEstimate, assumed_focal, closed_form_focal, solve_given_K,
+                            solve_with_focal, unknown_centre_floor)
 from ..solver.horizon_estimate import (HorizonKnownConfig, HorizonUncertainty, SkyVetoConfig, aligned_rotation,
                                       horizon_known, horizon_uncertainty, sky_and_segments, sky_decides,
                                       sky_start, up_covariance)
@@ -271,7 +272,7 @@ class ImageAnalyser:
         """The given intrinsics (in the analysed image's pixels), else the assumed field of view's K."""
         if given_K is not None:
             return FocalEstimate(given_K, "given", width=w, origin=self.camera.origin)
-        return FocalEstimate(assumed_K(h, w, self.focal_config.assumed_fov_deg), "assumed", width=w)
+        return assumed_focal(h, w, self.focal_config)
 
     def _sky_first(self, seen: "_Seen") -> tuple[VisualRotation, FocalEstimate] | None:
         """When the sky boundary sets up alone (the segments show no man-made verticals that could veto
@@ -319,6 +320,9 @@ class ImageAnalyser:
         else:
             _, up_c = up_candidate(visual.R_cm)
             atlanta = estimate_horizon(segments, focal.K, up_c) if segments is not None else None
+            if atlanta is not None and seen.given_K is None and not focal.origin:  # the image's own f
+                visual, focal = closed_form_focal(self.solver, seen.normal_map, segments, visual, focal, atlanta,
+                                                  self.focal_config)
             if atlanta is not None:
                 up_c = atlanta.up_c(focal.K)
         R_cm = aligned_rotation(visual.R_cm, up_c)

@@ -134,6 +134,9 @@ class AtlantaHorizon:
     """f from the zenith and the horizon, nan when the zenith is (near) infinity or inconsistent."""
     support: float
     """Share of the pair weight within the mode's +-3 sigma window."""
+    focal_std_px: float = float("nan")
+    """Std of `focal_px` (`focal_std`): the horizon's and the zenith's heights' relative stds, halved, in
+    quadrature (f^2 = -t v_z); nan with `focal_px`."""
 
     def up_c(self, K: np.ndarray) -> np.ndarray:
         """Unit up in the camera frame that puts the horizon `l ~ K^-T up` on this line."""
@@ -324,10 +327,20 @@ def estimate_horizon(segments: LineSegments, K: np.ndarray, up_c: np.ndarray,
     # Back to pixels: n . (x - c) / scale = t  <=>  n . x - (n . c + t scale) = 0, positive towards the sky.
     line = np.array([n[0], n[1], -(n @ c) - t * scale])
     zenith_px = np.array([zenith[0] * scale + c[0] * zenith[2], zenith[1] * scale + c[1] * zenith[2], zenith[2]])
-    focal = float("nan")
+    focal, focal_std = float("nan"), float("nan")
     if abs(zenith[2]) > 1e-12:
-        v_z = float(n @ zenith[:2] / zenith[2]) * scale
-        f2 = -t * scale * v_z
+        v_z = float(n @ zenith[:2] / zenith[2])
+        f2 = -t * v_z
         if f2 > 0 and n_vertical > 0:
-            focal = math.sqrt(f2)
-    return AtlantaHorizon(line, t_std * scale, zenith_px, float(n_vertical), focal, support)
+            focal = math.sqrt(f2) * scale
+            focal_std = focal * focal_std_fraction(t, t_std, v_z, zenith_cov, n)
+    return AtlantaHorizon(line, t_std * scale, zenith_px, float(n_vertical), focal, support, focal_std)
+
+
+def focal_std_fraction(t: float, t_std: float, v_z: float, zenith_cov: np.ndarray | None, n: np.ndarray) -> float:
+    """std(f) / f of f^2 = -t v_z (the closed form of two orthogonal VPs: the zenith at height v_z and the
+    horizon at height t, both along the image direction of up `n` from the principal point, scaled units):
+    half the relative stds of t and v_z in quadrature; v_z's from the zenith's 2x2 covariance (inf
+    without it)."""
+    v_std = math.sqrt(float(n @ zenith_cov @ n)) if zenith_cov is not None else float("inf")
+    return 0.5 * math.hypot(t_std / abs(t), v_std / abs(v_z))
