@@ -181,6 +181,9 @@ class _Recorded:
         self.results[Path(path).name] = result = self.analyser.analyse(path)
         return result
 
+    def __getattr__(self, name):  # the rest of the analyser as it is (`ecd_scores` reads its focal_config)
+        return getattr(self.analyser, name)
+
 
 @pytest.fixture(scope="module")
 def ecd_first_15(shared_data):
