@@ -151,6 +151,16 @@ class VisualRotation:
     R_cp_std_rad: float = float("nan")
     """Its std per axis (rad) of the left perturbation `R_cp_true = Exp(eps) R_cp`."""
 
+    def is_finite(self) -> bool:
+        """Whether the rotation and its covariance are finite (a frame the backends can fuse)."""
+        return bool(np.isfinite(self.R_cm).all() and np.isfinite(self.cov).all())
+
+    def has_image_rotation(self) -> bool:
+        """Whether the frame carries a usable image rotation since the previous frame (`R_cp` finite, its
+        std finite and > 0)."""
+        return (self.R_cp is not None and bool(np.isfinite(self.R_cp).all()) and np.isfinite(self.R_cp_std_rad)
+                and self.R_cp_std_rad > 0)
+
     def symmetric_to(self, R_cm_ref: np.ndarray) -> "VisualRotation":
         """The same measurement expressed with the Manhattan labelling nearest `R_cm_ref`.
 

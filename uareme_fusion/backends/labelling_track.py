@@ -76,7 +76,7 @@ class LabellingTrack:
     def _moved(self, t_s: float, visual: VisualRotation) -> tuple[np.ndarray, np.ndarray]:
         """The track predicted to `visual`'s frame: turned by its image rotation `R_cp` when it has one
         (`R_cm = R_cp R_pm`; an isotropic left perturbation is the same on the right), else `predicted`."""
-        if visual.R_cp is None or not np.isfinite(visual.R_cp_std_rad):
+        if not visual.has_image_rotation():
             return self.predicted(t_s)
         return visual.R_cp @ self.R_cm, self.cov + visual.R_cp_std_rad ** 2 * np.eye(3)
 

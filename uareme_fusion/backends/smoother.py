@@ -62,7 +62,7 @@ from ..types import Estimate, Status, VisualRotation, visual_R_wc_covariance
 from .base import Backend
 from .imu_noise import GyroNoiseConfig
 from .labelling_track import LabellingTrack
-from .smoother_image_motion import ImageMotionFactors, has_image_rotation
+from .smoother_image_motion import ImageMotionFactors
 from .visual_noise_share import VisualNoiseShare
 
 try:  # BatchFixedLagSmoother moved from gtsam_unstable into gtsam in 4.3/5.0.
@@ -170,11 +170,6 @@ class SmootherConfig(GyroNoiseConfig):
         return value
 
 
-def _finite(visual: VisualRotation) -> bool:
-    """Whether a frame's rotation and covariance are finite."""
-    return bool(np.isfinite(visual.R_cm).all() and np.isfinite(visual.cov).all())
-
-
 class OptimiserFailure(RuntimeError):
     """The smoother's optimisation raised or returned a non-finite estimate."""
 
@@ -246,7 +241,7 @@ class Smoother(Backend):
     def _predicted_R_wc(self, visual: VisualRotation | None = None) -> np.ndarray:
         """`R_wc` (3, 3) predicted at the next frame (paper: the last estimate turned by `visual`'s image
         rotation when it has one, `R_wc = R_wc_p R_cp^T`)."""
-        if visual is not None and has_image_rotation(visual):
+        if visual is not None and visual.has_image_rotation():
             return self._last.R_wc @ visual.R_cp.T
         return self._last.R_wc
 
@@ -263,7 +258,7 @@ class Smoother(Backend):
         latest frame with a visual rotation (`X(j)^-1 X(k) = R_cp^T`, isotropic `R_cp_std_rad`) when the
         frame has one and that frame is still in the window; else the paper's identity with `between_std_rad`."""
         j = self._k_visual
-        if (visual is not None and has_image_rotation(visual) and j is not None
+        if (visual is not None and visual.has_image_rotation() and j is not None
                 and k - j < self.config.window_frames - 1):
             self._image_motion.add(graph, values, stamps, j, k, t_s - self._t_visual, t_s - self._t_frame, visual)
         else:
@@ -306,7 +301,7 @@ class Smoother(Backend):
     def _visual_huber_k(self, visual: VisualRotation) -> float | None:
         """The Huber threshold of `visual`'s factor (paper: `image_motion_visual_huber_k` when its between
         factor is its image rotation, else the paper's `visual_huber_k`)."""
-        if has_image_rotation(visual):
+        if visual.has_image_rotation():
             return self.config.image_motion_visual_huber_k
         return self.config.visual_huber_k
 
@@ -328,7 +323,7 @@ class Smoother(Backend):
         whose rotation or covariance is not finite is not fused (`Status.VISUAL_REJECTED`, counted in
         `rejected_nonfinite`); its image rotation still ties the frame to the previous one."""
         status = Status.OK if visual is not None else Status.VISUAL_MISSING
-        usable = visual is not None and _finite(visual)
+        usable = visual is not None and visual.is_finite()
         if visual is not None and not usable:
             self.rejected_nonfinite += 1
             status |= Status.VISUAL_REJECTED

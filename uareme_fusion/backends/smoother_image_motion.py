@@ -28,12 +28,6 @@ from ..rotations import log_so3
 from ..types import VisualRotation
 
 
-def has_image_rotation(visual: VisualRotation | None) -> bool:
-    """Whether `visual` carries a usable image rotation since the previous frame (`R_cp`, finite std > 0)."""
-    return (visual is not None and visual.R_cp is not None and np.isfinite(visual.R_cp_std_rad)
-            and visual.R_cp_std_rad > 0 and bool(np.all(np.isfinite(visual.R_cp))))
-
-
 class ImageMotionFactors:
     """The image-rotation factors and the rate-bias chain `C(k)` of a paper-mode window (module docstring).
 

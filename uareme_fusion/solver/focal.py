@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .atlanta import AtlantaHorizon
 from .line_detection import LineSegments
 from ..pinhole import DEFAULT_FOV_DEG, assumed_K, centred_K, focal_from_hfov
 from ..rotations import log_so3
@@ -135,7 +136,7 @@ def solve_with_focal(solver: JointSolver, normal_map: NormalMap | None, segments
 
 
 def closed_form_focal(solver: JointSolver, normal_map: NormalMap | None, segments: LineSegments,
-                      visual: VisualRotation, focal: FocalEstimate, atlanta,
+                      visual: VisualRotation, focal: FocalEstimate, atlanta: AtlantaHorizon,
                       config: FocalConfig | None = None) -> tuple[VisualRotation, FocalEstimate]:
     """f from two orthogonal VPs in closed form (centred principal point, square pixels): the zenith at
     height v_z and the horizon at height t along the image direction of up give f^2 = -t v_z
@@ -147,11 +148,12 @@ def closed_form_focal(solver: JointSolver, normal_map: NormalMap | None, segment
     covariance is never below `visual`'s (which holds the principal point's floor): where the two f
     disagree the closed form may be the wrong one (a drone photo turned 90 deg: its ground lines took for
     verticals gave 487 px against the profile's 197 px, and the first solve's roll std of 60 deg must
-    stay, not drop to 1.4 deg with a horizon 88 deg off). On ECD
-    (77 photos with a labelled f good to 5 %): error median 16.8 -> 5.7 %, 90th percentile 66.9 -> 20.9 %."""
+    stay, not drop to 1.4 deg with a horizon 88 deg off). On ECD (77 photos with a labelled f good to
+    5 %, `bench horizon --ecd-only`): error median 16.8 -> 5.8 %, 90th percentile 66.9 -> 28.6 % (21.9 %
+    when the rule was applied offline to cached solves, a gap not traced)."""
     cfg = config or FocalConfig()
-    f = float(getattr(atlanta, "focal_px", float("nan")))
-    std_log_f = cfg.closed_form_std_scale * float(getattr(atlanta, "focal_std_px", float("nan"))) / f
+    f = float(atlanta.focal_px)
+    std_log_f = cfg.closed_form_std_scale * float(atlanta.focal_std_px) / f
     lo, hi = (focal_from_hfov(segments.width, a) for a in cfg.closed_form_hfov_range_deg[::-1])
     if not (np.isfinite(f) and lo <= f <= hi and std_log_f < cfg.closed_form_max_relative_std):
         return visual, focal

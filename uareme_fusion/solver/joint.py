@@ -234,10 +234,8 @@ class JointSolver:
         coarse = rounds > 0 and coarse_first
         for i in range(max(rounds, 1) + coarse):
             cues = [c.reweighted(R, coarse=coarse and i == 0) for c in cues]
-            for c in cues:
-                c.set_alpha(R)
-                if coarse and i == 0:  # steered undiscounted while R is a candidate's spacing from the minimum
-                    c.discount = 1.0
+            for c in cues:  # steered undiscounted while R is a candidate's spacing from the minimum
+                c.set_alpha(R, discounted=not (coarse and i == 0))
             R_new, its, _, converged = self._refine(cues, R)
             iterations += its
             moved = np.linalg.norm(log_so3(R.T @ R_new))

@@ -100,8 +100,8 @@ class _Cue:
         """The H_c of the covariance (the cost's Hessian unless a cue says otherwise)."""
         return self.derivatives(R)[2]
 
-    def set_alpha(self, R) -> None:
-        """a_c = n_c / (s_c max(E*, floor)) at the rotation R."""
+    def set_alpha(self, R, discounted: bool = True) -> None:
+        """a_c = n_c / (s_c max(E*, floor)) at the rotation R (`discounted`: see `_LineCue.set_alpha`)."""
         self.alpha = self.n_effective / (self.scale * max(float(self.cost(R)), self.min_cost))
 
     def summary(self) -> dict:
@@ -128,7 +128,7 @@ class _NormalCue(_Cue):
     regions_cost = None
     """`NormalMap.regions_cost` of the map (`manhattan.surface_regions`)."""
 
-    def set_alpha(self, R) -> None:
+    def set_alpha(self, R, discounted: bool = True) -> None:
         """a_c of any cue, its n_c shrunk by `surface_regions` at the cost there (as the normals-only solver)."""
         cost = float(self.cost(R))
         self.alpha = surface_regions(self.n_effective, cost, self.regions_cost) / (self.scale * max(cost, self.min_cost))
@@ -177,9 +177,13 @@ class _LineCue(_Cue):
     def information_hessian(self, R) -> np.ndarray:
         return line_information(self.moments, R)
 
-    def set_alpha(self, R) -> None:
-        """As for any cue, plus the clutter discount q^power (`LineCueConfig.clutter_power`)."""
+    def set_alpha(self, R, discounted: bool = True) -> None:
+        """As for any cue, plus the clutter discount q^power (`LineCueConfig.clutter_power`); 1 when not
+        `discounted` (the joint solve's coarse round, `JointSolver._reweighted_minimum`)."""
         super().set_alpha(R)
+        if not discounted:
+            self.discount = 1.0
+            return
         f0 = self.config.random_inlier_fraction
         n = max(min(self.base.n_effective, self.config.independent_segments), 1.0)
         f0 = min(f0 + self.config.chance_sigmas * np.sqrt(f0 * (1.0 - f0) / n), 0.99)

@@ -385,7 +385,7 @@ class HorizonCue(_Cue):
         e = self.obs.basis.T @ r
         return float(0.5 * e @ self.W @ e), Je.T @ self.W @ e, Je.T @ self.W @ Je
 
-    def set_alpha(self, R) -> None:
+    def set_alpha(self, R, discounted: bool = True) -> None:
         self.alpha = 1.0
 
     def robust_cost(self, R, coarse: bool = False):

@@ -18,7 +18,6 @@ from uareme_fusion.backends.base import Backend
 from uareme_fusion.backends.mekf import filter as production
 from uareme_fusion.backends.mekf import status_bits
 from uareme_fusion.backends.mekf.config import MekfMode
-from uareme_fusion.backends.mekf.scene import finite
 from uareme_fusion.backends.mekf.source_trust import (note_accel_information, note_visual_information, squared_rate,
                                                       update_visual_trust, vertical_variance,
                                                       visual_vertical_innovation)
@@ -146,7 +145,7 @@ class Mekf(production.Mekf):
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
             self._count_rejection()
             self.x[S_VISUAL_INFO_RATE] = 0.0
-            if not finite(visual):
+            if not visual.is_finite():
                 self._count_nonfinite()
             if accel_rows is not None:
                 self._kalman_update(*accel_rows)

@@ -28,7 +28,7 @@ from .config import GyroSampling, MekfConfig, MekfMode
 from .gravity_only import GravityOnly
 from .motion import ConstantRateMotion, GyroMotion
 from .parameters import KernelParameters
-from .scene import finite, ignored_too_long, initialise_manhattan
+from .scene import ignored_too_long, initialise_manhattan
 from .segments import process_imu_segments
 from .source_trust import tilt_shares
 from .status_bits import status_of
@@ -320,7 +320,7 @@ class Mekf(Backend):
             if fuses_visual:
                 self.flags |= status_bits.VISUAL_MISSING
                 self.x[S_VISUAL_INFO_RATE] = 0.0  # no share while the camera gives nothing
-        elif not finite(visual):  # never a start
+        elif not visual.is_finite():  # never a start
             self.flags |= status_bits.VISUAL_REJECTED
             self.counters["visual_rejected"] += 1
             self.counters["visual_nonfinite"] += 1
@@ -395,7 +395,7 @@ class Mekf(Backend):
             rejected = visual_update(self, visual, self.noise_share.share if shared else 1.0, rows)
             if not rejected and shared:
                 self.noise_share.take(self.t_state, visual)  # labelled by the track (`labelling_track.py`)
-        if rejected and not finite(visual):  # gated out, counted, and no sign of a new scene alignment
+        if rejected and not visual.is_finite():  # gated out, counted, and no sign of a new scene alignment
             self._count_nonfinite()
         if not rejected or self.rejections < self.config.reinit_after_rejections:
             return self.motion.uses_imu

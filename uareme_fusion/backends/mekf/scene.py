@@ -18,11 +18,6 @@ from .measurements import vertical_distance2
 from .state import MF, N_STATE, TH, orthonormal
 
 
-def finite(visual: VisualRotation) -> bool:
-    """Whether a frame's rotation and covariance are finite (checked only for a gated-out frame)."""
-    return bool(np.isfinite(visual.R_cm).all() and np.isfinite(visual.cov).all())
-
-
 def ignored_too_long(filt, t_s: float, visual: VisualRotation) -> bool | None:
     """Whether the camera has been ignored long enough to re-initialise from `visual`, decided once
     per frame before the update runs; `filt` is a `Mekf`. A frame disagrees when its
@@ -34,7 +29,7 @@ def ignored_too_long(filt, t_s: float, visual: VisualRotation) -> bool | None:
     as usual (it agrees, or the IMU's gate and Huber weight handle it). False: skip it, without an
     IMU, where fusing a large innovation would also corrupt the constant-rate model's rate and
     spin the estimate away; the filter coasts. A non-finite frame changes nothing."""
-    if not finite(visual):
+    if not visual.is_finite():
         return None
     cfg = filt.config
     # During a run, the covariance of its start: coasting grows P, and must not let the wrong
