@@ -149,8 +149,8 @@ def closed_form_focal(solver: JointSolver, normal_map: NormalMap | None, segment
     disagree the closed form may be the wrong one (a drone photo turned 90 deg: its ground lines took for
     verticals gave 487 px against the profile's 197 px, and the first solve's roll std of 60 deg must
     stay, not drop to 1.4 deg with a horizon 88 deg off). On ECD (77 photos with a labelled f good to
-    5 %, `bench horizon --ecd-only`): error median 16.8 -> 5.8 %, 90th percentile 66.9 -> 28.6 % (21.9 %
-    when the rule was applied offline to cached solves, a gap not traced)."""
+    5 %, `bench horizon`): error median 16.8 -> 5.7 %, 90th percentile 66.9 -> 21.9 % (28.6 % before the
+    line cue's chance level went to 4 sigmas, `LineCueConfig.chance_sigmas`)."""
     cfg = config or FocalConfig()
     f = float(atlanta.focal_px)
     std_log_f = cfg.closed_form_std_scale * float(atlanta.focal_std_px) / f
