@@ -150,6 +150,15 @@ class VisualRotation:
     unknown (the first frame, a single image, too few tracks). Independent of the Manhattan labelling."""
     R_cp_std_rad: float = float("nan")
     """Its std per axis (rad) of the left perturbation `R_cp_true = Exp(eps) R_cp`."""
+    cov_steady: np.ndarray | None = None
+    """The steady part of `cov` (rad^2, the same perturbation): one error shared by every frame of a stream
+    and fixed in the camera, the calibration's (a principal point not given: `focal.unknown_centre_floor`).
+    A constant alignment of the stream's rotations removes it where the camera turns little, so a score after
+    that alignment holds the rest, `cov_frame()`, the error new in each frame. None: nothing steady."""
+
+    def cov_frame(self) -> np.ndarray:
+        """The per-frame part of `cov`: `cov - cov_steady` (rad^2)."""
+        return self.cov if self.cov_steady is None else self.cov - self.cov_steady
 
     def is_finite(self) -> bool:
         """Whether the rotation and its covariance are finite (a frame the backends can fuse)."""
@@ -167,7 +176,8 @@ class VisualRotation:
         The covariance is rotated with it: `delta' = P^T delta` for `R_cm' = R_cm @ P`.
         """
         R_new, P = nearest_symmetric(self.R_cm, R_cm_ref)
-        return dataclasses.replace(self, R_cm=R_new, cov=P.T @ self.cov @ P)
+        steady = None if self.cov_steady is None else P.T @ self.cov_steady @ P
+        return dataclasses.replace(self, R_cm=R_new, cov=P.T @ self.cov @ P, cov_steady=steady)
 
 
 class Status(enum.IntFlag):
@@ -218,6 +228,29 @@ def visual_R_wc_covariance(visual: VisualRotation) -> np.ndarray:
     return 0.5 * (cov + cov.T)
 
 
+def visual_R_wc_steady(visual: VisualRotation) -> np.ndarray | None:
+    """`visual.cov_steady` as one of `R_wc`'s right perturbation (as `visual_R_wc_covariance`), None without."""
+    if visual.cov_steady is None:
+        return None
+    cov = visual.R_cm @ visual.cov_steady @ visual.R_cm.T
+    return 0.5 * (cov + cov.T)
+
+
+def steady_within(cov: np.ndarray, steady: np.ndarray | None) -> np.ndarray | None:
+    """`steady` (rad^2) shrunk, direction by direction, until `cov - steady` is positive semi-definite: the
+    steady part an estimate of covariance `cov` can carry (a filter's covariance may be smaller than a
+    frame's, never its steady error larger than its whole). None for None."""
+    if steady is None:
+        return None
+    val, vec = np.linalg.eigh(0.5 * (cov + cov.T))
+    root = vec * np.sqrt(np.maximum(val, 0.0))
+    inv = vec * np.divide(1.0, np.sqrt(val), out=np.zeros_like(val), where=val > 0)
+    g_val, g_vec = np.linalg.eigh(inv.T @ (0.5 * (steady + steady.T)) @ inv)  # steady in cov's whitened axes
+    shrunk = (g_vec * np.clip(g_val, 0.0, 1.0)) @ g_vec.T
+    out = root @ shrunk @ root.T
+    return 0.5 * (out + out.T)
+
+
 @dataclass(frozen=True)
 class Estimate:
     """A backend's output at time `t_s` (s).
@@ -237,6 +270,10 @@ class Estimate:
     R_wm: np.ndarray | None = None
     gyro_bias_rad_s: np.ndarray | None = None
     tilt_shares: tuple[float, float] | None = None
+    cov_steady: np.ndarray | None = None
+    """The steady part of `cov` (rad^2, the same perturbation): the camera's calibration error the visual
+    rotations carry (`VisualRotation.cov_steady`, `steady_within` the estimate's covariance), which no
+    fusion of frames averages away; None when there is none."""
 
     @property
     def up_c(self) -> np.ndarray:

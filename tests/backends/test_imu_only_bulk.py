@@ -111,7 +111,7 @@ def test_bulk_files_are_those_written_one_result_at_a_time(tmp_path):
     for name in ("trajectory.tum", "estimates.csv"):
         assert (tmp_path / "bulk" / name).read_bytes() == (tmp_path / "single" / name).read_bytes()
     lines = (tmp_path / "bulk" / "estimates.csv").read_text().splitlines()
-    assert len(lines) == 892 and lines[-1].split(",")[-4:] == ["0", "", "", ""]  # status, flags, no shares
+    assert len(lines) == 892 and lines[-1].split(",")[-13:] == ["0"] + [""] * 12  # status, flags, no shares, no steady part
     log = EstimateLog()
     limited = run_into(tmp_path / "limited", source, log, max_frames=300)
     assert limited.estimates == 300 and limited.stopped == "max_frames" and log.arrays()[0].size == 300
@@ -139,4 +139,4 @@ def test_a_full_disk_in_a_bulk_keeps_both_tables_whole_and_in_step(tmp_path, mon
     tum = [ln for ln in (out / "trajectory.tum").read_text().splitlines() if not ln.startswith("#")]
     csv_lines = (out / "estimates.csv").read_text().splitlines()
     assert len(tum) == 256 and len(csv_lines) == 257
-    assert all(len(r.split()) == 8 for r in tum) and all(ln.count(",") == 24 for ln in csv_lines)
+    assert all(len(r.split()) == 8 for r in tum) and all(ln.count(",") == 33 for ln in csv_lines)

@@ -13,7 +13,9 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from ..types import Estimate, Estimates, VisualRotation
+import dataclasses
+
+from ..types import Estimate, Estimates, Status, VisualRotation, steady_within, visual_R_wc_steady
 
 
 class Backend(ABC):
@@ -64,3 +66,22 @@ class Backend(ABC):
             estimates.append(self.process_frame(float(t_s[end - 1]), None))
             start = end
         return Estimates.of(estimates)
+
+
+class SteadyPart:
+    """Gives a backend's estimates the steady part of the visual rotations they fuse (`Estimate.cov_steady`):
+    every backend fuses the whole covariance (a steady calibration error is no noise to average; its
+    share of the estimate is that of the frames in it), and the estimate carries the latest frame's steady
+    part as far as its covariance holds it (`steady_within`). One per stream: `estimate = steady(estimate,
+    visual)` after each `process_frame`."""
+
+    def __init__(self):
+        self.last: np.ndarray | None = None
+        """The latest finite frame's steady part as one of `R_wc` (rad^2), None before one with it."""
+
+    def __call__(self, estimate: Estimate, visual: VisualRotation | None) -> Estimate:
+        if visual is not None and visual.is_finite():
+            self.last = visual_R_wc_steady(visual)
+        if self.last is None or estimate.status & Status.NOT_INITIALISED:
+            return estimate
+        return dataclasses.replace(estimate, cov_steady=steady_within(estimate.cov, self.last))

@@ -45,7 +45,9 @@ def figure_rows(name: str, fig: dict) -> list[dict]:
     for cue, backends in cues.items():
         single = backends["single"]
         for backend, row in backends.items():
-            figure = f"{cue}, {backend}: ARE / NEES" + (" / tilt" if "tilt_mean_deg" in row else "")
+            kind = row.get("nees_kind")
+            figure = f"{cue}, {backend}: ARE / NEES" + (f" ({kind})" if kind else "") + (
+                " / tilt" if "tilt_mean_deg" in row else "")
             measured = f"{row['are_mean_deg']:.2f} / {row['nees_mean']:.2f}" + (
                 f" / {row['tilt_mean_deg']:.2f}" if "tilt_mean_deg" in row else "")
             goal, versus, interval, ok = f"NEES in [{NEES_RANGE[0]:g}, {NEES_RANGE[1]:g}]", "", "", _in_nees(row["nees_mean"])

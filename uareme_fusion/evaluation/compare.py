@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.safe_files import save_figure_atomic, write_text_atomic
-from ..backends.base import Backend
+from ..backends.base import Backend, SteadyPart
 from ..types import Status
 from ..backends.factory import BACKEND_NAMES, knows_gravity, make_backend
 from ..scoring.metrics import JUMP_DEG, attitude_errors, jump_counts
@@ -61,7 +61,7 @@ def make_backends(names=BACKEND_NAMES) -> tuple[dict, dict]:
 
 def run_backend(backend: Backend, seq: VisualSequence) -> BackendRun:
     """Feed the sequence in time order: the IMU samples up to each frame, then the frame."""
-    run = BackendRun(backend.name)
+    run, steady = BackendRun(backend.name), SteadyPart()
     if seq.has_imu:
         ends = np.searchsorted(seq.imu_t_s, seq.t_frame_s, side="right")
     start = 0
@@ -71,7 +71,7 @@ def run_backend(backend: Backend, seq: VisualSequence) -> BackendRun:
             backend.process_imu(seq.imu_t_s[start:ends[k]], seq.imu_gyro_rad_s[start:ends[k]],
                                 seq.imu_accel_m_s2[start:ends[k]])
             start = ends[k]
-        run.estimates.append(backend.process_frame(float(t), seq.visuals[k]))
+        run.estimates.append(steady(backend.process_frame(float(t), seq.visuals[k]), seq.visuals[k]))
         run.latency_ms.append(1e3 * (time.perf_counter() - t0))
     return run
 
@@ -81,9 +81,16 @@ def errors_over_time(run: BackendRun, R_wc_true: np.ndarray, yaw_only_nees: bool
     not initialised. `initialised` marks the scored frames."""
     ok = np.array([not (e.status & Status.NOT_INITIALISED) for e in run.estimates])
     err = attitude_errors(np.array([e.R_wc for e in run.estimates]), np.array([e.cov for e in run.estimates]),
-                          ok, R_wc_true, yaw_only_nees)
+                          ok, R_wc_true, yaw_only_nees, steady_covariances(run.estimates))
     err["initialised"] = err.pop("valid")
     return err
+
+
+def steady_covariances(estimates: list) -> np.ndarray | None:
+    """`Estimate.cov_steady` of each estimate (M, 3, 3), NaN where one has none; None when none has."""
+    if all(e.cov_steady is None for e in estimates):
+        return None
+    return np.array([np.full((3, 3), np.nan) if e.cov_steady is None else e.cov_steady for e in estimates])
 
 
 def summarise(run: BackendRun, R_wc_true: np.ndarray | None, yaw_only_nees: bool = False) -> dict:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..backends.base import Backend
+from ..backends.base import Backend, SteadyPart
 from ..drivers.base import Source
 from ..errors import InputError, OutputError, SourceError
 from ..solver.cues import pool_before_run, solve_frame
@@ -122,6 +122,7 @@ class Pipeline:
         self.cues = cues
         """A `cues.CueSolver` (normals and/or lines); None: the normals-only solver."""
         self._R_cm_prev = None
+        self._steady = SteadyPart()
         self.stats = RunStats(backend=backend.name)
         self.accelerometer = None
         """An `interleave.AccelerometerFeed` of an accelerometer without gyro, fed up to each frame; None: none."""
@@ -152,7 +153,7 @@ class Pipeline:
         t1 = time.perf_counter()
         visual = self.visual_rotation(normal_map, frame.t_s, frame)
         t2 = time.perf_counter()
-        estimate = self.backend.process_frame(frame.t_s, visual)
+        estimate = self._steady(self.backend.process_frame(frame.t_s, visual), visual)
         if normal_map is None and frame.depth is None and getattr(self.normals, "needs_depth", False):
             estimate = dataclasses.replace(estimate, status=estimate.status | Status.DEPTH_MISSING)
             self.stats.frames_without_depth += 1

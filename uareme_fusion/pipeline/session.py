@@ -297,5 +297,6 @@ def evaluation_errors(log: EstimateLog, truth: GroundTruth, gravity_aware: bool)
         unaligned_tilt = attitude_errors(R_est, cov, valid, R_true)["tilt_deg"]
         R_est = align_constant(R_est[valid], R_true[valid]) @ R_est
         note = "reference is not gravity-aligned: tilt after the constant alignment used for ARE"
-    errors = attitude_errors(R_est, cov, valid, R_true, yaw_only_nees=gravity_aware and truth.gravity_aligned)
+    errors = attitude_errors(R_est, cov, valid, R_true, yaw_only_nees=gravity_aware and truth.gravity_aligned,
+                             cov_steady_rad2=log.steady())
     return t, errors, unaligned_tilt, note

@@ -4,7 +4,13 @@ ARE (degrees, paper eq. 10) after one constant chordal alignment of the estimate
 (the paper's protocol); tilt error (degrees) between estimated and true up in the camera frame, with no
 alignment; NEES of the reported covariance (right perturbation of `R_wc`, rad^2) after the same
 alignment, or after a rotation about up only for backends that know gravity, so that their
-absolute tilt is scored as it is.
+absolute tilt is scored as it is, against the whole covariance.
+
+After the constant alignment the NEES is of what the alignment leaves: a covariance with a steady part
+(`Estimate.cov_steady`: one calibration error shared by every frame, fixed in the camera) is scored by
+`aligned_covariance`, its per-frame part plus what of the shared error the alignment cannot remove (all of
+it where the camera turns a lot, none where it stands still). Without a steady part it is the covariance
+as reported.
 """
 
 from __future__ import annotations
@@ -22,12 +28,13 @@ GAUGE_VARIANCE_RAD2 = 1e-12
 
 
 def attitude_errors(R_wc_est: np.ndarray, cov_rad2: np.ndarray, valid: np.ndarray, R_wc_true: np.ndarray,
-                    yaw_only_nees: bool = False) -> dict:
+                    yaw_only_nees: bool = False, cov_steady_rad2: np.ndarray | None = None) -> dict:
     """Per-frame `are_deg`, `tilt_deg`, `nees` and `step_deg` (N,), NaN where `valid` is False;
     `step_deg` is the error of the rotation since the previous valid frame (`step_errors_deg`).
 
     `R_wc_est`, `R_wc_true` (N, 3, 3) camera-to-world; `cov_rad2` (N, 3, 3); `valid` (N,) bool (e.g.
-    initialised frames whose ground truth is known).
+    initialised frames whose ground truth is known); `cov_steady_rad2` (N, 3, 3) the steady part of each
+    covariance (NaN or None: none), scored as the module docstring says.
     """
     n = len(R_wc_est)
     valid = np.asarray(valid, bool)
@@ -37,11 +44,52 @@ def attitude_errors(R_wc_est: np.ndarray, cov_rad2: np.ndarray, valid: np.ndarra
         A = align_constant(R_est, R_true)
         are[valid] = are_deg(A @ R_est, R_true, align=False)
         tilt[valid] = tilt_error_deg(up_in_camera(R_est), up_in_camera(R_true))
-        A_nees = align_yaw(R_est, R_true) if yaw_only_nees else A
-        ne[valid] = nees(A_nees @ R_est, R_true, cov_rad2[valid], gauge_variance_rad2=GAUGE_VARIANCE_RAD2)
+        if yaw_only_nees:  # absolute tilt: the whole covariance
+            ne[valid] = nees(align_yaw(R_est, R_true) @ R_est, R_true, cov_rad2[valid],
+                             gauge_variance_rad2=GAUGE_VARIANCE_RAD2)
+        else:
+            cov = cov_rad2[valid] if cov_steady_rad2 is None else aligned_covariance(
+                R_est, cov_rad2[valid], np.nan_to_num(np.asarray(cov_steady_rad2, float)[valid]))
+            ne[valid] = nees(A @ R_est, R_true, cov, gauge_variance_rad2=GAUGE_VARIANCE_RAD2)
     step = np.full(n, np.nan)
     step[valid] = step_errors_deg(R_wc_est[valid], R_wc_true[valid])
     return {"are_deg": are, "tilt_deg": tilt, "nees": ne, "step_deg": step, "valid": valid}
+
+
+VIEW_OVERLAP_DEG = 60.0
+"""The angle (deg) between two optical axes at which two views share nothing: about a camera's horizontal
+field of view (the ICSL Xtion 61.6 deg, TUM's Kinect 63.5 deg). A steady error is taken to be shared by two
+frames as much as their views overlap (`view_overlap`)."""
+
+
+def view_overlap(R_wc: np.ndarray, overlap_deg: float = VIEW_OVERLAP_DEG) -> np.ndarray:
+    """(N, N) in [0, 1]: how much two frames' views have in common, from t = the angle between their optical
+    axes / `overlap_deg` (clipped to [0, 1]): 1 - 3 t^2 + 2 t^3, which is 1 for the same view, 0 for views
+    that share nothing and flat at both ends, so that the jitter of a still camera's estimates (tenths of a
+    degree) is no change of view."""
+    axes = R_wc[:, :, 2]
+    t = np.clip(np.degrees(np.arccos(np.clip(axes @ axes.T, -1.0, 1.0))) / overlap_deg, 0.0, 1.0)
+    return 1.0 - 3.0 * t**2 + 2.0 * t**3
+
+
+def aligned_covariance(R_wc_est: np.ndarray, cov_rad2: np.ndarray, cov_steady_rad2: np.ndarray) -> np.ndarray:
+    """Covariance (N, 3, 3, rad^2, right perturbation of `R_wc`) of each frame's error after one constant
+    alignment of the N estimates, when `cov_steady_rad2` of each `cov_rad2` is an error shared by the
+    frames that see the same view: frame k errs by `delta_k = L_k z_k + w_k` (L_k the symmetric square
+    root of its steady part, w_k its own error, of covariance cov - steady), z_k unit errors correlated
+    as the views overlap (`view_overlap`: a camera standing still shares all of its steady error, two views
+    that see nothing in common none). The alignment takes out the mean error in the world, mean_j R_j L_j
+    z_j (to first order), and what is left is scored: `cov - steady` plus the covariance of
+    `L_k z_k - R_k^T mean_j R_j L_j z_j`."""
+    val, vec = np.linalg.eigh(0.5 * (cov_steady_rad2 + np.swapaxes(cov_steady_rad2, 1, 2)))
+    L = (vec * np.sqrt(np.maximum(val, 0.0))[:, None, :]) @ np.swapaxes(vec, 1, 2)
+    M = R_wc_est @ L  # each frame's steady error in the world
+    rho = view_overlap(R_wc_est)
+    T = np.einsum("kj,jab->kab", rho, M) / len(M)  # Cov(M_k z_k, mean_j M_j z_j) = M_k T_k^T
+    MT = M @ np.swapaxes(T, 1, 2)
+    world = M @ np.swapaxes(M, 1, 2) - MT - np.swapaxes(MT, 1, 2) + MT.mean(axis=0)
+    out = cov_rad2 - cov_steady_rad2 + np.swapaxes(R_wc_est, 1, 2) @ world @ R_wc_est
+    return 0.5 * (out + np.swapaxes(out, 1, 2))
 
 
 def step_errors_deg(R_wc_est: np.ndarray, R_wc_true: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ ESTIMATE_COLUMNS = (
     + [f"cov_{i}{j}_rad2" for i in range(3) for j in range(3)]
     + ["up_x", "up_y", "up_z", "bias_x_rad_s", "bias_y_rad_s", "bias_z_rad_s",
        "visual_quality", "status", "status_flags", "share_accel", "share_visual"]
+    + [f"cov_steady_{i}{j}_rad2" for i in range(3) for j in range(3)]
 )
 """estimates.csv columns: quaternion x y z w of `R_wc`; covariance (3x3 row-major, rad^2) of the right
 perturbation of `R_wc`; up = world up in the camera frame (OpenCV axes); gyro bias in the IMU frame
@@ -36,7 +37,9 @@ perturbation of `R_wc`; up = world up in the camera frame (OpenCV axes); gyro bi
 that estimate, each source's information per second on tilt as far as the filter trusts it
 (`backends/mekf/source_trust.py`: a camera whose vertical keeps disagreeing with a quiet accelerometer
 gets a small share); empty for a source the backend has not seen or a backend that does not weigh
-sources (single, smoother)."""
+sources (single, smoother); the steady part of the covariance (`Estimate.cov_steady`, 3x3 row-major,
+rad^2: the camera calibration's error, shared by every frame; the rest, cov - cov_steady, is new in each
+frame), empty when there is none."""
 
 
 def status_names(status: Status) -> str:
@@ -85,8 +88,15 @@ def share_cells(shares) -> str:
     return ",".join("" if not np.isfinite(x) else f"{x:.4f}" for x in shares)
 
 
-_IMU_ONLY_SHARES = ","
-"""The share cells of estimates from an IMU-only stream in bulk: empty (no camera to share with)."""
+def steady_cells(cov_steady) -> str:
+    """The nine `cov_steady_ij_rad2` cells of an `Estimate.cov_steady` (empty for None)."""
+    if cov_steady is None:
+        return "," * 8
+    return ",".join(f"{x:.6e}" for x in np.asarray(cov_steady, float).ravel().tolist())
+
+
+_IMU_ONLY_SHARES = "," + "," * 9
+"""The share and steady cells of estimates from an IMU-only stream in bulk: empty (no camera)."""
 
 
 class EstimatesCsvWriter:
@@ -102,7 +112,7 @@ class EstimatesCsvWriter:
         quality = "" if result.visual is None else f"{result.visual.quality:.4f}"
         self._rows.write_row(self._lines(np.array([result.t_s]), np.asarray(est.R_wc, float)[None],
                                          np.asarray(est.cov, float)[None], bias, [quality], [int(est.status)],
-                                         [share_cells(est.tilt_shares)]))
+                                         [share_cells(est.tilt_shares) + "," + steady_cells(est.cov_steady)]))
 
     def write_many(self, estimates: Estimates) -> None:
         """The rows of many estimates (no visual rotation), written (and taken back) together."""
@@ -144,8 +154,11 @@ class EstimateLog:
 
     def __init__(self):
         self._t, self._R, self._cov, self._status = [], [], [], []
+        self._steady: dict[int, np.ndarray] = {}  # estimate index -> its cov_steady, where it has one
 
     def write(self, result: FrameResult) -> None:
+        if result.estimate.cov_steady is not None:
+            self._steady[len(self._t)] = np.asarray(result.estimate.cov_steady, np.float64)
         self._t.append(result.t_s)
         self._R.append(np.asarray(result.estimate.R_wc, np.float64))
         self._cov.append(np.asarray(result.estimate.cov, np.float64))
@@ -159,6 +172,15 @@ class EstimateLog:
 
     def close(self) -> None:
         pass
+
+    def steady(self) -> np.ndarray | None:
+        """`Estimate.cov_steady` of every estimate (N, 3, 3), NaN where one has none; None when none has."""
+        if not self._steady:
+            return None
+        out = np.full((len(self._t), 3, 3), np.nan)
+        for k, cov in self._steady.items():
+            out[k] = cov
+        return out
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         n = len(self._t)
