@@ -81,3 +81,13 @@ def test_the_steady_part_follows_a_relabelling_and_reaches_the_estimate():
     assert np.linalg.eigvalsh(est.cov - est.cov_steady).min() > -1e-15  # within the estimate's covariance
     assert carry(Estimate(1.0, np.eye(3), np.eye(3), Status.NOT_INITIALISED), None).cov_steady is None
     assert carry(Estimate(2.0, R_cm.T, np.eye(3)), None).cov_steady is not None  # a missing frame keeps it
+
+
+def test_a_long_run_takes_the_alignment_mean_from_a_subset_of_frames(monkeypatch):
+    from uareme_fusion.scoring import metrics
+
+    R_wc = Rotation.random(600, random_state=3).as_matrix()
+    cov = np.broadcast_to(2e-4 * np.eye(3), (600, 3, 3)).copy()
+    whole = aligned_covariance(R_wc, cov, 0.5 * cov)
+    monkeypatch.setattr(metrics, "_MEAN_FRAMES", 100)
+    np.testing.assert_allclose(aligned_covariance(R_wc, cov, 0.5 * cov), whole, atol=1e-5)  # 5 % of the variances

@@ -62,14 +62,23 @@ field of view (the ICSL Xtion 61.6 deg, TUM's Kinect 63.5 deg). A steady error i
 frames as much as their views overlap (`view_overlap`)."""
 
 
-def view_overlap(R_wc: np.ndarray, overlap_deg: float = VIEW_OVERLAP_DEG) -> np.ndarray:
-    """(N, N) in [0, 1]: how much two frames' views have in common, from t = the angle between their optical
-    axes / `overlap_deg` (clipped to [0, 1]): 1 - 3 t^2 + 2 t^3, which is 1 for the same view, 0 for views
-    that share nothing and flat at both ends, so that the jitter of a still camera's estimates (tenths of a
-    degree) is no change of view."""
+def view_overlap(R_wc: np.ndarray, R_wc_other: np.ndarray | None = None,
+                 overlap_deg: float = VIEW_OVERLAP_DEG) -> np.ndarray:
+    """(N, M) in [0, 1]: how much the views of `R_wc` (N, 3, 3) and `R_wc_other` (M, 3, 3; None: `R_wc`) have
+    in common, from t = the angle between their optical axes / `overlap_deg` (clipped to [0, 1]):
+    1 - 3 t^2 + 2 t^3, which is 1 for the same view, 0 for views that share nothing and flat at both ends, so
+    that the jitter of a still camera's estimates (tenths of a degree) is no change of view."""
     axes = R_wc[:, :, 2]
-    t = np.clip(np.degrees(np.arccos(np.clip(axes @ axes.T, -1.0, 1.0))) / overlap_deg, 0.0, 1.0)
+    other = axes if R_wc_other is None else R_wc_other[:, :, 2]
+    t = np.clip(np.degrees(np.arccos(np.clip(axes @ other.T, -1.0, 1.0))) / overlap_deg, 0.0, 1.0)
     return 1.0 - 3.0 * t**2 + 2.0 * t**3
+
+
+_OVERLAP_ROWS = 1024
+"""Rows of `view_overlap` computed at once in `aligned_covariance`."""
+_MEAN_FRAMES = 2000
+"""`aligned_covariance` takes the alignment's mean over every k-th frame, at most this many (a long run's
+cost stays linear in its length)."""
 
 
 def aligned_covariance(R_wc_est: np.ndarray, cov_rad2: np.ndarray, cov_steady_rad2: np.ndarray) -> np.ndarray:
@@ -84,8 +93,11 @@ def aligned_covariance(R_wc_est: np.ndarray, cov_rad2: np.ndarray, cov_steady_ra
     val, vec = np.linalg.eigh(0.5 * (cov_steady_rad2 + np.swapaxes(cov_steady_rad2, 1, 2)))
     L = (vec * np.sqrt(np.maximum(val, 0.0))[:, None, :]) @ np.swapaxes(vec, 1, 2)
     M = R_wc_est @ L  # each frame's steady error in the world
-    rho = view_overlap(R_wc_est)
-    T = np.einsum("kj,jab->kab", rho, M) / len(M)  # Cov(M_k z_k, mean_j M_j z_j) = M_k T_k^T
+    j = slice(None, None, -(-len(M) // _MEAN_FRAMES))  # the mean over j from at most _MEAN_FRAMES frames
+    flat, R_j = M[j].reshape(-1, 9), R_wc_est[j]
+    T = np.concatenate([view_overlap(R_wc_est[i:i + _OVERLAP_ROWS], R_j) @ flat
+                        for i in range(0, len(M), _OVERLAP_ROWS)]).reshape(-1, 3, 3) / len(flat)
+    # Cov(M_k z_k, mean_j M_j z_j) = M_k T_k^T
     MT = M @ np.swapaxes(T, 1, 2)
     world = M @ np.swapaxes(M, 1, 2) - MT - np.swapaxes(MT, 1, 2) + MT.mean(axis=0)
     out = cov_rad2 - cov_steady_rad2 + np.swapaxes(R_wc_est, 1, 2) @ world @ R_wc_est
