@@ -56,6 +56,23 @@ def test_a_persistent_error_is_found_and_its_independent_share_is_small():
     assert source_trust.vertical_variance(s, 1e-4, 30.0) == pytest.approx(1e-4 + 30 * (pers - 4e-4))
 
 
+def test_the_share_scales_the_tilt_and_leaves_the_yaw_about_up():
+    R_wm = Rotation.from_rotvec([0.1, -0.2, 0.7]).as_matrix()
+    u = R_wm[2]  # world up in the m frame
+    A = np.random.default_rng(5).normal(size=(3, 3))
+    C = A @ A.T + np.eye(3)
+    scaled = C.copy()
+    source_trust.share_tilt_covariance(scaled, 0.04, R_wm)
+    S = 0.2 * (np.eye(3) - np.outer(u, u)) + np.outer(u, u)
+    np.testing.assert_allclose(scaled, S @ C @ S.T, atol=1e-12)
+    assert u @ scaled @ u == pytest.approx(u @ C @ u)  # the variance about up is kept
+    tilt = np.linalg.svd(np.eye(3) - np.outer(u, u))[0][:, :2]  # two axes orthogonal to up
+    np.testing.assert_allclose(tilt.T @ scaled @ tilt, 0.04 * tilt.T @ C @ tilt, atol=1e-12)
+    same = C.copy()
+    source_trust.share_tilt_covariance(same, 1.0, R_wm)
+    np.testing.assert_array_equal(same, C)
+
+
 def test_vertical_waits_for_samples_and_trust_off_changes_nothing():
     s = _scalars()
     assert source_trust.vertical_variance(s, 1e-4, 30.0) == np.inf
