@@ -18,7 +18,8 @@ from uareme_fusion.backends.base import Backend
 from uareme_fusion.backends.mekf import filter as production
 from uareme_fusion.backends.mekf import status_bits
 from uareme_fusion.backends.mekf.config import MekfMode
-from uareme_fusion.backends.mekf.source_trust import (note_accel_information, note_visual_information, squared_rate,
+from uareme_fusion.backends.mekf.source_trust import (note_accel_information, note_visual_information,
+                                                      share_tilt_covariance, squared_rate,
                                                       update_visual_trust, vertical_variance,
                                                       visual_vertical_innovation)
 from uareme_fusion.backends.mekf.state import BG, I3, ORTHONORMALISE_EVERY, ZERO_STATE, orthonormal, reset_jacobian
@@ -160,8 +161,9 @@ class Mekf(production.Mekf):
         d = np.sqrt(d2)
         if d > cfg.visual_huber_k:  # Huber weight w = k / d  ->  covariance / w
             R_vis = R_vis * (d / cfg.visual_huber_k)
-        if trust != 1.0:  # the independent share of the frame's error (gated on the full one)
-            R_vis = R_vis * trust
+        if trust != 1.0:  # the independent share of the frame's tilt error (gated on the full one)
+            R_vis = np.array(R_vis, float)
+            share_tilt_covariance(R_vis, trust, self.R_wm)
         # "m's z is up" only where the world is not the Manhattan frame itself (visual only).
         vertical = (vertical_model(self.R_wm, np.sqrt(var_v), cfg.manhattan_vertical_max_rad)
                     if self.motion.uses_imu and var_v < np.inf else None)

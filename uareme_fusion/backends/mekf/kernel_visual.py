@@ -19,8 +19,8 @@ from .kernel_update import (DOWNWEIGHTED, NONFINITE, accel_rows, isotropic_updat
                             state_views)
 from .matrix3 import exp3_into, inv3, log3_into, matmul3_into
 from .measurements import correlated_noise_scale, vertical_measurement
-from .source_trust import note_visual_information, squared_rate, update_visual_trust, vertical_variance
-from .source_trust import visual_vertical_innovation
+from .source_trust import (note_visual_information, share_tilt_covariance, squared_rate, update_visual_trust,
+                           vertical_variance, visual_vertical_innovation)
 from .state import orthonormal
 from .state_buffer import (S_ACCEL_DUE, S_ACCEL_TIME, S_ACCEL_VAR_RATE, S_NONFINITE, S_REJECTIONS, S_REST_UPDATES,
                            S_T_STATE, S_T_VISUAL, S_VISUAL_INFO_RATE, S_VISUAL_REJECTED, S_VISUAL_UPDATES)
@@ -141,8 +141,8 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
         d = math.sqrt(d2)
         if d > p.visual_huber_k:  # Huber weight w = k / d  ->  covariance / w
             R_all[0:3, 0:3] *= d / p.visual_huber_k
-        if share != 1.0:  # the independent share of the frame's error (gated on the full one)
-            R_all[0:3, 0:3] *= share
+        if share != 1.0:  # the independent share of the frame's tilt error (gated on the full one)
+            share_tilt_covariance(R_all[0:3, 0:3], share, R_wm)
         m = 3
         if with_imu:  # "m's z is up" only where the world is not the Manhattan frame itself
             ok, r_v, _, H_v = vertical_measurement(R_wm, p.vertical_std_rad, p.vertical_max_rad)

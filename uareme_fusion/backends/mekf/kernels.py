@@ -31,7 +31,7 @@ _HELPERS = (state.reset_jacobian, state.orthonormal, measurements.gravity_model,
             matrix3.matmul3_into, matrix3.log3_into, accel.chunk_bounds, imu_stream.rows_if_clean,
             source_trust.note_accel_information, source_trust.note_visual_information,
             source_trust.update_visual_trust, source_trust.vertical_variance, source_trust.visual_vertical_innovation,
-            source_trust.squared_rate)
+            source_trust.squared_rate, source_trust.share_tilt_covariance)
 _INNER = (kernel_update.state_views, kernel_update.accel_measurement, kernel_update.zero_rate_measurement,
           kernel_update.matmul_into, kernel_update.solve_into, kernel_update.kalman_update,
           kernel_update.isotropic_update, kernel_update.inject_and_reset, kernel_update.accel_rows,
