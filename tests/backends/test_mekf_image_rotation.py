@@ -154,10 +154,18 @@ def test_frames_without_a_visual_rotation_are_spanned_by_the_next_image_rotation
 
 
 def test_a_prediction_asked_before_the_frame_leaves_the_filter_where_it_is():
+    """`predicted_R_cm` (the pipeline's, before solving a frame) moves nothing, and a propagation asked
+    before the frame (`evaluation.scenarios`) is redone from the frame's image rotation."""
     t, R_wc = handheld_truth(2.0)
     frames = image_stream(t, R_wc, np.radians(1.0), np.radians(0.2), 11)
     a, b = run(visual_only(), t, frames), run(visual_only(), t, frames, predict_first=True)
     np.testing.assert_allclose(np.array([e.R_wc for e in a]), np.array([e.R_wc for e in b]), atol=1e-12)
+    filt, c = visual_only(), []
+    for t_s, vis in zip(t, frames):
+        filt.propagate_to(float(t_s))
+        c.append(filt.process_frame(float(t_s), vis))
+    np.testing.assert_allclose(np.array([e.R_wc for e in a]), np.array([e.R_wc for e in c]), atol=1e-12)
+    np.testing.assert_allclose(np.array([e.cov for e in a]), np.array([e.cov for e in c]), atol=1e-15)
 
 
 @pytest.mark.parametrize("correlation_s", [0.0, 0.5])

@@ -7,19 +7,21 @@ camera to those in the next (Kabsch, a rotation-only fit: a handheld camera move
 against the depth it sees, and the essential matrix's own rotation is unstable when it barely moves: on
 real TUM fr1 rpy, 180 deg off on over a tenth of the frames). Real TUM fr1 rpy training frames (the first
 200; handheld, up to 175 deg/s): error 0.35 deg mean, 0.71 p95, 1.32 at most against the mocap (whose own
-clock is 25-35 ms off; frame steps 2 deg mean).
+clock is 25-35 ms off; frame steps 2 deg mean); all 515 steps, with the translation test below: 0.45 deg mean.
 
 A camera walked past near walls (real ICSL corridor_more, turning a corner a metre from a wall) sees the
-translation's parallax as large as the rotation's flow, and the rotation-only fit takes part of the
-turn for it: over the corner's 90 deg it measured 47 (drift over 30 frames 12.1 deg mean against the
-depth reference). Then the rotation-only fit leaves residuals the essential matrix explains: when their
-rms exceeds `translation_residual_ratio` times the tracks' distances to their epipolar planes and the
-essential matrix's rotation (`recoverPose`) lies within `translation_max_offset_residuals` rms residuals of
-the rotation-only one (not one of its degenerate flips), that rotation is taken: ICSL corridor_more drift
-over 30 frames 12.1 -> 4.4 deg (the corner 83 deg), TUM fr1 rpy train 3.8 -> 3.6 (taken on 17 % of its frames).
+translation's parallax as large as the rotation's flow, and the rotation-only fit takes part of the turn
+for it: over the corner's 90 deg (frames 161..221, the depth reference) it measured 50 (drift over 30
+frames 12.1 deg mean against that reference). Then the rotation-only fit leaves residuals the essential
+matrix explains: when their rms exceeds `translation_residual_ratio` times the tracks' distances to their
+epipolar planes and the essential matrix's rotation (`recoverPose`) lies within
+`translation_max_offset_residuals` rms residuals of the rotation-only one (not one of its degenerate
+flips), that rotation is taken: ICSL corridor_more drift over 30 frames 12.1 -> 4.4 deg (the corner 83
+deg; taken on 86 % of its frames), TUM fr1 rpy train 3.8 -> 3.6 against the mocap (taken on 17 %).
 
-Used by the stream's Manhattan labelling (`backends/labelling_track.py`): a run of wrong frames can walk
-the labelling only as far as the image says the camera turned.
+Used by the stream's Manhattan labelling (`backends/labelling_track.py`: a run of wrong frames can walk
+the labelling only as far as the image says the camera turned), the visual-only EKF's prediction
+(`backends/mekf/image_rotation_motion.py`) and the smoother's between-frame factors.
 
 Convention: `R_cp` maps the previous frame's camera coordinates (p) to this frame's (c): a direction
 `d_p` seen before is `R_cp @ d_p` now, and `R_cm = R_cp @ R_pm`. Its std (rad, per axis) is of the left
@@ -116,9 +118,9 @@ class FrameMotion:
             return None
         try:
             E, mask = cv2.findEssentialMat(a, b, K, cv2.RANSAC, 0.999, cfg.ransac_threshold_px)
-        except cv2.error:  # a degenerate sample (drawn, noiseless tracks): OpenCV's polynomial solver refuses it
-            return None
-        inliers = mask[:, 0].astype(bool) if E is not None and mask is not None else np.zeros(len(a), bool)
+            inliers = mask[:, 0].astype(bool) if E is not None and mask is not None else np.zeros(len(a), bool)
+        except cv2.error:  # degenerate tracks (a camera at rest, noiseless ones): OpenCV's solver refuses them
+            E, inliers = None, np.ones(len(a), bool)  # the rotation-only fit on every track, no translation
         if inliers.sum() < cfg.min_inliers:
             return None
         K_inv = np.linalg.inv(K)
@@ -126,7 +128,8 @@ class FrameMotion:
         U, _, Vt = np.linalg.svd(bearing_c.T @ bearing_p)  # Kabsch: R_cp minimising sum |c - R_cp p|^2
         R_cp = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
         rms = float(np.sqrt(np.mean(np.linalg.norm(bearing_c - bearing_p @ R_cp.T, axis=1) ** 2)))
-        R_cp = self._with_translation(R_cp, rms, E[:3], a[inliers], b[inliers], K, bearing_p, bearing_c)
+        if E is not None:
+            R_cp = self._with_translation(R_cp, rms, E[:3], a[inliers], b[inliers], K, bearing_p, bearing_c)
         std = cfg.std_base_rad + cfg.std_per_step * float(Rotation.from_matrix(R_cp).magnitude()) + cfg.std_per_residual * rms
         return FrameStep(R_cp, std, int(inliers.sum()))
 

@@ -356,7 +356,7 @@ class Mekf(Backend):
                 self._staged = 0
                 return
             self._add_staged()
-        elif not self.pending and t_s == self.t_state:
+        elif not self.pending and t_s == self.t_state and (visual is None or not self.motion.waits_for_frame):
             return  # already there (a frame's prediction, then its update); later stamps are late
         self.motion.propagate_to(self, t_s, visual)
 

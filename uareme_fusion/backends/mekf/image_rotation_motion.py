@@ -51,23 +51,29 @@ class ImageRotationMotion(ConstantRateMotion):
         with: where the next image rotation starts."""
 
     def propagate_to(self, filt, t_s: float, visual: VisualRotation | None = None) -> None:
-        """To the frame at `t_s` (s) with its visual rotation (None: a frame without one)."""
-        if not (filt.initialised and t_s > filt.t_state):
+        """To the frame at `t_s` (s) with its visual rotation; None: a frame without one, or a prediction
+        asked before the frame (by the rate, the state before it kept for the frame's image rotation)."""
+        if not filt.initialised:
             return
-        self.measures_motion = visual is not None and visual.has_image_rotation()
         if visual is None:
-            if self._before_gap is None:
-                self._before_gap = (filt.t_state, filt.R_wc.copy(), filt.R_wm.copy(), filt.P.copy(),
-                                    filt.omega_c.copy())
-            self.predict_by_rate(filt, t_s)
+            if t_s > filt.t_state:
+                if self._before_gap is None:
+                    self._before_gap = (filt.t_state, filt.R_wc.copy(), filt.R_wm.copy(), filt.P.copy(),
+                                        filt.omega_c.copy())
+                self.measures_motion = False
+                self.predict_by_rate(filt, t_s)
             return
         before, self._before_gap = self._before_gap, None
         if not visual.has_image_rotation():
-            self.predict_by_rate(filt, t_s)
+            self.measures_motion = False
+            if t_s > filt.t_state:
+                self.predict_by_rate(filt, t_s)
             return
         if before is not None:
             filt.t_state, filt.R_wc, filt.R_wm, filt.P, filt.omega_c = before
-        self.predict_by_image(filt, t_s, visual.R_cp, float(visual.R_cp_std_rad) ** 2)
+        self.measures_motion = t_s > filt.t_state
+        if self.measures_motion:
+            self.predict_by_image(filt, t_s, visual.R_cp, float(visual.R_cp_std_rad) ** 2)
 
     def predict_by_rate(self, filt, t_s: float) -> None:
         """The constant-rate prediction to `t_s` (s) (`kernel_visual.constant_rate_predict`)."""
