@@ -28,13 +28,15 @@ from uareme_fusion.types import VisualRotation
 
 from .accel import AccelPeriod
 from .measurements import correlated_noise_scale, gravity_model, stack, vertical_model, visual_model
-from .motion import ConstantRateMotion, GyroMotion
+from .motion import ConstantRateMotion, GyroMotion, ImageRotationMotion
 from .state import inject
 
 
-def motion_for(mode: MekfMode):
-    """The oracle's motion strategy of a mode."""
-    return ConstantRateMotion() if mode == MekfMode.VISUAL_ONLY else GyroMotion(mode)
+def motion_for(mode: MekfMode, image_rotation: bool = False):
+    """The oracle's motion strategy of a mode (visual only, by the image rotation with `image_rotation`)."""
+    if mode != MekfMode.VISUAL_ONLY:
+        return GyroMotion(mode)
+    return ImageRotationMotion() if image_rotation else ConstantRateMotion()
 
 
 class Mekf(production.Mekf):
@@ -44,19 +46,19 @@ class Mekf(production.Mekf):
         super().__init__(config)
         self.accel = AccelPeriod(self.x)
         self.F_buffer = np.eye(12)  # gyro transition: only its TH rows change between chunks
-        self.set_motion(motion_for(self.motion.mode))
+        self.set_motion(motion_for(self.motion.mode, self.config.visual_only_image_rotation))
 
     def set_motion(self, motion) -> None:
         """The oracle's strategy for `motion`'s mode; no stage (each batch goes through the stream)."""
-        if not isinstance(motion, (ConstantRateMotion, GyroMotion)):
-            motion = motion_for(motion.mode)
+        if not isinstance(motion, (ConstantRateMotion, GyroMotion, ImageRotationMotion)):
+            motion = motion_for(motion.mode, self.config.visual_only_image_rotation)
         super().set_motion(motion)
         self._stages_frames = False
 
     def resolve_mode(self, mode: MekfMode) -> None:
         if not self._mode_resolved:
             self._mode_resolved = True
-            self.set_motion(motion_for(mode))
+            self.set_motion(motion_for(mode, self.config.visual_only_image_rotation))
 
     def warm_up(self, has_imu: bool, has_frames: bool) -> None:
         """Nothing to compile."""
@@ -124,6 +126,7 @@ class Mekf(production.Mekf):
         update (`_accel_rows`) into one update; past the gate, the accelerometer rows alone."""
         cfg = self.config
         r, R_vis, H = self._visual_model(visual)
+        share = self.motion.visual_noise_scale(self) if not self.motion.uses_imu else 1.0  # before t_visual_s moves
         t_s, t_prev_s = self.t_state, self.t_visual_s
         self.t_visual_s = t_s
         trust, var_v = (self._visual_trust(r, R_vis, t_s, t_prev_s) if self.motion.uses_imu
@@ -156,7 +159,7 @@ class Mekf(production.Mekf):
         self.rejections = 0
         shared = not self.motion.uses_imu and self.noise_share.enabled
         if shared:  # fuse the independent share only (as estimated over the previous frames)
-            R_vis = R_vis * self.noise_share.share
+            R_vis = R_vis * share
             self.noise_share.take(t_s, visual)  # labelled by the track (`labelling_track.py`)
         d = np.sqrt(d2)
         if d > cfg.visual_huber_k:  # Huber weight w = k / d  ->  covariance / w

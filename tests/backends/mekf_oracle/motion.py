@@ -3,7 +3,8 @@ strategies of the package, whose scheduling (release, initialisation, re-initial
 
 - `GyroMotion`: samples integrated chunk by chunk (`propagation.gyro_chunk`), gaps, saturated samples
   and stale extrapolations as unknown rotations, the accelerometer updates falling due per period;
-- `ConstantRateMotion`: `propagation.constant_rate_model` between frames.
+- `ConstantRateMotion`: `propagation.constant_rate_model` between frames;
+- `ImageRotationMotion`: `propagation.image_rotation_model` for a frame with an image rotation.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import math
 import numpy as np
 from filterpy.kalman import predict as kf_predict
 
+from uareme_fusion.backends.mekf import image_rotation_motion
 from uareme_fusion.backends.mekf import motion as production
 from uareme_fusion.backends.mekf import status_bits
 from uareme_fusion.backends.mekf.accel import PERIOD_TOLERANCE_S, chunk_bounds
@@ -21,6 +23,7 @@ from uareme_fusion.types import IMU_COLUMNS as COLUMNS
 from uareme_fusion.types import ImuBatch
 
 from .propagation import constant_rate_model, gyro_chunk, gyro_process_noise, gyro_rates, gyro_transition
+from .propagation import image_rotation_model
 from .propagation import manhattan_walk_noise
 
 _NO_ROWS = np.zeros((0, COLUMNS))
@@ -29,7 +32,7 @@ _NO_ROWS = np.zeros((0, COLUMNS))
 class ConstantRateMotion(production.ConstantRateMotion):
     """Visual only, the reference constant-rate prediction."""
 
-    def propagate_to(self, filt, t_s: float) -> None:
+    def propagate_to(self, filt, t_s: float, visual=None) -> None:
         """`R_wc <- R_wc Exp(omega_c dt)` and the covariance prediction, to `t_s` (s)."""
         if filt.initialised and t_s > filt.t_state:
             M, F, Q = constant_rate_model(filt.omega_c, t_s - filt.t_state, filt.config.rate_rw_rad_s2_sqrt_hz**2)
@@ -38,10 +41,27 @@ class ConstantRateMotion(production.ConstantRateMotion):
             filt.t_state = t_s
 
 
+class ImageRotationMotion(image_rotation_motion.ImageRotationMotion):
+    """Visual only by the image rotation, the reference predictions: `propagation.constant_rate_model`
+    without one, `propagation.image_rotation_model` with."""
+
+    def predict_by_rate(self, filt, t_s: float) -> None:
+        M, F, Q = constant_rate_model(filt.omega_c, t_s - filt.t_state, filt.config.rate_rw_rad_s2_sqrt_hz**2)
+        filt.R_wc = orthonormal(filt.R_wc @ M)
+        _, filt.P = kf_predict(np.zeros(N_STATE), filt.P, F, Q)
+        filt.t_state = t_s
+
+    def predict_by_image(self, filt, t_s: float, R_cp: np.ndarray, var_rad2: float) -> None:
+        dt_s = t_s - filt.t_state
+        filt.R_wc = orthonormal(filt.R_wc @ R_cp.T)
+        filt.omega_c, filt.P = image_rotation_model(R_cp, var_rad2, dt_s, filt.config.rate_rw_rad_s2_sqrt_hz**2, filt.P)
+        filt.t_state = t_s
+
+
 class GyroMotion(production.GyroMotion):
     """Gyro-driven, the reference integration."""
 
-    def propagate_to(self, filt, t_s: float) -> None:
+    def propagate_to(self, filt, t_s: float, visual=None) -> None:
         """Integrate IMU samples up to `t_s` (camera clock, s), then hold the last rate."""
         rows = filt.stream.release_rows_until(t_s)
         filt.queue(ImuBatch.from_rows(rows))

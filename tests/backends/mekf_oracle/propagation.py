@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from uareme_fusion.rotations import WORLD_UP, exp_so3
+from uareme_fusion.rotations import WORLD_UP, exp_so3, log_so3
 from uareme_fusion.backends.mekf.state import BG, I3, N_STATE, RATE, TH
 
 
@@ -105,3 +105,19 @@ def constant_rate_model(omega_c: np.ndarray, dt_s: float, q_rate: float):
     Q[RATE, RATE] = q_rate * dt_s * I3
     return M, F, Q
 
+
+
+def image_rotation_model(R_cp: np.ndarray, var_rad2: float, dt_s: float, q_rate: float, P: np.ndarray):
+    """The prediction by the image rotation `R_cp` (3, 3) of variance `var_rad2` (rad^2 per axis) over
+    `dt_s` s (`kernel_image_rotation.py`): `(omega_c (3,), P (12, 12))`, with `F[TH, TH] = R_cp`,
+    `Q[TH, TH] = var I`, and the rate measured afresh: `Log(R_cp^T) / dt`, variance
+    `var / dt^2 + q_rate dt / 3`, cross-covariance with the attitude `var / dt`, none with the rest."""
+    F = np.eye(N_STATE)
+    F[TH, TH] = R_cp
+    P = F @ P @ F.T
+    P[TH, TH] += var_rad2 * I3
+    P[RATE, :] = 0.0
+    P[:, RATE] = 0.0
+    P[RATE, RATE] = (var_rad2 / dt_s**2 + q_rate * dt_s / 3.0) * I3
+    P[TH, RATE] = P[RATE, TH] = var_rad2 / dt_s * I3
+    return log_so3(R_cp.T) / dt_s, P

@@ -212,3 +212,14 @@ def constant_rate_predict(filt, t_s: float, q_rate: float) -> None:
     except Exception as exc:  # noqa: BLE001
         _failed(exc)
         kernels.CONSTANT_RATE(filt.x, t_s, q_rate)
+
+
+def image_rotation_predict(filt, t_s: float, R_cp: np.ndarray, var_rad2: float, q_rate: float) -> None:
+    """Visual only: the state predicted to `t_s` (s) by the image rotation `R_cp` (3, 3) of variance
+    `var_rad2` (rad^2 per axis) (`kernel_image_rotation.image_rotation_predict`)."""
+    R_cp = np.ascontiguousarray(R_cp, float)
+    try:
+        kernels.IMAGE_ROTATION(filt.x, t_s, R_cp, var_rad2, q_rate)
+    except Exception as exc:  # noqa: BLE001
+        _failed(exc)
+        kernels.IMAGE_ROTATION(filt.x, t_s, R_cp, var_rad2, q_rate)

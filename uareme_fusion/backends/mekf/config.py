@@ -131,6 +131,15 @@ class MekfConfig(GyroNoiseConfig):
     """Visual-only constant-rate model: angular-rate random walk, rad/s^2/sqrt(Hz)."""
     rate_initial_std_rad_s: float = Field(1.0, ge=1e-6, le=100.0)
     """Visual-only: prior std of the angular rate, rad/s."""
+    visual_only_image_rotation: bool = True
+    """Visual only: a frame carrying the image rotation since the previous frame (`VisualRotation.R_cp`,
+    `solver/frame_motion.py`) is predicted by it, its std the process noise (a visual gyro:
+    `image_rotation_motion.py`); others by the constant-rate model. False: the constant-rate model always."""
+    image_rotation_error_correlation_s: float = Field(0.0, ge=0.0, le=600.0)
+    """Visual only, a frame predicted by its image rotation: how long the persistent share of its visual
+    error (`1 - lam`, `visual_noise_share_frames`) lasts, s; a frame `dt` s after the previous update
+    counts as `dt / this` of an independent look at it (`ImageRotationMotion.visual_noise_scale`; 0: every
+    frame independent)."""
     visual_error_correlation_s: float = Field(0.0, ge=0, le=600.0)
     """How long a visual rotation's error persists, s: a network (or a scene's lines) seen again
     errs the same way, so frames closer than this are not independent. An update `dt` s after the
@@ -170,7 +179,9 @@ class MekfConfig(GyroNoiseConfig):
     re-initialises from the frame's rotation. Each such frame carries `Status.VISUAL_IGNORED`, so no
     estimate drifts away from the camera while every flag is clear."""
     visual_only_reinit_after_s: float = Field(0.0, ge=0.0, le=3600.0)
-    """Without an IMU, `reinit_after_disagreement_s` (s; a gated-out frame disagrees too): the camera is
+    """With the constant-rate model (no IMU, no image rotation: `visual_only_image_rotation`; the image
+    rotation, a measured motion, takes `reinit_after_disagreement_s`),
+    `reinit_after_disagreement_s` (s; a gated-out frame disagrees too): the camera is
     the only evidence, and while the filter ignores it it coasts on a rate that may be the wrong one, so
     it re-initialises as soon as two disagreeing frames agree with each other (0). Real ICSL
     corridor_more, lines only, against single's 3.30 deg: 0.1 s 4.17, 0.05 s 3.64, 0 3.17 (2.77 without

@@ -26,6 +26,7 @@ from .compiled import (STAGE_ROWS, accel_update, harvest_kernel_counters, integr
                        visual_distance, visual_update)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .gravity_only import GravityOnly
+from .image_rotation_motion import ImageRotationMotion
 from .motion import ConstantRateMotion, GyroMotion
 from .parameters import KernelParameters
 from .scene import ignored_too_long, initialise_manhattan
@@ -54,9 +55,13 @@ def _shape(a) -> tuple:
     return a.shape if type(a) is np.ndarray else np.shape(a)
 
 
-def motion_for(mode: MekfMode):
-    """The motion strategy of a mode; `auto` starts gyro-driven and is resolved once (`Mekf.resolve_mode`)."""
-    return ConstantRateMotion() if mode == MekfMode.VISUAL_ONLY else GyroMotion(mode)
+def motion_for(mode: MekfMode, image_rotation: bool = False):
+    """The motion strategy of a mode; `auto` starts gyro-driven and is resolved once (`Mekf.resolve_mode`).
+    Visual only, `image_rotation` (`MekfConfig.visual_only_image_rotation`): frames are predicted by their
+    image rotation (`image_rotation_motion.py`)."""
+    if mode != MekfMode.VISUAL_ONLY:
+        return GyroMotion(mode)
+    return ImageRotationMotion() if image_rotation else ConstantRateMotion()
 
 
 class Mekf(Backend):
@@ -128,7 +133,7 @@ class Mekf(Backend):
         self.x = new_state_buffer()  # R_wc = R_wm = I, b_c = 0, P = 0, t_state None
         self.estimate_out = np.empty((4, 3, 3))  # the estimate after a visual update with an IMU
         self.views = field_views(self.x)
-        self.set_motion(motion_for(cfg.mode))
+        self.set_motion(motion_for(cfg.mode, cfg.visual_only_image_rotation))
         self._mode_resolved = cfg.mode != MekfMode.AUTO
         self.initialised = False
         self.manhattan_initialised = False
@@ -171,7 +176,7 @@ class Mekf(Backend):
         """Fix an `auto` filter's mode (once: later calls and explicit modes are left alone)."""
         if not self._mode_resolved:
             self._mode_resolved = True
-            self.set_motion(motion_for(mode))
+            self.set_motion(motion_for(mode, self.config.visual_only_image_rotation))
 
     def set_motion(self, motion) -> None:
         """Use `motion` (a strategy of `motion.py`), with the kernels' parameters that go with it."""
@@ -296,7 +301,7 @@ class Mekf(Backend):
         if not self._mode_resolved:
             seen_imu = self.initialised or self.pending or self.stream.newest_s > -np.inf or self.init_samples
             self.resolve_mode(MekfMode.VISUAL_IMU if seen_imu else MekfMode.VISUAL_ONLY)
-        self.propagate_to(t_s)
+        self.propagate_to(t_s, visual)
         if visual is not None and self.initialised and not self.motion.uses_imu:
             visual = self.labelling.label(t_s, visual)  # `labelling_track.py`: not nearest a prediction that may drift
         fuses_visual = self.motion.fuses_visual
@@ -336,11 +341,14 @@ class Mekf(Backend):
         before a Manhattan frame is known."""
         if not self.manhattan_initialised:
             return None
+        if self.motion.waits_for_frame:  # predicted by the frame's own image rotation, when the frame comes
+            return self.motion.predicted_R_wc(self, float(t_s)).T @ self.R_wm
         self.propagate_to(float(t_s))
         return self.R_wc.T @ self.R_wm
 
-    def propagate_to(self, t_s: float) -> None:
-        """Propagate the state to `t_s` (s, camera clock) with the mode's motion strategy."""
+    def propagate_to(self, t_s: float, visual: VisualRotation | None = None) -> None:
+        """Propagate the state to `t_s` (s, camera clock) with the mode's motion strategy (`visual`: the
+        frame's visual rotation, for a motion that predicts by its image rotation)."""
         if self._staged:
             # A frame's batch, staged by `process_imu`: integrated in one kernel call (with a sample past
             # the frame, or an update waiting, the stream takes it).
@@ -348,9 +356,9 @@ class Mekf(Backend):
                 self._staged = 0
                 return
             self._add_staged()
-        elif not self.pending and t_s == self.t_state:
+        elif not self.pending and t_s == self.t_state and (visual is None or not self.motion.waits_for_frame):
             return  # already there (a frame's prediction, then its update); later stamps are late
-        self.motion.propagate_to(self, t_s)
+        self.motion.propagate_to(self, t_s, visual)
 
     def imu_trajectory(self) -> tuple[np.ndarray, np.ndarray]:
         """`(t_s (N,), R_wc (N, 3, 3))` after every integrated IMU sample (camera clock), before the
@@ -392,7 +400,7 @@ class Mekf(Backend):
         else:
             rows = self._gravity_rows()
             shared = self.noise_share.enabled
-            rejected = visual_update(self, visual, self.noise_share.share if shared else 1.0, rows)
+            rejected = visual_update(self, visual, self.motion.visual_noise_scale(self), rows)
             if not rejected and shared:
                 self.noise_share.take(self.t_state, visual)  # labelled by the track (`labelling_track.py`)
         if rejected and not visual.is_finite():  # gated out, counted, and no sign of a new scene alignment
@@ -463,7 +471,7 @@ class Mekf(Backend):
         cov = P_th + P_th_T  # into a new array: in place, numpy would check two views of one array for overlap
         cov *= 0.5
         if not self.motion.uses_imu:
-            cov += self.noise_share.persistent_cov
+            cov += self.motion.persistent_cov(self)
             bias_i, shares = None, _CAMERA_ONLY
         else:
             bias_i, shares = self._bias_in_imu(b_c[0]), tilt_shares(self.views["s"])

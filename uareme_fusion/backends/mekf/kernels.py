@@ -3,7 +3,8 @@ same functions as plain Python otherwise (`jit.py`).
 
 The maths live in `kernel_imu` (IMU propagation, gaps and saturation included), `kernel_update`
 (Kalman update, injection and reset, accelerometer and zero-rate updates) and `kernel_visual`
-(visual update with an IMU and visual only, the disagreement test, the constant-rate prediction),
+(visual update with an IMU and visual only, the disagreement test, the constant-rate prediction) and
+`kernel_image_rotation` (the visual-only prediction by the image rotation between frames),
 with the models of `measurements`, `source_trust` and `state`. The drivers named here take the
 filter's state buffer `x` (`state_buffer.py`) and its parameter record (`parameters.py`) and update
 the buffer in place; `compiled.py` calls them for `Mekf`.
@@ -21,10 +22,11 @@ import types
 
 from ... import jit, rotations
 from .. import imu_stream
-from . import accel, kernel_imu, kernel_update, kernel_visual, matrix3, measurements, source_trust, state
+from . import accel, kernel_image_rotation, kernel_imu, kernel_update, kernel_visual, matrix3, measurements
+from . import source_trust, state
 from . import state_buffer, status_bits
 
-_MODULES = (kernel_imu, kernel_update, kernel_visual)
+_MODULES = (kernel_imu, kernel_update, kernel_visual, kernel_image_rotation)
 """The modules whose functions call the others by their global names (rebound to the compiled ones)."""
 _HELPERS = (state.reset_jacobian, state.orthonormal, measurements.gravity_model, measurements.zero_rate_model,
             measurements.vertical_measurement, measurements.correlated_noise_scale, matrix3.inv3, matrix3.exp3_into,
@@ -42,13 +44,14 @@ DRIVERS = dict(
     INTEGRATE=kernel_imu.integrate_batch, STAGE=kernel_imu.stage_batch, INTEGRATE_STAGED=kernel_imu.integrate_staged,
     SEGMENTS=kernel_imu.integrate_segments, ACCEL_UPDATE=kernel_update.accel_update_in_place,
     UPDATE=kernel_update.update_in_place, VISUAL_UPDATE=kernel_visual.visual_update,
-    VISUAL_DISTANCE=kernel_visual.visual_distance, CONSTANT_RATE=kernel_visual.constant_rate_predict)
+    VISUAL_DISTANCE=kernel_visual.visual_distance, CONSTANT_RATE=kernel_visual.constant_rate_predict,
+    IMAGE_ROTATION=kernel_image_rotation.image_rotation_predict)
 """The drivers by name: `compiled.py` calls `kernels.<NAME>`, compiled or plain."""
-_PER_FRAME = {"STAGE", "INTEGRATE_STAGED", "VISUAL_UPDATE", "VISUAL_DISTANCE", "CONSTANT_RATE"}
+_PER_FRAME = {"STAGE", "INTEGRATE_STAGED", "VISUAL_UPDATE", "VISUAL_DISTANCE", "CONSTANT_RATE", "IMAGE_ROTATION"}
 """Drivers of a few microseconds called per frame: they keep the GIL (`jit.compiled(nogil=False)`)."""
 
 INTEGRATE = STAGE = INTEGRATE_STAGED = SEGMENTS = ACCEL_UPDATE = UPDATE = VISUAL_UPDATE = None
-VISUAL_DISTANCE = CONSTANT_RATE = None
+VISUAL_DISTANCE = CONSTANT_RATE = IMAGE_ROTATION = None
 _compiled = False
 
 

@@ -4,8 +4,14 @@
   integrated by the kernels (`kernel_imu.integrate_batch`: chunk by chunk, gaps and saturated samples
   included), the accelerometer updates falling due per `accel_update_period_s`.
 - `ConstantRateMotion` (mode `visual_only`): the constant-rate model between frames
-  (`kernel_visual.constant_rate_predict`, the one place the visual-only propagation goes through);
-  the world is the first Manhattan frame; IMU samples are ignored.
+  (`kernel_visual.constant_rate_predict`); the world is the first Manhattan frame; IMU samples are
+  ignored. `image_rotation_motion.ImageRotationMotion` (visual only, `visual_only_image_rotation`) is
+  one, predicting the frames that carry the image rotation by it instead.
+
+`measures_motion`: the motion between frames is measured (gyro, image rotation), not modelled (`scene.py`
+then fuses a disagreeing frame under the gate instead of coasting past it). `waits_for_frame`: the
+prediction to a frame needs the frame's own visual rotation (`propagate_to`'s `visual`), so a prediction
+asked before it (`Mekf.predicted_R_cm`) leaves the state where it is (`predicted_R_wc`).
 """
 
 from __future__ import annotations
@@ -31,15 +37,28 @@ class ConstantRateMotion:
 
     uses_imu = False
     estimates_rate = True
+    measures_motion = False
+    waits_for_frame = False
 
     def __init__(self, mode: MekfMode = MekfMode.VISUAL_ONLY):
         self.mode = mode
         self.fuses_visual = True
 
-    def propagate_to(self, filt, t_s: float) -> None:
-        """`R_wc <- R_wc Exp(omega_c dt)` and the covariance prediction, to `t_s` (s)."""
+    def propagate_to(self, filt, t_s: float, visual: VisualRotation | None = None) -> None:
+        """`R_wc <- R_wc Exp(omega_c dt)` and the covariance prediction, to `t_s` (s) (`visual`, the
+        frame's: not used)."""
         if filt.initialised and t_s > filt.t_state:
             constant_rate_predict(filt, t_s, filt.config.rate_rw_rad_s2_sqrt_hz**2)
+
+    def visual_noise_scale(self, filt) -> float:
+        """The factor on a frame's visual covariance as fused: its independent share (`VisualNoiseShare`;
+        1 when that is off)."""
+        return filt.noise_share.share if filt.noise_share.enabled else 1.0
+
+    def persistent_cov(self, filt) -> np.ndarray:
+        """(3, 3) rad^2 added to the reported covariance: the current frame's persistent error, which the
+        filter following the frames carries (`VisualNoiseShare.persistent_cov`)."""
+        return filt.noise_share.persistent_cov
 
     def start_from_visual(self, filt, t_s: float, visual: VisualRotation) -> None:
         """`R_wc` from the first frame's `R_cm` labelled upright; the rate starts at 0."""
@@ -72,13 +91,16 @@ class GyroMotion:
 
     uses_imu = True
     estimates_rate = False
+    measures_motion = True
+    waits_for_frame = False
 
     def __init__(self, mode: MekfMode):
         self.mode = mode
         self.fuses_visual = mode != MekfMode.IMU_ONLY
 
-    def propagate_to(self, filt, t_s: float) -> None:
-        """Integrate IMU samples up to `t_s` (camera clock, s), then hold the last rate."""
+    def propagate_to(self, filt, t_s: float, visual: VisualRotation | None = None) -> None:
+        """Integrate IMU samples up to `t_s` (camera clock, s), then hold the last rate (`visual`, the
+        frame's: not used)."""
         rows = filt.stream.release_rows_until(t_s)
         # The common case of a frame after its samples, in one kernel call: what `integrate_pending`
         # does for one batch when nothing else waits, without queueing it first.

@@ -26,9 +26,10 @@ def ignored_too_long(filt, t_s: float, visual: VisualRotation) -> bool | None:
     then rejects it, or the Huber weight lets it move the estimate little, and persistent disagreement is drift the
     other flags do not show. Such a frame is flagged `VISUAL_IGNORED`; after
     `reinit_after_disagreement_s` (s) of them in a row, True (re-initialise). None: fuse the frame
-    as usual (it agrees, or the IMU's gate and Huber weight handle it). False: skip it, without an
-    IMU, where fusing a large innovation would also corrupt the constant-rate model's rate and
-    spin the estimate away; the filter coasts. A non-finite frame changes nothing."""
+    as usual (it agrees, or, the motion measured by a gyro or the image rotation, the gate and Huber
+    weight handle it). False: skip it, with the constant-rate model, where fusing a large innovation
+    would also corrupt the model's rate and spin the estimate away; the filter coasts. A non-finite
+    frame changes nothing."""
     if not visual.is_finite():
         return None
     cfg = filt.config
@@ -36,24 +37,26 @@ def ignored_too_long(filt, t_s: float, visual: VisualRotation) -> bool | None:
     # rotations in as a jump.
     P = filt.P if filt.disagree_since_s is None else filt._disagree_P
     angle, d2 = filt.visual_distance(visual, P)
-    # Without an IMU a gated-out frame is a disagreement too: the filter coasts through both alike.
-    chi2 = cfg.disagreement_chi2 if filt.motion.uses_imu else min(cfg.disagreement_chi2, cfg.visual_gate_chi2)
+    # With a modelled motion (constant rate) a gated-out frame is a disagreement too: the filter coasts
+    # through both alike. A measured one (gyro, image rotation) fuses them under the gate and Huber weight.
+    measured = filt.motion.measures_motion
+    chi2 = cfg.disagreement_chi2 if measured else min(cfg.disagreement_chi2, cfg.visual_gate_chi2)
     if not (angle > np.radians(cfg.disagreement_min_deg) and not d2 <= chi2):
         filt.disagree_since_s = filt._disagree_R_cm = None
         return None
     # Without an IMU, a run re-initialises only on frames that agree with each other (the camera
     # turned, or the filter drifted): two wrong minima in a row point different ways.
     previous, filt._disagree_R_cm = filt._disagree_R_cm, visual.R_cm
-    consistent = filt.motion.uses_imu or (
+    consistent = measured or (
         previous is not None and float(angle_between(previous, visual.R_cm)) < 0.5 * angle)
     filt.flags |= status_bits.VISUAL_IGNORED
     filt._counters["visual_ignored"] += 1
     if filt.disagree_since_s is None:
         filt.disagree_since_s, filt._disagree_P = t_s, filt.P.copy()
-    limit_s = cfg.reinit_after_disagreement_s if filt.motion.uses_imu else cfg.visual_only_reinit_after_s
+    limit_s = cfg.reinit_after_disagreement_s if measured else cfg.visual_only_reinit_after_s
     if t_s - filt.disagree_since_s >= limit_s and consistent:
         return True
-    return None if filt.motion.uses_imu else False
+    return None if measured else False
 
 
 def initialise_manhattan(filt, visual: VisualRotation, R_wm_ref: np.ndarray | None = None) -> bool:
