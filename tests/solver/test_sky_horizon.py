@@ -168,3 +168,26 @@ def test_fisheye_frame_is_finite_or_declined(shared_data):
                      cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
     found = detect_sky_horizon(fish)
     assert found is None or (np.all(np.isfinite(found.cov_line)) and found.offset_std_px > 0)
+
+
+def test_a_rough_sky_off_to_the_side_puts_the_horizon_angle_in_doubt():
+    """`sky_orientation_doubt_deg`: an untrusted boundary (separation 1.3 < the trusted 1.6, a bent skyline)
+    with its sky on the left of a photo whose segments' horizon has its sky up: doubt 90 deg; the same sky
+    above: none; too weak a separation or an untextured ground: none."""
+    import dataclasses
+
+    from uareme_fusion.solver.horizon_estimate import sky_orientation_doubt_deg
+    from uareme_fusion.solver.sky_horizon import SkyHorizon, SkyHorizonConfig
+
+    cfg = SkyHorizonConfig()
+    left = SkyHorizon(line=np.array([-1.0, 0.0, 200.0]), cov_line=np.diag([4.0, 1e-4]), height=640, width=480,
+                      separation=1.3, sky_fraction=0.4, span_fraction=0.5, residual_fraction=0.05,
+                      texture_ratio=5.0, inliers=40)
+    assert set(left.failed_checks(cfg)) == {"separation", "span", "straight"}
+    upright = np.array([0.0, -1.0, 250.0])  # sky above y = 250
+    assert sky_orientation_doubt_deg(left, upright, cfg) == pytest.approx(90.0)
+    above = dataclasses.replace(left, line=np.array([0.05, -1.0, 240.0]) / np.hypot(0.05, 1.0))
+    assert sky_orientation_doubt_deg(above, upright, cfg) == 0.0
+    assert sky_orientation_doubt_deg(dataclasses.replace(left, separation=1.0), upright, cfg) == 0.0
+    assert sky_orientation_doubt_deg(dataclasses.replace(left, texture_ratio=0.5), upright, cfg) == 0.0
+    assert sky_orientation_doubt_deg(None, upright, cfg) == 0.0

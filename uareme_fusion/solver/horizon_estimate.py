@@ -110,6 +110,42 @@ def sky_and_segments(sky, segments, K: np.ndarray, up_guess_c: np.ndarray, confi
     return (None, segments) if sky_vetoed(sky, atlanta, cfg) else (sky, segments)
 
 
+@dataclass(frozen=True)
+class SkyOrientationConfig:
+    """When a sky boundary too rough to be the horizon still says that the segments' up is turned away from
+    the sky: the zenith search assumes an upright photo (`ZenithConfig.roll_prior_deg`), and in a photo
+    turned 90 deg a facade's horizontal VP, now near the image vertical, is taken for the zenith; the
+    segments alone cannot tell (a Manhattan scene looks the same turned). Measured (real) with
+    `detect_sky_horizon` on ECD and the same photos turned 90 deg clockwise (segments turned alike), and on
+    every 4th ICSL, ICSL-more and ICL kt3 frame: with these limits the sky lies over 70 deg from the
+    Atlanta horizon's up in 51 of 102 turned photos (ECD 066 turned: 90 deg, separation 1.27), in 2 of
+    102 upright ones (071, 076) and in none of the 43 indoor frames (one indoor frame at 65 deg, 1.35)."""
+
+    min_separation: float = 1.2
+    """The boundary's separation (`SkyHorizon.separation`, the trusted sky's check asks 1.6) ..."""
+    min_angle_deg: float = 70.0
+    """... and the angle between its sky direction and the horizon's up (image plane) from which the
+    horizon's angle is in doubt by that angle."""
+    required_checks: tuple[str, ...] = ("side", "texture")
+    """`SkyHorizon.failed_checks` names it must pass: sky and ground on each side, the ground textured and
+    the sky smooth (a skyline of buildings need be neither long nor straight)."""
+
+
+def sky_orientation_doubt_deg(boundary, line_px: np.ndarray, sky_config,
+                              config: SkyOrientationConfig | None = None) -> float:
+    """The angle (deg, image plane) between the sky direction of the untrusted sky boundary `boundary`
+    (`SkyDetector.boundary`, checked with `sky_config`) and the up of the horizon `line_px` (positive on the
+    sky side) when that boundary contradicts it (`SkyOrientationConfig`), else 0."""
+    cfg = config or SkyOrientationConfig()
+    if boundary is None or boundary.separation < cfg.min_separation:
+        return 0.0
+    if set(boundary.failed_checks(sky_config)) & set(cfg.required_checks):
+        return 0.0
+    a, b = np.asarray(boundary.line[:2], float), np.asarray(line_px[:2], float)
+    angle = float(np.degrees(np.arccos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))))
+    return angle if angle > cfg.min_angle_deg else 0.0
+
+
 SKY_START_STEPS = 18
 """Turns about the sky's up tried by `sky_start` (over 90 deg, the Manhattan symmetry about up: 5 deg apart)."""
 

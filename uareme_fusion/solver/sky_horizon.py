@@ -412,5 +412,12 @@ class SkyDetector:
         self.config = config or SkyHorizonConfig()
 
     def detect(self, rgb: np.ndarray | None) -> SkyHorizon | None:
-        found = detect_sky_horizon(rgb, self.config) if rgb is not None else None
+        return self.trusted(self.boundary(rgb))
+
+    def boundary(self, rgb: np.ndarray | None) -> SkyHorizon | None:
+        """The fitted boundary before the checks (`detect_sky_horizon`), None when none could be fitted."""
+        return detect_sky_horizon(rgb, self.config) if rgb is not None else None
+
+    def trusted(self, found: SkyHorizon | None) -> SkyHorizon | None:
+        """`found` when it passes all the checks, else None."""
         return found if found is not None and not found.failed_checks(self.config) else None
