@@ -17,7 +17,7 @@ from filterpy.kalman import update as kf_update
 from jacobians import check_measurement_model, fd_jacobian
 
 from uareme_fusion.backends.mekf import kernel_imu, kernel_visual
-from uareme_fusion.backends.mekf.measurements import gravity_model, vertical_model, visual_model, zero_rate_model
+from uareme_fusion.backends.mekf.measurements import gravity_model, vertical_model, zero_rate_model
 from uareme_fusion.backends.mekf.state import BG, MF, N_STATE, RATE, TH, ZERO_STATE, reset_jacobian
 from uareme_fusion.backends.mekf.state_buffer import S_T_STATE, field_views, new_state_buffer
 from uareme_fusion.rotations import WORLD_UP, angle_between, exp_so3, log_so3
@@ -33,6 +33,8 @@ def plain(f):
     """A kernel as plain Python (numba's `py_func`), so that the test runs it with any argument."""
     return getattr(f, "py_func", f)
 
+
+visual_model = plain(kernel_visual.visual_model)
 
 GRAVITY_ARGS = dict(gravity_m_s2=9.81, noise_rad_sqrt_s=0.02, norm_scale=0.05, innovation_scale_rad=0.05,
                     flag_ratio=2.0)

@@ -13,10 +13,11 @@ import math
 
 import numpy as np
 
+from ... import rotations
 from . import status_bits
 from .kernel_update import DOWNWEIGHTED, NONFINITE, accel_rows, kalman_update, matmul_into, state_views
-from .matrix3 import exp3_into, inv3, matmul3_into
-from .measurements import correlated_noise_scale, vertical_model, visual_model
+from .matrix3 import exp3_into, inv3, log3_into, matmul3_into
+from .measurements import Measurement, correlated_noise_scale, vertical_model
 from .source_trust import note_visual_information, squared_rate, update_visual_trust, vertical_variance
 from .source_trust import visual_vertical_innovation
 from .state import orthonormal
@@ -25,10 +26,53 @@ from .state_buffer import (S_ACCEL_DUE, S_ACCEL_TIME, S_ACCEL_VAR_RATE, S_NONFIN
 
 VISUAL_REJECTED = status_bits.VISUAL_REJECTED
 """`visual_update`: the frame's rotation failed the gate (a `Status` bit)."""
+SYMMETRIES = rotations.manhattan_symmetries()
+"""The 24 rotations that relabel a Manhattan frame (`rotations.manhattan_symmetries`, in its order):
+a constant of the compiled code."""
+
+
+def visual_model(R_wc, R_wm, R_cm, cov, relabel):
+    """The solver's `R_cm` (3, 3) with covariance `cov` (3, 3) rad^2 (right perturbation) measures
+    `R_cm = R_wc^T R_wm`; with `relabel`, relabelled first by the symmetry that brings it nearest the
+    prediction (the first of `SYMMETRIES` with the largest trace, as `rotations.nearest_symmetric`),
+    else as labelled (`backends.labelling_track`): residual `Log(R_cm_pred^T R_cm)`, covariance
+    `G^T cov G` (symmetrised) for the relabelling `G`, `H = [-R_cm_pred^T, 0, I, 0]`. Always `ok`."""
+    R_pred = np.empty((3, 3))  # R_wc^T R_wm
+    for i in range(3):
+        for j in range(3):
+            R_pred[i, j] = R_wc[0, i] * R_wm[0, j] + R_wc[1, i] * R_wm[1, j] + R_wc[2, i] * R_wm[2, j]
+    A = np.empty((3, 3))  # R_pred^T R_cm
+    for i in range(3):
+        for j in range(3):
+            A[i, j] = R_pred[0, i] * R_cm[0, j] + R_pred[1, i] * R_cm[1, j] + R_pred[2, i] * R_cm[2, j]
+    best, best_trace = 0, -np.inf  # SYMMETRIES[0] is the identity
+    for g in range(SYMMETRIES.shape[0] if relabel else 0):
+        trace = 0.0
+        for i in range(3):
+            for j in range(3):
+                trace += A[i, j] * SYMMETRIES[g, j, i]
+        if trace > best_trace:
+            best, best_trace = g, trace
+    G = SYMMETRIES[best]
+    r = log3_into(matmul3_into(A, G, np.empty((3, 3))), np.empty(3))
+    C = np.empty((3, 3))  # G^T (cov + cov^T)/2 G
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = 0.5 * (cov[i, j] + cov[j, i])
+    R_vis, H = np.empty((3, 3)), np.zeros((3, 12))
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += G[k, i] * (C[k, 0] * G[0, j] + C[k, 1] * G[1, j] + C[k, 2] * G[2, j])
+            R_vis[i, j] = acc
+            H[i, j] = -R_pred[j, i]
+        H[i, 6 + i] = 1.0
+    return Measurement(True, r, R_vis, H)
 
 
 def visual_rows(R_wc, R_wm, R_cm, cov, relabel, r, R_vis, H):
-    """`measurements.visual_model` into the first three rows of a stacked update's `r` (m,), `R_vis`
+    """`visual_model` into the first three rows of a stacked update's `r` (m,), `R_vis`
     (m, m) and `H` (m, 12) (zeros elsewhere, which it leaves)."""
     visual = visual_model(R_wc, R_wm, R_cm, cov, relabel)
     r[0:3] = visual.residual
@@ -141,7 +185,7 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
 
 def visual_distance(x, P, R_cm, cov, relabel):
     """`(angle rad, d2)` of a frame's rotation against the prediction of the state buffer `x`: the norm
-    of its residual (`measurements.visual_model`, relabelled nearest the prediction with `relabel`) and its
+    of its residual (`visual_model`, relabelled nearest the prediction with `relabel`) and its
     squared Mahalanobis distance under the error covariance `P` (12, 12) and its own (inf for a
     singular innovation covariance)."""
     R_wc, R_wm = state_views(x)[1:3]

@@ -24,11 +24,10 @@ from .. import imu_stream
 from . import accel, kernel_imu, kernel_update, kernel_visual, matrix3, measurements, source_trust, state
 from . import state_buffer, status_bits
 
-_MODULES = (kernel_imu, kernel_update, kernel_visual, measurements)
+_MODULES = (kernel_imu, kernel_update, kernel_visual)
 """The modules whose functions call the others by their global names (rebound to the compiled ones)."""
 _HELPERS = (state.reset_jacobian, state.orthonormal, measurements.gravity_model, measurements.zero_rate_model,
-            measurements.vertical_model, measurements.visual_model, measurements.not_applicable,
-            measurements.correlated_noise_scale, matrix3.inv3, matrix3.exp3_into,
+            measurements.vertical_model, measurements.correlated_noise_scale, matrix3.inv3, matrix3.exp3_into,
             matrix3.matmul3_into, matrix3.log3_into, accel.chunk_bounds, imu_stream.rows_if_clean,
             source_trust.note_accel_information, source_trust.note_visual_information,
             source_trust.update_visual_trust, source_trust.vertical_variance, source_trust.visual_vertical_innovation,
@@ -38,7 +37,7 @@ _INNER = (kernel_update.state_views,
           kernel_update.inject_and_reset, kernel_update.accel_rows,
           kernel_imu.chunk_steps, kernel_imu.propagate_chunk,
           kernel_imu.gyro_predict_in_place, kernel_imu.scratch, kernel_imu.integrate_chunks, kernel_imu.carry_lowpass_in_place,
-          kernel_visual.visual_rows)
+          kernel_visual.visual_model, kernel_visual.visual_rows)
 DRIVERS = dict(
     INTEGRATE=kernel_imu.integrate_batch, STAGE=kernel_imu.stage_batch, INTEGRATE_STAGED=kernel_imu.integrate_staged,
     SEGMENTS=kernel_imu.integrate_segments, ACCEL_UPDATE=kernel_update.accel_update_in_place,

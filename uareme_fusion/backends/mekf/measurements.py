@@ -7,7 +7,8 @@ the measurement and the prediction (its evaluation), the residual's covariance R
 measurement noise) and its Jacobian H (3, 12) with `residual(x) - residual(x (+) dx) = H dx` to first
 order for the error state `dx` (right perturbations, `state.py`); tests/backends/test_mekf_models.py
 checks each H against finite differences.
-- visual: the solver's `R_cm` measures `R_wc^T R_wm` (residual `Log(R_cm_pred^T R_cm)`);
+- visual: the solver's `R_cm` measures `R_wc^T R_wm` (residual `Log(R_cm_pred^T R_cm)`;
+  `kernel_visual.visual_model`);
 - vertical: "the Manhattan z axis is world up" (`e_z - R_wm^T up`);
 - gravity: the accelerometer direction measures up in the camera frame (`z - R_wc^T up`);
 - zero rate: at rest the mean gyro reading measures the bias (`g_mean - b_c`).
@@ -20,60 +21,13 @@ import math
 
 import numpy as np
 
-from ...rotations import manhattan_symmetries
-from .matrix3 import log3_into, matmul3_into
 from .state import MF
 
 Measurement = collections.namedtuple("Measurement", ("ok", "residual", "covariance", "jacobian"))
 """What every model returns: `ok` (bool: the model applies), `residual` (3,), `covariance` (3, 3) and
-`jacobian` (3, 12) (module docstring); zeros when not `ok`. numba compiles it as a named tuple."""
-SYMMETRIES = manhattan_symmetries()
-"""The 24 rotations that relabel a Manhattan frame (`rotations.manhattan_symmetries`, in its order):
-a constant of the compiled code."""
-
-
-def not_applicable():
-    return Measurement(False, np.zeros(3), np.zeros((3, 3)), np.zeros((3, 12)))
-
-
-def visual_model(R_wc, R_wm, R_cm, cov, relabel):
-    """The solver's `R_cm` (3, 3) with covariance `cov` (3, 3) rad^2 (right perturbation) measures
-    `R_cm = R_wc^T R_wm`; with `relabel`, relabelled first by the symmetry that brings it nearest the
-    prediction (the first of `SYMMETRIES` with the largest trace, as `rotations.nearest_symmetric`),
-    else as labelled (`backends.labelling_track`): residual `Log(R_cm_pred^T R_cm)`, covariance
-    `G^T cov G` (symmetrised) for the relabelling `G`, `H = [-R_cm_pred^T, 0, I, 0]`. Always `ok`."""
-    R_pred = np.empty((3, 3))  # R_wc^T R_wm
-    for i in range(3):
-        for j in range(3):
-            R_pred[i, j] = R_wc[0, i] * R_wm[0, j] + R_wc[1, i] * R_wm[1, j] + R_wc[2, i] * R_wm[2, j]
-    A = np.empty((3, 3))  # R_pred^T R_cm
-    for i in range(3):
-        for j in range(3):
-            A[i, j] = R_pred[0, i] * R_cm[0, j] + R_pred[1, i] * R_cm[1, j] + R_pred[2, i] * R_cm[2, j]
-    best, best_trace = 0, -np.inf  # SYMMETRIES[0] is the identity
-    for g in range(SYMMETRIES.shape[0] if relabel else 0):
-        trace = 0.0
-        for i in range(3):
-            for j in range(3):
-                trace += A[i, j] * SYMMETRIES[g, j, i]
-        if trace > best_trace:
-            best, best_trace = g, trace
-    G = SYMMETRIES[best]
-    r = log3_into(matmul3_into(A, G, np.empty((3, 3))), np.empty(3))
-    C = np.empty((3, 3))  # G^T (cov + cov^T)/2 G
-    for i in range(3):
-        for j in range(3):
-            C[i, j] = 0.5 * (cov[i, j] + cov[j, i])
-    R_vis, H = np.empty((3, 3)), np.zeros((3, 12))
-    for i in range(3):
-        for j in range(3):
-            acc = 0.0
-            for k in range(3):
-                acc += G[k, i] * (C[k, 0] * G[0, j] + C[k, 1] * G[1, j] + C[k, 2] * G[2, j])
-            R_vis[i, j] = acc
-            H[i, j] = -R_pred[j, i]
-        H[i, 6 + i] = 1.0
-    return Measurement(True, r, R_vis, H)
+`jacobian` (3, 12) (module docstring); zeros when not `ok`. numba compiles it as a named tuple.
+The models here call no other compiled function (the kernels rebind only their own modules' names):
+the visual model, which draws on the 3x3 helpers, is `kernel_visual.visual_model`."""
 
 
 def correlated_noise_scale(dt_s: float, correlation_s: float) -> float:
@@ -90,7 +44,7 @@ def vertical_model(R_wm, std_rad, max_rad):
     std `std_rad` (covariance `std_rad^2 I`); not `ok` when m's z is farther than `max_rad` from up."""
     h = R_wm[2].copy()  # R_wm^T @ (0, 0, 1)
     if math.acos(min(1.0, max(-1.0, h[2]))) > max_rad:
-        return not_applicable()
+        return Measurement(False, np.zeros(3), np.zeros((3, 3)), np.zeros((3, 12)))
     H = np.zeros((3, 12))
     # d/d(dtheta_m) of Exp(-dtheta_m) h at 0: skew(h)
     H[0, 7], H[0, 8], H[1, 8] = -h[2], h[1], -h[0]
@@ -124,7 +78,7 @@ def gravity_model(accel_c, T_s, R_wc, lp_J1, use_lp_J, gravity_m_s2, noise_rad_s
     exceeds `flag_ratio` times the nominal one."""
     norm = math.sqrt(accel_c[0] ** 2 + accel_c[1] ** 2 + accel_c[2] ** 2)
     if not (T_s > 0 and norm > 0.1 * gravity_m_s2):
-        return not_applicable(), False
+        return Measurement(False, np.zeros(3), np.zeros((3, 3)), np.zeros((3, 12))), False
     H = np.zeros((3, 12))
     # |mean specific force| against gravity: the mean is taken in a common (rotating) camera frame,
     # so it is the inertial-frame average and translational accelerations cancel in it.
@@ -156,7 +110,7 @@ def zero_rate_model(rest_sums, rest_n, T_s, b_c, q_gyro, rest_gyro_max_rad_s, re
     a_dev2 = max(rest_sums[7] / rest_n - (a_mean[0] ** 2 + a_mean[1] ** 2 + a_mean[2] ** 2), 0.0)
     limit2 = rest_gyro_max_rad_s**2
     if g2 >= limit2 or g_dev2 >= limit2 or a_dev2 >= rest_accel_max_m_s2**2:
-        return not_applicable()
+        return Measurement(False, np.zeros(3), np.zeros((3, 3)), np.zeros((3, 12)))
     H = np.zeros((3, 12))
     for i in range(3):
         H[i, 3 + i] = 1.0
