@@ -8,7 +8,10 @@ with the models of `measurements`, `source_trust` and `state`. The drivers named
 filter's state buffer `x` (`state_buffer.py`) and its parameter record (`parameters.py`) and update
 the buffer in place; `compiled.py` calls them for `Mekf`.
 
-Compiling takes about 20 s on a small machine, so the machine code is cached on disk, keyed by the
+numba optimises and generates each compiled function with everything it calls linked in, so each
+layer of calls and each extra signature (a C- against an A-layout array, a literal bool) compiles the
+code beneath it again: compiling both sets (`filter.load_kernels`) takes about 60 s of one core on a
+small machine. The machine code is therefore cached on disk, keyed by the
 sources of every module the kernels draw on (`jit.compiled(sources=...)`): an edit anywhere there
 compiles them again; nothing is deleted. Should numba fail to compile a kernel at its first call,
 `use_python` puts the plain functions back everywhere (one warning line) and the call runs as Python.
