@@ -71,7 +71,7 @@ def test_gravity_jacobian_matches_finite_differences():
     prior moves R_wc and R_wm as one world rotation does."""
     R_wc = Rotation.from_rotvec([0.4, -0.2, 1.1]).as_matrix()
     acc = G * np.array([0.1, -0.9, 0.2]) / np.linalg.norm([0.1, -0.9, 0.2])
-    ok, r0, _, H, _ = gravity_model(acc, 0.1, R_wc, np.zeros((3, 3)), False, G, 0.01, 0.05, 0.3, 2.0)
+    (ok, r0, _, H), _ = gravity_model(acc, 0.1, R_wc, np.zeros((3, 3)), False, G, 0.01, 0.05, 0.3, 2.0)
     assert ok
     eps, J = 1e-6, np.zeros((3, 3))
     for k in range(3):

@@ -6,7 +6,7 @@ updates in turn.
 
 Convention (`mekf.state`): a state `x (+) dx` has `R_wc Exp(dtheta_c)`, `b_c + db`, `R_wm Exp(dtheta_m)`,
 `omega_c + domega`; a model's H satisfies `residual(x) - residual(x (+) dx) = H dx` to first order
-for the same measurement (its prediction moved by `H dx`)."""
+for the same measurement (its prediction moved by `H dx`): `jacobians.check_measurement_model`."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import update as kf_update
 
-from jacobians import fd_jacobian
+from jacobians import check_measurement_model, fd_jacobian
 
 from uareme_fusion.backends.mekf import kernel_imu, kernel_visual
 from uareme_fusion.backends.mekf.measurements import gravity_model, vertical_model, zero_rate_model
@@ -23,7 +23,8 @@ from uareme_fusion.backends.mekf.state_buffer import S_T_STATE, field_views, new
 from uareme_fusion.rotations import WORLD_UP, angle_between, exp_so3, log_so3
 
 from mekf_oracle.accel import AccelPeriod  # tests/backends/mekf_oracle: pytest puts tests/backends on sys.path
-from mekf_oracle.measurements import stack, visual_model
+from mekf_oracle.measurements import stack
+from mekf_oracle.measurements import visual_model as oracle_visual_model
 from mekf_oracle.propagation import gyro_chunk, gyro_rates, prefix_products
 from mekf_oracle.state import inject
 
@@ -33,11 +34,7 @@ def plain(f):
     return getattr(f, "py_func", f)
 
 
-def visual_rows(R_wc, R_wm, R_cm, cov, relabel=True):
-    """The kernels' visual model (`kernel_visual.visual_measurement`): `(residual, R, H)`."""
-    r, R, H = np.zeros(3), np.zeros((3, 3)), np.zeros((3, 12))
-    plain(kernel_visual.visual_measurement)(R_wc, R_wm, R_cm, np.asarray(cov, float), relabel, r, R, H)
-    return r, R, H
+visual_model = plain(kernel_visual.visual_model)
 
 GRAVITY_ARGS = dict(gravity_m_s2=9.81, noise_rad_sqrt_s=0.02, norm_scale=0.05, innovation_scale_rad=0.05,
                     flag_ratio=2.0)
@@ -53,22 +50,89 @@ def random_state(seed):
     return exp_so3(rng.normal(size=3)), exp_so3(rng.normal(size=3)), 0.01 * rng.normal(size=3), rng.normal(size=3)
 
 
+def visual_at(relabel):
+    """The visual model at `x (+) dx` of the rotation that `x` predicts (H is its Jacobian at a zero residual)."""
+    x = random_state(3)
+    R_cm = x[0].T @ x[1]
+    cov = np.diag([1e-4, 2e-4, 3e-4])
+    return lambda dx: plain(visual_model)(*perturbed(*x, dx)[:2], R_cm, cov, relabel)
+
+
+def vertical_at():
+    x = random_state(4)
+    R_wm = exp_so3([0.05, -0.03, 1.2])  # z within the gate of up
+    return lambda dx: plain(vertical_model)(perturbed(x[0], R_wm, *x[2:], dx)[1], 0.02, 0.35)
+
+
+def gravity_at(use_lp_J):
+    """The gravity model of a low-passed specific force, which follows the bias estimate: `lp + J db`
+    (the kernels' injection, `kernel_update.inject_and_reset`)."""
+    x = random_state(5)
+    rng = np.random.default_rng(6)
+    lp = x[0].T @ (9.81 * WORLD_UP) + 0.3 * rng.normal(size=3)  # m/s^2
+    J = rng.normal(size=(3, 3)) if use_lp_J else np.zeros((3, 3))
+
+    def measure(dx):
+        R_wc = perturbed(*x, dx)[0]
+        return plain(gravity_model)(lp + J @ dx[BG], 0.04, R_wc, J, use_lp_J, **GRAVITY_ARGS)[0]
+    return measure
+
+
+def resting(seed=7):
+    """A state, 50 gyro readings at rest about its bias and the rest sums of `zero_rate_model` over them."""
+    x = random_state(seed)
+    rng = np.random.default_rng(seed + 1)
+    gyro = x[2] + 1e-4 * rng.normal(size=(50, 3))
+    accel = np.tile([0.0, -9.81, 0.0], (50, 1))
+    return x, gyro, np.r_[gyro.sum(axis=0), (gyro**2).sum(), accel.sum(axis=0), (accel**2).sum()]
+
+
+def zero_rate_at():
+    x, _, sums = resting()
+    return lambda dx: plain(zero_rate_model)(sums, 50, 0.25, perturbed(*x, dx)[2], 4e-6, 0.035, 0.5, 5e-4)
+
+
+MODELS = {"visual": lambda: visual_at(True), "visual as labelled": lambda: visual_at(False),
+          "vertical": vertical_at, "gravity": lambda: gravity_at(False), "gravity low-passed": lambda: gravity_at(True),
+          "zero rate": zero_rate_at}
+"""Every measurement model of the EKF (`mekf.measurements`), as the kernels run it (plain Python), at a
+state `x (+) dx`."""
+
+
 def test_fd_jacobian_of_a_known_map():
     A = np.arange(12.0).reshape(3, 4)
     np.testing.assert_allclose(fd_jacobian(lambda d: A @ d + np.sin(d[0]) * np.array([1.0, 0, 0]), 4),
                                A + np.array([[1.0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]]), atol=1e-8)
 
 
-@pytest.mark.parametrize("relabel", [True, False])
-def test_visual_model_H(relabel):
-    R_wc, R_wm, b, w = random_state(3)
-    R_cm_meas = R_wc.T @ R_wm  # H is the Jacobian at a zero residual
-    r0, R, H = visual_rows(R_wc, R_wm, R_cm_meas, 1e-4 * np.eye(3), relabel)
-    assert np.abs(r0).max() < 1e-12
-    np.testing.assert_allclose(R, 1e-4 * np.eye(3))
-    fd = fd_jacobian(lambda dx: r0 - visual_rows(*perturbed(R_wc, R_wm, b, w, dx)[:2], R_cm_meas, np.eye(3),
-                                                 relabel)[0], N_STATE)
-    np.testing.assert_allclose(fd, H, atol=1e-8)
+@pytest.mark.parametrize("name", MODELS)
+def test_measurement_model_jacobian_against_finite_differences(name):
+    """One contract for all: each model's `Measurement` at a state, its H the derivative of its residual."""
+    check_measurement_model(MODELS[name](), atol=1e-7)
+
+
+def test_measurement_models_covariances_and_where_they_apply():
+    visual = visual_at(True)(np.zeros(12))
+    np.testing.assert_allclose(visual.covariance, np.diag([1e-4, 2e-4, 3e-4]), atol=1e-18)  # nearest as labelled
+    np.testing.assert_array_equal(vertical_at()(np.zeros(12)).covariance, 0.02**2 * np.eye(3))
+    assert not vertical_model(exp_so3([0.5, 0.0, 0.0]), 0.02, 0.35).ok  # m's z 29 deg from up
+    gravity = gravity_at(False)(np.zeros(12))
+    assert gravity.covariance[0, 0] > 0.02**2 / 0.04 and np.all(gravity.jacobian[:, BG] == 0)
+    rest = zero_rate_at()(np.zeros(12))
+    np.testing.assert_array_equal(rest.covariance, (4e-6 / 0.25 + 5e-4**2) * np.eye(3))
+
+
+def test_visual_model_at_its_prediction_and_the_kernels_rows():
+    """At the prediction the residual is zero; the kernels write the model into a stacked update's rows."""
+    R_wc, R_wm, _, _ = random_state(3)
+    at = visual_model(R_wc, R_wm, R_wc.T @ R_wm, 1e-4 * np.eye(3), True)
+    assert np.abs(at.residual).max() < 1e-12
+    r, R, H = np.ones(6), np.ones((6, 6)), np.ones((6, 12))
+    plain(kernel_visual.visual_rows)(R_wc, R_wm, R_wc.T @ R_wm, 1e-4 * np.eye(3), True, r, R, H)
+    np.testing.assert_array_equal(r[:3], at.residual)
+    np.testing.assert_array_equal(R[:3, :3], at.covariance)
+    np.testing.assert_array_equal(H[:3], at.jacobian)
+    assert np.all(r[3:] == 1) and np.all(R[3:] == 1) and np.all(H[3:] == 1)  # the other rows left
 
 
 def test_visual_model_relabels_nearest_the_prediction_and_its_covariance_with_it():
@@ -80,66 +144,27 @@ def test_visual_model_relabels_nearest_the_prediction_and_its_covariance_with_it
     R_cm = R_wc.T @ R_wm @ exp_so3([0.01, -0.02, 0.005])
     cov = np.diag([1e-4, 2e-4, 3e-4])
     G = manhattan_symmetries()[7]
-    r0, R0, _ = visual_rows(R_wc, R_wm, R_cm, cov)
-    r, R, H = visual_rows(R_wc, R_wm, R_cm @ G, G.T @ cov @ G)
+    _, r0, R0, _ = visual_model(R_wc, R_wm, R_cm, cov, True)
+    _, r, R, H = visual_model(R_wc, R_wm, R_cm @ G, G.T @ cov @ G, True)
     np.testing.assert_allclose(r, r0, atol=1e-12)
     np.testing.assert_allclose(R, R0, atol=1e-15)
-    for mine, oracle in zip((r, R, H), visual_model(R_wc, R_wm, R_cm @ G, G.T @ cov @ G)):
+    for mine, oracle in zip((r, R, H), oracle_visual_model(R_wc, R_wm, R_cm @ G, G.T @ cov @ G)):
         np.testing.assert_allclose(mine, oracle, atol=1e-12)
 
 
-def test_vertical_model_H():
-    R_wc, _, b, w = random_state(4)
-    R_wm = exp_so3([0.05, -0.03, 1.2])  # z within the gate of up
-    r0, R, H = vertical_model(R_wm, 0.02, 0.35)
-    np.testing.assert_allclose(R, 0.02**2 * np.eye(3))
-    fd = fd_jacobian(lambda dx: r0 - vertical_model(perturbed(R_wc, R_wm, b, w, dx)[1], 0.02, 0.35)[0], N_STATE)
-    np.testing.assert_allclose(fd, H, atol=1e-8)
-    assert vertical_model(exp_so3([0.5, 0.0, 0.0]), 0.02, 0.35) is None  # m's z 29 deg from up
-
-
-@pytest.mark.parametrize("use_lp_J", [False, True])
-def test_gravity_model_H(use_lp_J):
-    R_wc, R_wm, b, w = random_state(5)
-    rng = np.random.default_rng(6)
-    lp = R_wc.T @ (9.81 * WORLD_UP) + 0.3 * rng.normal(size=3)  # a low-passed specific force, m/s^2
-    J = rng.normal(size=(3, 3)) if use_lp_J else np.zeros((3, 3))
-    ok, r0, var, H, _ = gravity_model(lp, 0.04, R_wc, J, use_lp_J, **GRAVITY_ARGS)
-    assert ok and var > 0.02**2 / 0.04
-
-    def delta(dx):
-        Rc, _, _, _ = perturbed(R_wc, R_wm, b, w, dx)
-        # The low-passed reading follows the bias estimate: lp + J db (`AccelPeriod.reinject`).
-        return r0 - gravity_model(lp + J @ dx[BG], 0.04, Rc, J, use_lp_J, **GRAVITY_ARGS)[1]
-
-    np.testing.assert_allclose(fd_jacobian(delta, N_STATE), H, atol=1e-7)
-    if not use_lp_J:
-        assert np.all(H[:, BG] == 0)
-
-
 def test_gravity_model_skips_free_fall():
-    ok, _, _, H, _ = gravity_model(np.array([0.0, -0.5, 0.0]), 0.04, np.eye(3), np.zeros((3, 3)), False,
-                                   **GRAVITY_ARGS)
-    assert not ok and np.all(H == 0)
+    gravity, _ = gravity_model(np.array([0.0, -0.5, 0.0]), 0.04, np.eye(3), np.zeros((3, 3)), False, **GRAVITY_ARGS)
+    assert not gravity.ok and np.all(gravity.jacobian == 0)
 
 
-def test_zero_rate_model_H():
-    R_wc, R_wm, b, w = random_state(7)
-    rng = np.random.default_rng(8)
-    gyro = b + 1e-4 * rng.normal(size=(50, 3))
-    accel = np.tile([0.0, -9.81, 0.0], (50, 1))
-    sums = np.r_[gyro.sum(axis=0), (gyro**2).sum(), accel.sum(axis=0), (accel**2).sum()]
-    args = (sums, 50, 0.25)
+def test_zero_rate_model_residual_and_motion():
+    x, gyro, sums = resting()
     limits = (4e-6, 0.035, 0.5, 5e-4)
-    at_rest, r0, var, H = zero_rate_model(*args, b, *limits)
-    assert at_rest and var == pytest.approx(4e-6 / 0.25 + 5e-4**2)
-    np.testing.assert_allclose(r0, gyro.mean(axis=0) - b, atol=1e-12)
-    fd = fd_jacobian(lambda dx: r0 - zero_rate_model(*args, perturbed(R_wc, R_wm, b, w, dx)[2], *limits)[1],
-                     N_STATE)
-    np.testing.assert_allclose(fd, H, atol=1e-9)
+    np.testing.assert_allclose(zero_rate_model(sums, 50, 0.25, x[2], *limits).residual, gyro.mean(axis=0) - x[2],
+                               atol=1e-12)
     moving = gyro + [0.1, 0.0, 0.0]
     sums_moving = np.r_[moving.sum(axis=0), (moving**2).sum(), sums[4:]]
-    assert not zero_rate_model(sums_moving, 50, 0.25, b, *limits)[0]
+    assert not zero_rate_model(sums_moving, 50, 0.25, x[2], *limits).ok
 
 
 def kernel_chunk(gyro, dt, b, trapezoid, P=np.zeros((12, 12))):
@@ -269,11 +294,10 @@ def test_stacked_update_matches_sequential_updates():
     acc = R_wc.T @ (9.81 * WORLD_UP) + [0.05, 0.0, 0.02]
 
     def visual(R_wc, R_wm):
-        return visual_model(R_wc, R_wm, R_cm, 1e-4 * np.eye(3))
+        return oracle_visual_model(R_wc, R_wm, R_cm, 1e-4 * np.eye(3))
 
     def accel_rows(R_wc):
-        _, r, var, H, _ = gravity_model(acc, 0.1, R_wc, np.zeros((3, 3)), False, **GRAVITY_ARGS)
-        return r, var * np.eye(3), H
+        return gravity_model(acc, 0.1, R_wc, np.zeros((3, 3)), False, **GRAVITY_ARGS)[0][1:]
 
     def update(state, P, rows):
         dx, P = kf_update(ZERO_STATE, P, *rows)

@@ -62,6 +62,7 @@ from ..types import Estimate, Status, VisualRotation, visual_R_wc_covariance
 from .base import Backend
 from .imu_noise import GyroNoiseConfig
 from .labelling_track import LabellingTrack
+from .mekf.source_trust import STILL_RATE_RAD_S
 from .smoother_image_motion import ImageMotionFactors
 from .visual_noise_share import VisualNoiseShare
 
@@ -143,7 +144,7 @@ class SmootherConfig(GyroNoiseConfig):
     accel_inflation_rad_per_m_s2: float = Field(0.5, ge=0, le=100.0)
     """Added to `accel_std_rad` per m/s^2 of | |a_mean| - g |, and of the samples' RMS spread while the
     platform turns (`still_rate_rad_s`; still: the mean's standard error, spread / sqrt(N) / g rad)."""
-    still_rate_rad_s: float = Field(0.15, ge=0, le=100.0)
+    still_rate_rad_s: float = Field(STILL_RATE_RAD_S, ge=0, le=100.0)
     """Gyro mode: below this bias-corrected rate (rad/s, the EKF's `source_trust.STILL_RATE_RAD_S`) the
     platform counts as still and the accelerometer's spread as noise or vibration, which averages out of
     the mean (its standard error); above it the spread inflates the gravity factor as the platform's own

@@ -102,14 +102,15 @@ LABEL_ZENITH_STD_RAD = 0.0035
 from the camera (rad, 0.2 deg: dozens of hand-labelled vertical lines)."""
 
 
-def label_focal(path: Path, height: int, width: int) -> tuple[float, float]:
+def label_focal(path: Path, height: int, width: int, horizon: np.ndarray | None = None) -> tuple[float, float]:
     """(f px, its relative std) that an ECD photo's labels imply: the labelled zenith z (NNNVP.mat) and
     horizon (NNNhor.mat) are orthogonal VPs, f^2 = d_h d_z with d_h, d_z their distances from the image
     centre (principal point there, square pixels). The std from `LABEL_HORIZON_STD_PX` on d_h and
     `LABEL_ZENITH_STD_RAD` on z's direction (d_z moves by d_z^2 / f of it), halved, in quadrature; a
-    horizon through the centre or a zenith near infinity leaves f open."""
+    horizon through the centre or a zenith near infinity leaves f open. `horizon`: the labelled line
+    (a, b, c) when the caller has read NNNhor.mat already."""
     zenith = scipy.io.loadmat(path.with_name(path.stem + "VP.mat"))["zenith"].ravel()
-    line = scipy.io.loadmat(path.with_name(path.stem + "hor.mat"))["horizon"].ravel()
+    line = scipy.io.loadmat(path.with_name(path.stem + "hor.mat"))["horizon"].ravel() if horizon is None else horizon
     c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
     d_h = abs(float(line[:2] @ c + line[2])) / float(np.hypot(*line[:2]))
     d_z = float(np.linalg.norm(zenith - c))
@@ -143,7 +144,7 @@ def ecd_scores(folder: Path, analyser, limit: int | None = None) -> dict:
         level.append(horizon_error(level_horizon(h, w), truth, h, w))
         hfov.append(result.focal.hfov_deg)
         sources.append(result.focal.source)
-        f_label.append(label_focal(path, h, w))
+        f_label.append(label_focal(path, h, w, truth))
         f_est.append(result.focal.f_px)
         f_assumed.append(focal_from_hfov(w, analyser.focal_config.assumed_fov_deg))
     return {"images": len(images), "auc_percent": auc_percent(est), "level_auc_percent": auc_percent(level),

@@ -87,6 +87,25 @@ def _shape_text(shape) -> str:
     return "(" + ", ".join(str(d) if isinstance(d, int) else repr(d or "?") for d in shape) + ")"
 
 
+def _free_hw_names(path: Path) -> tuple[str, str] | None:
+    """The names of the H and W dimensions of an ONNX file's one input when both are free (named), read
+    from the file by `onnx` without building a session; None when either is fixed or unnamed, the file
+    does not parse (the session then says why), or `onnx` is not installed (H and W then stay free)."""
+    try:
+        import onnx
+
+        graph = onnx.load(str(path), load_external_data=False).graph
+    except Exception:  # noqa: BLE001 -- ImportError, or a broken file that the session reports
+        return None
+    weights = {w.name for w in graph.initializer}
+    inputs = [i for i in graph.input if i.name not in weights]
+    if len(inputs) != 1:
+        return None
+    dims = inputs[0].type.tensor_type.shape.dim
+    names = tuple(d.dim_param if d.HasField("dim_param") else "" for d in dims[2:])
+    return names if len(dims) == 4 and all(names) else None
+
+
 class OnnxNormalModel:
     """An ONNX normal model on ONNX Runtime's CPU provider, checked against the contract on load;
     `model(x)` maps (1, 3, h, w) float32 to (1, 4, h, w) float32. `input_size` is the (width, height) the
@@ -113,14 +132,12 @@ class OnnxNormalModel:
             options.intra_op_num_threads = int(threads)
             options.inter_op_num_threads = 1
         options.log_severity_level = 3
-        self.session = self._session(options)
+        free = _free_hw_names(self.path) if run_size_hw is not None else None
+        for name, size in zip(free or (), run_size_hw or ()):
+            options.add_free_dimension_override_by_name(name, int(size))
+        self.run_size_hw = (int(run_size_hw[0]), int(run_size_hw[1])) if free else None
+        self.session = self._session(options)  # once: the overrides are known before it is built
         self.input_size = self._check_contract()
-        self.run_size_hw = None
-        free = self.session.get_inputs()[0].shape[2:]
-        if run_size_hw is not None and self.input_size is None and all(isinstance(d, str) and d for d in free):
-            for name, size in zip(free, run_size_hw):
-                options.add_free_dimension_override_by_name(name, int(size))
-            self.session, self.run_size_hw = self._session(options), (int(run_size_hw[0]), int(run_size_hw[1]))
 
     def _session(self, options):
         import onnxruntime as ort
@@ -146,10 +163,11 @@ class OnnxNormalModel:
         out_shape = outputs[0].shape
         if len(out_shape) != 4 or (isinstance(out_shape[1], int) and out_shape[1] != 4):
             raise refusal
-        fixed = all(isinstance(d, int) for d in shape[2:])
+        sized = all(isinstance(d, int) for d in shape[2:])  # by the file, or by `run_size_hw`'s overrides
+        fixed = sized and self.run_size_hw is None
         from .learned import PROBE_SIZE_PX
 
-        w, h = (shape[3], shape[2]) if fixed else PROBE_SIZE_PX
+        w, h = (shape[3], shape[2]) if sized else PROBE_SIZE_PX
         try:
             probe = self(np.full((1, 3, h, w), 0.5, np.float32))
         except Exception as exc:

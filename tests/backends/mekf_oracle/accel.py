@@ -91,8 +91,8 @@ class AccelPeriod(production.AccelPeriod):
         self.rest_sums, self.rest_n = 0.0, 0
         if n < 2 or T_s <= 0:
             return None
-        at_rest, r, var, H = zero_rate_model(sums, n, T_s, b_c, q_gyro, cfg.rest_gyro_max_rad_s,
-                                             cfg.rest_accel_max_m_s2, cfg.rest_rate_std_rad_s)
+        at_rest, r, R, H = zero_rate_model(sums, n, T_s, b_c, q_gyro, cfg.rest_gyro_max_rad_s,
+                                           cfg.rest_accel_max_m_s2, cfg.rest_rate_std_rad_s)
         if not at_rest:
             self.rest_since_s = None
             return None
@@ -100,4 +100,4 @@ class AccelPeriod(production.AccelPeriod):
             self.rest_since_s = t_state_s - T_s
         if t_state_s - self.rest_since_s < cfg.rest_min_duration_s:
             return None
-        return r, var * np.eye(3), H
+        return r, R, H

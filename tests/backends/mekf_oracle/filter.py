@@ -22,7 +22,7 @@ from uareme_fusion.backends.mekf.source_trust import (note_accel_information, no
                                                       share_tilt_covariance, squared_rate,
                                                       update_visual_trust, vertical_variance,
                                                       visual_vertical_innovation)
-from uareme_fusion.backends.mekf.state import BG, I3, ORTHONORMALISE_EVERY, ZERO_STATE, orthonormal, reset_jacobian
+from uareme_fusion.backends.mekf.state import BG, ORTHONORMALISE_EVERY, ZERO_STATE, orthonormal, reset_jacobian
 from uareme_fusion.backends.mekf.state_buffer import S_ACCEL_VAR_RATE, S_VISUAL_INFO_RATE
 from uareme_fusion.types import VisualRotation
 
@@ -105,19 +105,19 @@ class Mekf(production.Mekf):
                 self.counters["rest_updates"] += 1
         accel_c = self.accel.lowpass(accel_c, T, cfg.accel_lowpass_tau_s)
         use_lp_J = cfg.accel_lowpass_tau_s > 0
-        ok, r, var, H, downweighted = gravity_model(
+        (ok, r, R, H), downweighted = gravity_model(
             accel_c, T, self.R_wc, self.accel.lp_J[1], use_lp_J, cfg.gravity_m_s2,
             cfg.accel_tilt_noise_rad_sqrt_s, cfg.accel_norm_scale, cfg.accel_innovation_scale_rad,
             cfg.accel_downweight_flag_ratio)
         if not ok:
             self.counters["accel_skipped"] += 1
             return None
-        note_accel_information(self.views["s"], var, T)
+        note_accel_information(self.views["s"], R[0, 0], T)
         if downweighted:
             self.flags |= status_bits.ACCEL_DOWNWEIGHTED
             self.counters["accel_downweighted"] += 1
         self.counters["accel_updates"] += 1
-        return r, var * I3, H
+        return r, R, H
 
     def _visual_update(self, visual: VisualRotation) -> None:
         """The frame's rotation as a measurement of `R_cm`, gated and Huber-weighted, its covariance
@@ -168,8 +168,10 @@ class Mekf(production.Mekf):
             R_vis = np.array(R_vis, float)
             share_tilt_covariance(R_vis, trust, self.R_wm)
         # "m's z is up" only where the world is not the Manhattan frame itself (visual only).
-        vertical = (vertical_model(self.R_wm, np.sqrt(var_v), cfg.manhattan_vertical_max_rad)
-                    if self.motion.uses_imu and var_v < np.inf else None)
+        vertical = None
+        if self.motion.uses_imu and var_v < np.inf:
+            ok, *rows = vertical_model(self.R_wm, np.sqrt(var_v), cfg.manhattan_vertical_max_rad)
+            vertical = rows if ok else None
         self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
         self.counters["visual_updates"] += 1
 

@@ -1,8 +1,9 @@
 """Multiplicative (error-state) EKF fusing visual Manhattan rotations with a gyro and accelerometer.
 
 Modules: `config` (MekfConfig), `state` (error state, reset), `motion` (the motion strategy of a
-mode), `measurements` (vertical, gravity and zero-rate models), `accel` (the accelerometer period),
-`scene` (Manhattan-frame initialisation and re-initialisation), `filter` (`Mekf`, the scheduler),
+mode), `measurements` (the measurement models' one contract, `Measurement`, and the vertical, gravity
+and zero-rate models; the visual one is `kernel_visual.visual_model`), `accel` (the accelerometer
+period), `scene` (Manhattan-frame initialisation and re-initialisation), `filter` (`Mekf`, the scheduler),
 `kernels` (the one implementation: `kernel_imu`, `kernel_update`, `kernel_visual`, numba-compiled or
 plain Python), `compiled` (the filter's calls into them), `parameters` (their named parameter record),
 `state_buffer` (the one array holding the state, which the kernels update in place), `offline`

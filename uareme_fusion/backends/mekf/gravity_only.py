@@ -97,9 +97,10 @@ class GravityOnly:
             self.world_aligned = True
         if not filt.P[MF, MF].any():
             filt.P = world_tilt_prior(filt.P, filt.R_wc, filt.R_wm, cfg.manhattan_vertical_std_rad)
-        _, r, var, H, downweighted = gravity_model(
+        gravity, downweighted = gravity_model(
             mean, covered_s, filt.R_wc, np.zeros((3, 3)), False, cfg.gravity_m_s2, cfg.accel_only_noise_rad_sqrt_s,
             cfg.accel_norm_scale, cfg.accel_only_innovation_scale_rad, cfg.accel_downweight_flag_ratio)
+        r, var, H = gravity.residual, gravity.covariance[0, 0], gravity.jacobian  # covariance var I
         z = mean / np.linalg.norm(mean)
         H[:, RATE] = -(I3 - np.outer(z, z)) @ dmean_domega / np.linalg.norm(mean)  # z = normalise(mean(omega))
         shake_factor = 1.0 + shake2 / cfg.accel_only_shake_m_s2**2

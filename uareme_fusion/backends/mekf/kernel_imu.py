@@ -20,7 +20,7 @@ import numpy as np
 
 from . import status_bits
 from .accel import chunk_bounds
-from .kernel_update import accel_and_rest_update, state_views
+from .kernel_update import accel_rows, state_views
 from .matrix3 import exp3_into, matmul3_into
 from .state import orthonormal
 from .state_buffer import (S_ACCEL_DUE, S_ACCEL_ELAPSED, S_ACCEL_TIME, S_IMU_GAPS, S_IMU_T, S_IN_GAP, S_LP_VALID,
@@ -232,7 +232,7 @@ def integrate_chunks(x, t, gyro, accel, saturated, bounds, extra_s, p, record_R,
         if not last or s[S_ACCEL_ELAPSED] >= p.due_s:
             if last and p.defer > 0:
                 s[S_ACCEL_DUE] = 1
-            elif accel_and_rest_update(x, p):
+            elif accel_rows(x, p, 1.0)[1]:  # updated, down-weighted
                 code |= DOWNWEIGHTED
     return code
 
@@ -309,7 +309,10 @@ def integrate_segments(x, t, gyro, accel, ends, params, record_R, record_P, out_
     covariance (symmetrised), `out_b[i]` b_c, `out_flags[i]` the `Status` bits of what happened."""
     p = params[0]
     s, R_wc, _, b_c, P = state_views(x)[:5]
-    not_saturated = np.zeros(t.shape[0])
+    # Strided views ('A' layout in numba, as a batch's columns in `integrate_batch`): `integrate_chunks`
+    # and what it calls compile once for both drivers.
+    t, gyro, accel = t[::1], gyro[::1], accel[::1]
+    not_saturated = np.zeros(t.shape[0])[::1]
     C_buf, g_buf, dt_buf = scratch(t.shape[0])
     start = 0
     for i in range(ends.shape[0]):

@@ -37,18 +37,6 @@ def state_views(x):
             x[X_OMEGA_C:X_SIZE])
 
 
-def accel_measurement(accel_c, T, R_wc, lp_J1, use_lp_J, p):
-    """`measurements.gravity_model` with the parameters of `p`."""
-    return gravity_model(accel_c, T, R_wc, lp_J1, use_lp_J, p.gravity_m_s2, p.accel_tilt_noise, p.accel_norm_scale,
-                         p.accel_innovation_scale_rad, p.accel_downweight_flag_ratio)
-
-
-def zero_rate_measurement(rest_sums, rest_n, T, b_c, p):
-    """`measurements.zero_rate_model` with the parameters of `p`."""
-    return zero_rate_model(rest_sums, rest_n, T, b_c, p.q_gyro, p.rest_gyro_max_rad_s, p.rest_accel_max_m_s2,
-                           p.rest_rate_std_rad_s)
-
-
 def matmul_into(A, B, out):
     """`out = A @ B` by scalar loops (small matrices: no BLAS call), summed in index order."""
     for i in range(A.shape[0]):
@@ -93,7 +81,9 @@ def solve_into(A, B, X):
 
 
 def kalman_update(x, residual, R, H, p):
-    """Joseph-form update with the measurement `residual` (m,), noise `R` (m, m) and `H` (m, 12), then
+    """Joseph-form update with the measurement `residual` (m,), noise `R` (its leading (m, m) block: a
+    stacked update passes its whole work array, so that every caller passes a C-contiguous `R` and
+    numba compiles this function once) and `H` (m, 12), then
     injection into the nominal state and the reset of the error , all in
     place; nothing changes but `s[S_NONFINITE]` when the result is not finite.
     Scalar loops that use the structure (a BLAS call per small product costs more than the product,
@@ -127,11 +117,6 @@ def kalman_update(x, residual, R, H, p):
         s[S_NONFINITE] += 1
         return
     inject_and_reset(x, dx, P_new, p)
-
-
-def isotropic_update(x, residual, var, H, p):
-    """`kalman_update` of a 3-row measurement with isotropic noise `var`."""
-    kalman_update(x, residual, var * np.eye(3), H, p)
 
 
 def inject_and_reset(x, dx, P_new, p):
@@ -179,11 +164,14 @@ def inject_and_reset(x, dx, P_new, p):
             P[i, j] = 0.5 * (GPG[i, j] + GPG[j, i])
 
 
-def accel_rows(x, p):
-    """The end of an accelerometer period : the zero-rate update when at rest,
-    applied in place, then the (low-passed) accelerometer direction's measurement. Consumes the
-    period. Returns (ok, residual (3,), variance, H (3, 12), downweighted); `ok` False (no
-    measurement) near free fall."""
+def accel_rows(x, p, update):
+    """The end of an accelerometer period: the zero-rate update when at rest, applied in place, then
+    the (low-passed) accelerometer direction's measurement, with `update` > 0 its update too (else
+    the caller stacks it into its own; a float, as numba compiles one specialisation per literal
+    bool). Consumes the period. Returns `(Measurement, downweighted)`, the
+    measurement not `ok` near free fall.
+    The compile time of the kernels grows with each function that calls into the Kalman update (each
+    is optimised with all it calls): this one updates itself rather than through a wrapper."""
     s, R_wc, _, b_c, _, _, accel_sum, lp, lp_J, rest_sums, _ = state_views(x)
     T = s[S_ACCEL_TIME]
     accel_c = accel_sum / T if T > 0 else accel_sum.copy()
@@ -193,14 +181,15 @@ def accel_rows(x, p):
     if p.rest_gyro_max_rad_s > 0:
         n = s[S_REST_N]
         if n >= 2 and T > 0:
-            at_rest, r, var, H = zero_rate_measurement(rest_sums, n, T, b_c, p)
-            if not at_rest:
+            rest = zero_rate_model(rest_sums, n, T, b_c, p.q_gyro, p.rest_gyro_max_rad_s, p.rest_accel_max_m_s2,
+                                   p.rest_rate_std_rad_s)
+            if not rest.ok:
                 s[S_REST_SINCE] = np.nan
             else:
                 if math.isnan(s[S_REST_SINCE]):
                     s[S_REST_SINCE] = s[S_T_STATE] - T
                 if s[S_T_STATE] - s[S_REST_SINCE] >= p.rest_min_duration_s:
-                    isotropic_update(x, r, var, H, p)
+                    kalman_update(x, rest.residual, rest.covariance, rest.jacobian, p)
                     s[S_REST_UPDATES] += 1
         rest_sums[:] = 0.0
         s[S_REST_N] = 0
@@ -217,32 +206,27 @@ def accel_rows(x, p):
             lp_J[0] *= 1.0 - alpha
             lp_J[1] += alpha * (lp_J[0] - lp_J[1])
         accel_c = lp[1].copy()
-    ok, r, var, H, downweighted = accel_measurement(accel_c, T, R_wc, lp_J[1], tau > 0, p)
-    if not ok:
+    gravity, downweighted = gravity_model(accel_c, T, R_wc, lp_J[1], tau > 0, p.gravity_m_s2, p.accel_tilt_noise,
+                                          p.accel_norm_scale, p.accel_innovation_scale_rad,
+                                          p.accel_downweight_flag_ratio)
+    if not gravity.ok:
         s[S_ACCEL_SKIPPED] += 1
-        return False, r, var, H, False
-    note_accel_information(s, var, T)
+        return gravity, False
+    note_accel_information(s, gravity.covariance[0, 0], T)
     if downweighted:
         s[S_ACCEL_DOWNWEIGHTED] += 1
     s[S_ACCEL_UPDATES] += 1
-    return True, r, var, H, downweighted
-
-
-def accel_and_rest_update(x, p):
-    """The update at the end of an accelerometer period , in place:
-    `accel_rows`, then its measurement's update. Returns whether it was down-weighted."""
-    ok, r, var, H, downweighted = accel_rows(x, p)
-    if ok:
-        isotropic_update(x, r, var, H, p)
-    return downweighted
+    if update > 0:
+        kalman_update(x, gravity.residual, gravity.covariance, gravity.jacobian, p)
+    return gravity, downweighted
 
 
 def accel_update_in_place(x, params):
-    """`accel_and_rest_update` on the state buffer `x`, in place: the `DOWNWEIGHTED` | `NONFINITE`
-    bits of what happened."""
+    """The update at the end of an accelerometer period (`accel_rows`) on the state buffer `x`, in
+    place: the `DOWNWEIGHTED` | `NONFINITE` bits of what happened."""
     p = params[0]
     nonfinite_before = x[X_S + S_NONFINITE]
-    downweighted = accel_and_rest_update(x, p)
+    downweighted = accel_rows(x, p, 1.0)[1]
     return (DOWNWEIGHTED if downweighted else 0) + (NONFINITE if x[X_S + S_NONFINITE] > nonfinite_before else 0)
 
 

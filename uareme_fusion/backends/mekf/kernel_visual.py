@@ -15,10 +15,9 @@ import numpy as np
 
 from ... import rotations
 from . import status_bits
-from .kernel_update import (DOWNWEIGHTED, NONFINITE, accel_rows, isotropic_update, kalman_update, matmul_into,
-                            state_views)
+from .kernel_update import DOWNWEIGHTED, NONFINITE, accel_rows, kalman_update, matmul_into, state_views
 from .matrix3 import exp3_into, inv3, log3_into, matmul3_into
-from .measurements import correlated_noise_scale, vertical_measurement
+from .measurements import Measurement, correlated_noise_scale, vertical_model
 from .source_trust import (note_visual_information, share_tilt_covariance, squared_rate, update_visual_trust,
                            vertical_variance, visual_vertical_innovation)
 from .state import orthonormal
@@ -32,13 +31,12 @@ SYMMETRIES = rotations.manhattan_symmetries()
 a constant of the compiled code."""
 
 
-def visual_measurement(R_wc, R_wm, R_cm, cov, relabel, r, R_vis, H):
-    """The visual model, into the first three rows of `r` (m,), `R_vis` (m, m) and `H` (m, 12) (zeros
-    elsewhere, which it leaves): the solver's `R_cm` (3, 3) with covariance `cov` (3, 3) rad^2 (right
-    perturbation) measures `R_cm = R_wc^T R_wm`; with `relabel`, relabelled first by the symmetry that
-    brings it nearest the prediction (the first of `SYMMETRIES` with the largest trace, as
-    `rotations.nearest_symmetric`), else as labelled (`backends.labelling_track`); residual
-    `Log(R_cm_pred^T R_cm)`, noise `G^T cov G` (symmetrised) for the relabelling `G`."""
+def visual_model(R_wc, R_wm, R_cm, cov, relabel):
+    """The solver's `R_cm` (3, 3) with covariance `cov` (3, 3) rad^2 (right perturbation) measures
+    `R_cm = R_wc^T R_wm`; with `relabel`, relabelled first by the symmetry that brings it nearest the
+    prediction (the first of `SYMMETRIES` with the largest trace, as `rotations.nearest_symmetric`),
+    else as labelled (`backends.labelling_track`): residual `Log(R_cm_pred^T R_cm)`, covariance
+    `G^T cov G` (symmetrised) for the relabelling `G`, `H = [-R_cm_pred^T, 0, I, 0]`. Always `ok`."""
     R_pred = np.empty((3, 3))  # R_wc^T R_wm
     for i in range(3):
         for j in range(3):
@@ -56,11 +54,12 @@ def visual_measurement(R_wc, R_wm, R_cm, cov, relabel, r, R_vis, H):
         if trace > best_trace:
             best, best_trace = g, trace
     G = SYMMETRIES[best]
-    log3_into(matmul3_into(A, G, np.empty((3, 3))), r)
+    r = log3_into(matmul3_into(A, G, np.empty((3, 3))), np.empty(3))
     C = np.empty((3, 3))  # G^T (cov + cov^T)/2 G
     for i in range(3):
         for j in range(3):
             C[i, j] = 0.5 * (cov[i, j] + cov[j, i])
+    R_vis, H = np.empty((3, 3)), np.zeros((3, 12))
     for i in range(3):
         for j in range(3):
             acc = 0.0
@@ -69,6 +68,16 @@ def visual_measurement(R_wc, R_wm, R_cm, cov, relabel, r, R_vis, H):
             R_vis[i, j] = acc
             H[i, j] = -R_pred[j, i]
         H[i, 6 + i] = 1.0
+    return Measurement(True, r, R_vis, H)
+
+
+def visual_rows(R_wc, R_wm, R_cm, cov, relabel, r, R_vis, H):
+    """`visual_model` into the first three rows of a stacked update's `r` (m,), `R_vis`
+    (m, m) and `H` (m, 12) (zeros elsewhere, which it leaves)."""
+    visual = visual_model(R_wc, R_wm, R_cm, cov, relabel)
+    r[0:3] = visual.residual
+    R_vis[0:3, 0:3] = visual.covariance
+    H[0:3] = visual.jacobian
 
 
 def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, estimate):
@@ -92,7 +101,7 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
     nonfinite_before = s[S_NONFINITE]
     code = 0
     r, R_all, H = np.zeros(9), np.zeros((9, 9)), np.zeros((9, 12))
-    visual_measurement(R_wc, R_wm, R_cm, cov, with_imu, r, R_all, H)
+    visual_rows(R_wc, R_wm, R_cm, cov, with_imu, r, R_all, H)
     share, var_v = 1.0, math.inf
     t_prev = s[S_T_VISUAL]
     s[S_T_VISUAL] = s[S_T_STATE]
@@ -111,10 +120,11 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
         if s[S_ACCEL_DUE] > 0:  # left to the frame at the end of its batch (`p.defer`)
             s[S_ACCEL_DUE] = 0
             rest_before = s[S_REST_UPDATES]
-            with_accel, r_a, var_a, H_a, downweighted = accel_rows(x, p)
+            gravity, downweighted = accel_rows(x, p, 0.0)  # stacked below
+            with_accel = gravity.ok
             if s[S_REST_UPDATES] > rest_before:  # the zero-rate update moved the state: the residual again
                 r[:], R_all[:, :], H[:, :] = 0.0, 0.0, 0.0
-                visual_measurement(R_wc, R_wm, R_cm, cov, True, r, R_all, H)
+                visual_rows(R_wc, R_wm, R_cm, cov, with_imu, r, R_all, H)
     if t_prev == t_prev:  # not NaN: a previous visual update
         R_all[0:3, 0:3] *= correlated_noise_scale(s[S_T_STATE] - t_prev, p.visual_correlation_s)
     PHt = matmul_into(P, H[0:3].T, np.empty((12, 3)))  # the gate and Huber weigh the frame's full error
@@ -131,7 +141,7 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
         s[S_REJECTIONS] += 1
         s[S_VISUAL_INFO_RATE] = 0.0  # no share while the camera is gated out
         if with_accel:
-            isotropic_update(x, r_a, var_a, H_a, p)
+            kalman_update(x, gravity.residual, gravity.covariance, gravity.jacobian, p)
         if k:
             kalman_update(x, extra_r, extra_R, extra_H, p)
     else:
@@ -145,25 +155,24 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
             share_tilt_covariance(R_all[0:3, 0:3], share, R_wm)
         m = 3
         if with_imu:  # "m's z is up" only where the world is not the Manhattan frame itself
-            ok, r_v, _, H_v = vertical_measurement(R_wm, p.vertical_std_rad, p.vertical_max_rad)
-            if ok and var_v < np.inf:
-                r[3:6] = r_v
-                H[3:6] = H_v
+            vertical = vertical_model(R_wm, p.vertical_std_rad, p.vertical_max_rad)
+            if vertical.ok and var_v < np.inf:  # its variance from the trust (`source_trust.vertical_variance`)
+                r[3:6] = vertical.residual
+                H[3:6] = vertical.jacobian
                 for i in range(3):
                     R_all[3 + i, 3 + i] = var_v
                 m = 6
         if with_accel:
-            r[m:m + 3] = r_a
-            H[m:m + 3] = H_a
-            for i in range(3):
-                R_all[m + i, m + i] = var_a
+            r[m:m + 3] = gravity.residual
+            H[m:m + 3] = gravity.jacobian
+            R_all[m:m + 3, m:m + 3] = gravity.covariance
             m += 3
         if k:
             r[m:m + k] = extra_r
             H[m:m + k] = extra_H
             R_all[m:m + k, m:m + k] = extra_R
             m += k
-        kalman_update(x, r[:m], R_all[:m, :m], H[:m], p)
+        kalman_update(x, r[:m], R_all, H[:m], p)  # R_all's leading m x m block
         s[S_VISUAL_UPDATES] += 1
     for i in range(3):
         for j in range(3):
@@ -176,12 +185,11 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
 
 def visual_distance(x, P, R_cm, cov, relabel):
     """`(angle rad, d2)` of a frame's rotation against the prediction of the state buffer `x`: the norm
-    of its residual (`visual_measurement`, relabelled nearest the prediction with `relabel`) and its
+    of its residual (`visual_model`, relabelled nearest the prediction with `relabel`) and its
     squared Mahalanobis distance under the error covariance `P` (12, 12) and its own (inf for a
     singular innovation covariance)."""
     R_wc, R_wm = state_views(x)[1:3]
-    r, R_vis, H = np.zeros(3), np.zeros((3, 3)), np.zeros((3, 12))
-    visual_measurement(R_wc, R_wm, R_cm, cov, relabel, r, R_vis, H)
+    r, R_vis, H = visual_model(R_wc, R_wm, R_cm, cov, relabel)[1:]
     PHt = matmul_into(P, H.T, np.empty((12, 3)))
     S = matmul_into(H, PHt, np.empty((3, 3)))
     S += R_vis

@@ -9,7 +9,10 @@ with the models of `measurements`, `source_trust` and `state`. The drivers named
 filter's state buffer `x` (`state_buffer.py`) and its parameter record (`parameters.py`) and update
 the buffer in place; `compiled.py` calls them for `Mekf`.
 
-Compiling takes about 20 s on a small machine, so the machine code is cached on disk, keyed by the
+numba optimises and generates each compiled function with everything it calls linked in, so each
+layer of calls and each extra signature (a C- against an A-layout array, a literal bool) compiles the
+code beneath it again: compiling both sets (`filter.load_kernels`) takes about 60 s of one core on a
+small machine. The machine code is therefore cached on disk, keyed by the
 sources of every module the kernels draw on (`jit.compiled(sources=...)`): an edit anywhere there
 compiles them again; nothing is deleted. Should numba fail to compile a kernel at its first call,
 `use_python` puts the plain functions back everywhere (one warning line) and the call runs as Python.
@@ -29,17 +32,17 @@ from . import state_buffer, status_bits
 _MODULES = (kernel_imu, kernel_update, kernel_visual, kernel_image_rotation)
 """The modules whose functions call the others by their global names (rebound to the compiled ones)."""
 _HELPERS = (state.reset_jacobian, state.orthonormal, measurements.gravity_model, measurements.zero_rate_model,
-            measurements.vertical_measurement, measurements.correlated_noise_scale, matrix3.inv3, matrix3.exp3_into,
+            measurements.vertical_model, measurements.correlated_noise_scale, matrix3.inv3, matrix3.exp3_into,
             matrix3.matmul3_into, matrix3.log3_into, accel.chunk_bounds, imu_stream.rows_if_clean,
             source_trust.note_accel_information, source_trust.note_visual_information,
             source_trust.update_visual_trust, source_trust.vertical_variance, source_trust.visual_vertical_innovation,
             source_trust.squared_rate, source_trust.share_tilt_covariance)
-_INNER = (kernel_update.state_views, kernel_update.accel_measurement, kernel_update.zero_rate_measurement,
+_INNER = (kernel_update.state_views,
           kernel_update.matmul_into, kernel_update.solve_into, kernel_update.kalman_update,
-          kernel_update.isotropic_update, kernel_update.inject_and_reset, kernel_update.accel_rows,
-          kernel_update.accel_and_rest_update, kernel_imu.chunk_steps, kernel_imu.propagate_chunk,
+          kernel_update.inject_and_reset, kernel_update.accel_rows,
+          kernel_imu.chunk_steps, kernel_imu.propagate_chunk,
           kernel_imu.gyro_predict_in_place, kernel_imu.scratch, kernel_imu.integrate_chunks, kernel_imu.carry_lowpass_in_place,
-          kernel_visual.visual_measurement)
+          kernel_visual.visual_model, kernel_visual.visual_rows)
 DRIVERS = dict(
     INTEGRATE=kernel_imu.integrate_batch, STAGE=kernel_imu.stage_batch, INTEGRATE_STAGED=kernel_imu.integrate_staged,
     SEGMENTS=kernel_imu.integrate_segments, ACCEL_UPDATE=kernel_update.accel_update_in_place,

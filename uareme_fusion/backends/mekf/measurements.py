@@ -1,11 +1,14 @@
-"""Measurement models of `Mekf`: plain-array functions returning residual, noise and H, which the
-kernels (`kernels.py`) compile.
+"""Measurement models of `Mekf`, one contract for all: plain-array functions that the kernels
+(`kernels.py`) compile and plain Python calls alike, each returning a `Measurement`.
 
-Each model compares a measurement with its prediction from the nominal state and returns
-`(residual (3,), noise, H (3, 12))` with `residual ~ H dx + noise` for the error state `dx` (right
-perturbations, `state.py`), the noise an isotropic variance.
+A model compares a measurement with its prediction from the nominal state and returns
+`Measurement(ok, residual, covariance, jacobian)`: whether it applies here, the residual (3,) between
+the measurement and the prediction (its evaluation), the residual's covariance R (3, 3) (the
+measurement noise) and its Jacobian H (3, 12) with `residual(x) - residual(x (+) dx) = H dx` to first
+order for the error state `dx` (right perturbations, `state.py`); tests/backends/test_mekf_models.py
+checks each H against finite differences.
 - visual: the solver's `R_cm` measures `R_wc^T R_wm` (residual `Log(R_cm_pred^T R_cm)`;
-  `kernel_visual.visual_measurement`, which writes into the rows of a stacked update);
+  `kernel_visual.visual_model`);
 - vertical: "the Manhattan z axis is world up" (`e_z - R_wm^T up`);
 - gravity: the accelerometer direction measures up in the camera frame (`z - R_wc^T up`);
 - zero rate: at rest the mean gyro reading measures the bias (`g_mean - b_c`).
@@ -13,11 +16,18 @@ perturbations, `state.py`), the noise an isotropic variance.
 
 from __future__ import annotations
 
+import collections
 import math
 
 import numpy as np
 
-from .state import I3, MF
+from .state import MF
+
+Measurement = collections.namedtuple("Measurement", ("ok", "residual", "covariance", "jacobian"))
+"""What every model returns: `ok` (bool: the model applies), `residual` (3,), `covariance` (3, 3) and
+`jacobian` (3, 12) (module docstring); zeros when not `ok`. numba compiles it as a named tuple.
+The models here call no other compiled function (the kernels rebind only their own modules' names):
+the visual model, which draws on the 3x3 helpers, is `kernel_visual.visual_model`."""
 
 
 def correlated_noise_scale(dt_s: float, correlation_s: float) -> float:
@@ -29,27 +39,19 @@ def correlated_noise_scale(dt_s: float, correlation_s: float) -> float:
     return max(1.0, correlation_s / dt_s)
 
 
-def vertical_measurement(R_wm, std_rad, max_rad):
+def vertical_model(R_wm, std_rad, max_rad):
     """Pseudo-measurement "the Manhattan z axis is (nearly) world up" (docs/design.md "Conventions"),
-    std `std_rad`, on plain arrays (the compiled kernels call it too): `(ok, residual (3,), variance
-    rad^2, H (3, 12))`, `ok` False when m's z is farther than `max_rad` from up."""
+    std `std_rad` (covariance `std_rad^2 I`); not `ok` when m's z is farther than `max_rad` from up."""
     h = R_wm[2].copy()  # R_wm^T @ (0, 0, 1)
-    H = np.zeros((3, 12))
     if math.acos(min(1.0, max(-1.0, h[2]))) > max_rad:
-        return False, np.zeros(3), 0.0, H
+        return Measurement(False, np.zeros(3), np.zeros((3, 3)), np.zeros((3, 12)))
+    H = np.zeros((3, 12))
     # d/d(dtheta_m) of Exp(-dtheta_m) h at 0: skew(h)
     H[0, 7], H[0, 8], H[1, 8] = -h[2], h[1], -h[0]
     H[1, 6], H[2, 6], H[2, 7] = h[2], -h[1], h[0]
     r = -h
     r[2] += 1.0  # e_z - h
-    return True, r, std_rad**2, H
-
-
-def vertical_model(R_wm: np.ndarray, std_rad: float, max_rad: float):
-    """`vertical_measurement` as `(residual (3,), R (3, 3) rad^2, H (3, 12))`, or None when m's z is
-    farther than `max_rad` from up."""
-    ok, r, var, H = vertical_measurement(R_wm, std_rad, max_rad)
-    return (r, var * I3, H) if ok else None
+    return Measurement(True, r, std_rad**2 * np.eye(3), H)
 
 
 def vertical_distance2(R_wm: np.ndarray, P_m: np.ndarray, std_rad: float, max_rad: float) -> float | None:
@@ -57,10 +59,9 @@ def vertical_distance2(R_wm: np.ndarray, P_m: np.ndarray, std_rad: float, max_ra
     Manhattan frame `R_wm` whose error (right perturbation) has covariance `P_m` (3, 3, rad^2); None
     when that pseudo-measurement does not apply (m's z farther than `max_rad` from up). A frame
     that fails it contradicts gravity: the vertical pseudo-measurement would tilt the camera."""
-    model = vertical_model(R_wm, std_rad, max_rad)
-    if model is None:
+    ok, r, R, H = vertical_model(R_wm, std_rad, max_rad)
+    if not ok:
         return None
-    r, R, H = model
     H_m = H[:, MF]
     return float(r @ np.linalg.solve(H_m @ P_m @ H_m.T + R, r))
 
@@ -71,14 +72,14 @@ def gravity_model(accel_c, T_s, R_wc, lp_J1, use_lp_J, gravity_m_s2, noise_rad_s
     specific force over `T_s` s in the camera frame measures up, `R_wc^T up`. Its variance
     `noise_rad_sqrt_s^2 / T_s` grows by `1 + (dev / norm_scale)^2` (dev: relative deviation of |acc|
     from `gravity_m_s2`) and `1 + (angle / innovation_scale_rad)^2` (angle between measured and
-    predicted up). With `use_lp_J` the low-passed direction also measures the gyro-bias error
-    through `lp_J1` (3, 3), its sensitivity to the bias. Returns `(ok, residual (3,), variance rad^2,
-    H (3, 12), downweighted)`: `ok` False near free fall (no direction); `downweighted` when the std
+    predicted up); the covariance is that variance times I. With `use_lp_J` the low-passed direction
+    also measures the gyro-bias error through `lp_J1` (3, 3), its sensitivity to the bias. Not `ok`
+    near free fall (no direction). Returns `(Measurement, downweighted)`, `downweighted` when the std
     exceeds `flag_ratio` times the nominal one."""
     norm = math.sqrt(accel_c[0] ** 2 + accel_c[1] ** 2 + accel_c[2] ** 2)
-    H = np.zeros((3, 12))
     if not (T_s > 0 and norm > 0.1 * gravity_m_s2):
-        return False, np.zeros(3), 0.0, H, False
+        return Measurement(False, np.zeros(3), np.zeros((3, 3)), np.zeros((3, 12))), False
+    H = np.zeros((3, 12))
     # |mean specific force| against gravity: the mean is taken in a common (rotating) camera frame,
     # so it is the inertial-frame average and translational accelerations cancel in it.
     norm_dev = abs(norm * (1.0 / gravity_m_s2) - 1.0)
@@ -93,7 +94,7 @@ def gravity_model(accel_c, T_s, R_wc, lp_J1, use_lp_J, gravity_m_s2, noise_rad_s
     H[1, 0], H[2, 0], H[2, 1] = h[2], -h[1], h[0]
     if use_lp_J:  # z = normalise(lp - J db)
         H[:, 3:6] = -(np.eye(3) - np.outer(z, z)) @ lp_J1 / norm
-    return True, z - h, var, H, downweighted
+    return Measurement(True, z - h, var * np.eye(3), H), downweighted
 
 
 def zero_rate_model(rest_sums, rest_n, T_s, b_c, q_gyro, rest_gyro_max_rad_s, rest_accel_max_m_s2,
@@ -102,16 +103,15 @@ def zero_rate_model(rest_sums, rest_n, T_s, b_c, q_gyro, rest_gyro_max_rad_s, re
     `rest_sums` (8,): sums over the period's `rest_n` samples of gyro (rad/s), |gyro|^2, accel (m/s^2)
     and |accel|^2. At rest when the mean gyro and the rms deviations of gyro and accel from their
     means are below the limits. The variance is the gyro white noise `q_gyro` ((rad/s)^2/Hz) of a
-    `T_s`-second mean plus `rest_rate_std_rad_s^2`. Returns `(at_rest, residual (3,), variance
-    (rad/s)^2, H (3, 12))`."""
-    H = np.zeros((3, 12))
+    `T_s`-second mean plus `rest_rate_std_rad_s^2` (covariance: that times I). Not `ok` unless at rest."""
     g_mean, a_mean = rest_sums[0:3] / rest_n, rest_sums[4:7] / rest_n
     g2 = g_mean[0] ** 2 + g_mean[1] ** 2 + g_mean[2] ** 2
     g_dev2 = max(rest_sums[3] / rest_n - g2, 0.0)
     a_dev2 = max(rest_sums[7] / rest_n - (a_mean[0] ** 2 + a_mean[1] ** 2 + a_mean[2] ** 2), 0.0)
     limit2 = rest_gyro_max_rad_s**2
     if g2 >= limit2 or g_dev2 >= limit2 or a_dev2 >= rest_accel_max_m_s2**2:
-        return False, np.zeros(3), 0.0, H
+        return Measurement(False, np.zeros(3), np.zeros((3, 3)), np.zeros((3, 12)))
+    H = np.zeros((3, 12))
     for i in range(3):
         H[i, 3 + i] = 1.0
-    return True, g_mean - b_c, q_gyro / T_s + rest_rate_std_rad_s**2, H
+    return Measurement(True, g_mean - b_c, (q_gyro / T_s + rest_rate_std_rad_s**2) * np.eye(3), H)
