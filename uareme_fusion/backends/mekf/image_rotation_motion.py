@@ -26,6 +26,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ...types import VisualRotation
+from ..visual_error_persistence import VisualErrorPersistence
 from .compiled import constant_rate_predict, image_rotation_predict
 from .config import MekfMode
 from .motion import ConstantRateMotion
@@ -43,6 +44,9 @@ class ImageRotationMotion(ConstantRateMotion):
 
     def __init__(self, mode: MekfMode = MekfMode.VISUAL_ONLY):
         super().__init__(mode)
+        self.persistence: VisualErrorPersistence | None = None
+        """The stream's learned correlation time of its visual errors (`image_rotation_error_persistence_lag_frames`;
+        made at the first frame, from the filter's config)."""
         self.measures_motion = False
         """Whether the current frame was predicted by its image rotation (else by the rate, and `scene.py`
         treats it as the constant-rate model's)."""
@@ -56,6 +60,8 @@ class ImageRotationMotion(ConstantRateMotion):
         if not filt.initialised:
             return
         if visual is None:
+            if self.persistence is not None and t_s > filt.t_state:
+                self.persistence.update(t_s, None)  # a frame without a rotation: the chain breaks
             if t_s > filt.t_state:
                 if self._before_gap is None:
                     self._before_gap = (filt.t_state, filt.R_wc.copy(), filt.R_wm.copy(), filt.P.copy(),
@@ -88,22 +94,46 @@ class ImageRotationMotion(ConstantRateMotion):
         """Predicted by its image rotation, a frame's visual error has an independent share `lam`
         (`VisualNoiseShare`) and a persistent one, `1 - lam`, that lasts `image_rotation_error_correlation_s`
         (`tau`): a frame `dt` s after the previous visual update holds `dt / tau` of an independent look
-        at the persistent error, so the covariance fused is `(lam + (1 - lam) max(1, tau / dt)) C`.
-        Predicted by the rate: `ConstantRateMotion`'s."""
+        at the persistent error, so the covariance fused is `(lam + (1 - lam) max(1, tau / dt)) C`. With the
+        time learned from the stream (`image_rotation_error_persistence_lag_frames`), the whole error is
+        Gauss-Markov of that time: `C (1 + rho) / (1 - rho)`, `rho = exp(-dt / tau)`, the variance of a
+        mean of such looks per look. Predicted by the rate: `ConstantRateMotion`'s."""
         share = super().visual_noise_scale(filt)
-        tau_s = filt.config.image_rotation_error_correlation_s
+        tau_s = self.correlation_s(filt)
         t_prev = filt.t_visual_s
         if not self.measures_motion or tau_s <= 0 or t_prev is None or not filt.t_state > t_prev:
             return share
+        if self.persistence is not None:
+            rho = np.exp(-(filt.t_state - t_prev) / tau_s)
+            return (1.0 + rho) / (1.0 - rho)
         return share + (1.0 - share) * max(1.0, tau_s / (filt.t_state - t_prev))
 
     def persistent_cov(self, filt) -> np.ndarray:
         """Predicted by its image rotation with a correlation time, the filter averages the persistent error
         over it (`visual_noise_scale`), and its own covariance says how well: nothing is added. Else
         `ConstantRateMotion`'s (the frame's persistent share, which the filter carries)."""
-        if self.measures_motion and filt.config.image_rotation_error_correlation_s > 0:
+        if self.measures_motion and self.correlation_s(filt) > 0:
             return _NO_COV
         return super().persistent_cov(filt)
+
+    def correlation_s(self, filt) -> float:
+        """How long the persistent share of a frame's visual error lasts, s: learned from the stream
+        (`visual_error_persistence.py`) when `image_rotation_error_persistence_lag_frames` is set, else
+        `image_rotation_error_correlation_s`."""
+        if self.persistence is None:
+            return filt.config.image_rotation_error_correlation_s
+        return self.persistence.tau_s
+
+    def observe_visual(self, filt, t_s: float, visual: VisualRotation) -> None:
+        """The frame's labelled rotation and image rotation into the learned correlation time (after its
+        update: a frame's own error does not set its weight)."""
+        cfg = filt.config
+        if self.persistence is None and cfg.image_rotation_error_persistence_lag_frames > 1:
+            self.persistence = VisualErrorPersistence(cfg.image_rotation_error_persistence_lag_frames,
+                                                      cfg.image_rotation_error_persistence_frames,
+                                                      cfg.image_rotation_error_persistence_max_s)
+        if self.persistence is not None:
+            self.persistence.update(t_s, visual)
 
     def predicted_R_wc(self, filt, t_s: float) -> np.ndarray:
         """`R_wc` (3, 3) predicted to `t_s` (s) by the rate, the state left where it is: the frame's image
@@ -114,3 +144,5 @@ class ImageRotationMotion(ConstantRateMotion):
     def _restart(self, filt, visual: VisualRotation) -> None:
         super()._restart(filt, visual)
         self._before_gap = None
+        if self.persistence is not None:
+            self.persistence.update(filt.t_state, None)  # a new labelling: the chain restarts
