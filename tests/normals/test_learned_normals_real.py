@@ -15,7 +15,8 @@ from uareme_fusion.sim.render import Renderer, intrinsics_from_fov
 from uareme_fusion.sim.scenarios import build_scenario
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
-from train_normals import CONFIDENT_DEPTH_KAPPA, motion_kernel, rolled, tum_labelled  # noqa: E402
+from train_normals import (CONFIDENT_DEPTH_KAPPA, cropped_K, motion_kernel, rolled, rotated_view,  # noqa: E402
+                           tum_labelled)
 
 TUM_EVAL_STRIDE = 40
 """Every 40th evaluation frame: 6 frames, a few seconds."""
@@ -86,3 +87,31 @@ def test_rolled_view_is_the_view_of_a_rolled_camera():
     error_deg = np.degrees(np.arccos(np.clip(np.sum(n[both] * truth.normals_c[both], -1), -1, 1)))
     assert np.median(error_deg) < 0.5 and np.percentile(error_deg, 90) < 2.0
     assert np.all(img[0, 0] == 0) and not np.any(n[0, 0])  # a corner from outside: black, unlabelled
+
+
+@pytest.mark.parametrize("crop", [False, True])
+def test_turned_view_is_the_view_of_a_turned_camera(crop):
+    """`rotated_view` (the real frames' pitch/yaw augmentation) against rendering the turned camera, on
+    the full image and on a crop resized as `augment` does (intrinsics from `cropped_K`)."""
+    import cv2
+
+    world = build_scenario("office", 10.0, 5)
+    K = intrinsics_from_fov(160, 120, 65.0)
+    renderer = Renderer(world.scene, K, 160, 120)
+    sample = world.trajectory.sample(3.0)
+    R_wc, p_w = sample.R_wc[0], sample.p_w[0]
+    Q = Rotation.from_rotvec(np.radians(12.0) * np.array([0.6, 0.8, 0.0])).as_matrix()  # camera turn, own frame
+    view, truth = renderer.render(R_wc, p_w), renderer.render(R_wc @ Q, p_w)
+    rgb, normals = view.rgb, view.normals_c.astype(np.float32)
+    truth_n, K_used = truth.normals_c, K
+    if crop:  # the left-top 120x90 of both views, resized to 80x60
+        rgb = cv2.resize(rgb[:90, :120], (80, 60), interpolation=cv2.INTER_AREA)
+        normals = cv2.resize(normals[:90, :120], (80, 60), interpolation=cv2.INTER_NEAREST)
+        K_used = cropped_K(K, 0, 0, 80 / 120, 60 / 90)
+        renderer = Renderer(world.scene, K_used, 80, 60)
+        truth_n = renderer.render(R_wc @ Q, p_w).normals_c
+    img, n = rotated_view(rgb, normals, K_used, Q.T)  # a world direction d_c becomes Q^T d_c
+    both = (np.abs(n).sum(-1) > 0.5) & (np.abs(truth_n).sum(-1) > 0.5)
+    assert both.mean() > 0.6
+    error_deg = np.degrees(np.arccos(np.clip(np.sum(n[both] * truth_n[both], -1), -1, 1)))
+    assert np.median(error_deg) < 0.5 and np.percentile(error_deg, 90) < 2.0
