@@ -10,7 +10,7 @@ import dataclasses
 import numpy as np
 
 from uareme_fusion.backends.labelling_track import LabellingTrack
-from uareme_fusion.backends.smoother import Smoother, SmootherConfig
+from uareme_fusion.backends.smoother import SCENE_K_IMAGE_ROTATION_BIAS, Smoother, SmootherConfig
 from uareme_fusion.rotations import are_deg, exp_so3, manhattan_symmetries
 from uareme_fusion.types import Status, VisualRotation
 
@@ -55,7 +55,7 @@ def test_a_steady_bias_of_the_image_rotations_is_estimated_and_does_not_drift_th
     R_true = R_wc_at(t)
     bias = np.radians([0.0, 0.4, 0.0])  # per frame, as a translating camera's pure-rotation fit on ICSL
     visuals = noisy_visuals(t, R_true, np.random.default_rng(2), np.radians(2.0), cp_bias_rad=bias)
-    sm = Smoother()
+    sm = Smoother(SmootherConfig(**SCENE_K_IMAGE_ROTATION_BIAS))  # ICSL: K estimated from the scene
     ests = feed(sm, t, visuals)
     err = are_deg(np.array([e.R_wc for e in ests]), R_true, align=False)
     single_err = are_deg(np.array([v.R_cm.T for v in visuals]), R_true, align=False)

@@ -39,8 +39,9 @@ def test_knows_gravity_only_with_an_imu_and_only_for_imu_backends():
 @pytest.mark.parametrize("has_imu", [False, True])
 def test_run_and_compare_build_the_same_smoother(has_imu):
     """`run --backend smoother` builds, through the same factory, the backend `compare` names
-    smoother (no IMU) or smoother-gyro (with an IMU), with the same settings."""
-    info = SourceInfo(name="test", has_imu=has_imu)
+    smoother (no IMU) or smoother-gyro (with an IMU), with the same settings, for a source of known K
+    (without, `run` widens the paper smoother's rate bias: `smoother.SCENE_K_IMAGE_ROTATION_BIAS`)."""
+    info = SourceInfo(name="test", has_imu=has_imu, K=np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]))
     from_run = backend_for_run(RunConfig(backend="smoother"), info)
     from_compare = make_backend("smoother-gyro" if has_imu else "smoother")
     assert from_run.name == from_compare.name

@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..rotations import log_so3
-from ..types import VisualRotation, visual_R_wc_covariance
+from ..types import VisualRotation, visual_R_wc_covariance, visual_R_wc_steady
 
 
 MAX_SAMPLE = 10.0
@@ -53,13 +53,18 @@ others'."""
 class VisualNoiseShare:
     """The running independent share `lam` of the frames' visual covariances (module docstring)."""
 
-    def __init__(self, frames: float, min_share: float = 0.05):
-        """`frames`: the averaging horizon (0: off, `share` stays 1); `min_share` the floor of lam."""
+    def __init__(self, frames: float, min_share: float = 0.05, of_frame_part: bool = False):
+        """`frames`: the averaging horizon (0: off, `share` stays 1); `min_share` the floor of lam;
+        `of_frame_part`: lam is the share of each frame's per-frame part (`VisualRotation.cov_frame()`,
+        the covariance less its steady calibration part), and the steady part is persistent as a whole
+        (`take`); else of the whole covariance."""
         self.frames, self.min_share = float(frames), float(min_share)
+        self.of_frame_part = bool(of_frame_part)
         self.share = 1.0
         self.persistent_cov = np.zeros((3, 3))
         """(1 - lam) times the last finite frame's covariance as one of `R_wc` (rad^2, right
-        perturbation): the error the filter cannot average, reported with the estimate (`take`)."""
+        perturbation): the error the filter cannot average, reported with the estimate (`take`); with
+        `of_frame_part`, (1 - lam) times its per-frame part plus its whole steady part."""
         self._history: list[tuple[float, np.ndarray, float]] = []  # (t_s, R_mc, tr cov) of the last frames
         self._sum = self._sum2 = self._weight = 0.0
         self._count = 0
@@ -80,7 +85,11 @@ class VisualNoiseShare:
         has it already."""
         if self._take_frame(t_s, visual):
             R_wc_cov = visual_R_wc_covariance(visual) if R_wc_cov is None else R_wc_cov
-            self.persistent_cov = (1.0 - self.share) * R_wc_cov
+            steady = visual_R_wc_steady(visual) if self.of_frame_part else None
+            if steady is None:
+                self.persistent_cov = (1.0 - self.share) * R_wc_cov
+            else:
+                self.persistent_cov = (1.0 - self.share) * (R_wc_cov - steady) + steady
 
     def _take_frame(self, t_s: float, visual: VisualRotation | None) -> bool:
         """`update`'s work; whether `visual` is a rotation with a finite covariance."""
@@ -95,7 +104,8 @@ class VisualNoiseShare:
 
     def _update_share(self, t_s: float, visual: VisualRotation) -> None:
         """`share` with the frame (a finite covariance) as the third of the last three."""
-        self._history = (self._history + [(t_s, visual.R_cm.T, float(np.trace(visual.cov)))])[-3:]
+        cov = visual.cov_frame() if self.of_frame_part else visual.cov
+        self._history = (self._history + [(t_s, visual.R_cm.T, float(np.trace(cov)))])[-3:]
         if len(self._history) < 3:
             return
         (t0, R0, c0), (t1, R1, c1), (t2, R2, c2) = self._history
