@@ -17,7 +17,7 @@ from uareme_fusion.backends.mekf import Mekf, MekfConfig, kernel_image_rotation
 from uareme_fusion.backends.mekf.image_rotation_motion import ImageRotationMotion
 from uareme_fusion.backends.mekf.motion import ConstantRateMotion
 from uareme_fusion.backends.mekf.state import N_STATE, RATE, TH
-from uareme_fusion.backends.mekf.state_buffer import S_T_STATE, field_views, new_state_buffer
+from uareme_fusion.backends.mekf.state_buffer import field_views, new_state_buffer, python_state
 from uareme_fusion.backends.single import SingleFrame
 from uareme_fusion.rotations import exp_so3, log_so3, nees
 from uareme_fusion.types import Status
@@ -37,9 +37,9 @@ def image_rotation_step(R_wc, P, R_cp, var, dt_s, q_rate):
     x = new_state_buffer()
     views = field_views(x)
     views["R_wc"][...], views["P"][...] = R_wc, P
-    x[S_T_STATE] = 0.0
-    plain(kernel_image_rotation.image_rotation_predict)(x, dt_s, R_cp, var, q_rate)
-    assert x[S_T_STATE] == dt_s
+    x["t_state_s"] = 0.0
+    plain(kernel_image_rotation.image_rotation_predict)(python_state(x), dt_s, R_cp, var, q_rate)
+    assert x["t_state_s"][0] == dt_s
     return views["R_wc"].copy(), views["omega_c"].copy(), views["P"].copy()
 
 

@@ -19,7 +19,7 @@ from jacobians import check_measurement_model, fd_jacobian
 from uareme_fusion.backends.mekf import kernel_imu, kernel_visual
 from uareme_fusion.backends.mekf.measurements import gravity_model, vertical_model, zero_rate_model
 from uareme_fusion.backends.mekf.state import BG, MF, N_STATE, RATE, TH, ZERO_STATE, reset_jacobian
-from uareme_fusion.backends.mekf.state_buffer import S_T_STATE, field_views, new_state_buffer
+from uareme_fusion.backends.mekf.state_buffer import field_views, new_state_buffer, python_state
 from uareme_fusion.rotations import WORLD_UP, angle_between, exp_so3, log_so3
 
 from mekf_oracle.accel import AccelPeriod  # tests/backends/mekf_oracle: pytest puts tests/backends on sys.path
@@ -209,8 +209,8 @@ def constant_rate_step(R_wc, omega, P, dt_s, q_rate):
     x = new_state_buffer()
     views = field_views(x)
     views["R_wc"][...], views["omega_c"][...], views["P"][...] = R_wc, omega, P
-    x[S_T_STATE] = 0.0
-    plain(kernel_visual.constant_rate_predict)(x, dt_s, q_rate)
+    x["t_state_s"] = 0.0
+    plain(kernel_visual.constant_rate_predict)(python_state(x), dt_s, q_rate)
     return views["R_wc"].copy(), views["P"].copy()
 
 

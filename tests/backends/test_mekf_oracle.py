@@ -354,16 +354,22 @@ def test_a_kernel_cache_is_keyed_by_the_sources_it_draws_on(tmp_path):
 
 
 def test_kernels_see_the_fields_that_python_sees():
-    """`kernel_update.state_views` (the kernels' fields of the state buffer) and `state_buffer.field_views`
-    (Python's) are the same views of `x`, field by field, in the order of `state_buffer.FIELDS`."""
+    """`kernel_update.state_views` (the kernels' array fields of the state buffer) and
+    `state_buffer.field_views` (Python's) are the same views of `x`, field by field, in the order of
+    `state_buffer.ARRAYS`; the record is float64 throughout, its flat view (`flat_index`) the fields."""
     x = state_buffer.new_state_buffer()
-    x[:] = np.arange(x.size)
+    flat = x.view(np.float64)
+    flat[:] = np.arange(flat.size)
     python_views = state_buffer.field_views(x)
-    kernel_views = getattr(kernel_update.state_views, "py_func", kernel_update.state_views)(x)
-    assert len(kernel_views) == len(state_buffer.FIELDS)
-    for view, (name, shape) in zip(kernel_views, state_buffer.FIELDS):
+    kernel_views = getattr(kernel_update.state_views, "py_func", kernel_update.state_views)(state_buffer.python_state(x))
+    s = state_buffer.python_state(x)[0]  # the record, as a kernel reads it (`s = x[0]`)
+    assert len(kernel_views) == len(state_buffer.ARRAYS) and x.dtype.itemsize == 8 * flat.size
+    for view, (name, shape) in zip(kernel_views, state_buffer.ARRAYS):
         assert view.shape == shape and np.shares_memory(view, x)
-        assert np.array_equal(view, python_views[name])
+        assert np.array_equal(view, python_views[name]) and np.array_equal(view, flat[state_buffer.flat_index(name)])
+    for name, shape in state_buffer.FIELDS:
+        assert np.array_equal(getattr(s, name), flat[state_buffer.flat_index(name)].reshape(shape))
+    assert s.t_state_s == python_views["s"].t_state_s == 0.0
 
 
 @pytest.mark.slow

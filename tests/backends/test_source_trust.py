@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from uareme_fusion.backends.mekf import Mekf, MekfConfig
 from uareme_fusion.backends.mekf import source_trust
-from uareme_fusion.backends.mekf.state_buffer import S_SIZE, S_TRUST_FRAMES, S_VISUAL_SCALE, new_state_buffer
+from uareme_fusion.backends.mekf.state_buffer import new_state_buffer, python_state
 from uareme_fusion.types import Status, VisualRotation
 
 from mekf_oracle import OracleMekf  # tests/backends/mekf_oracle: pytest puts tests/backends on sys.path
@@ -20,8 +20,9 @@ UP_C = R_WC[2]
 IMU_HZ, FPS = 200.0, 20.0
 
 
-def _scalars() -> np.ndarray:
-    return new_state_buffer()[:S_SIZE]
+def _scalars() -> np.record:
+    """A fresh state record, fields by attribute (as the kernels read them)."""
+    return python_state(new_state_buffer())[0]
 
 
 def _tilt_deg(R_wc: np.ndarray) -> float:
@@ -80,8 +81,10 @@ def test_vertical_waits_for_samples_and_trust_off_changes_nothing():
     assert source_trust.update_visual_trust(s, np.ones(3), 1.0, 0.0, 0.05, 0.0) == (1.0, 0.0)
     before = s.copy()
     source_trust.update_visual_trust(s, np.full(3, np.nan), 1.0, 30.0, 0.05, 0.0)  # a NaN frame is left out
-    seen = np.arange(s.size) == S_TRUST_FRAMES  # ... but for the frames seen
-    assert np.array_equal(before[~seen], s[~seen], equal_nan=True) and s[S_TRUST_FRAMES] == before[S_TRUST_FRAMES] + 1
+    for name in s.dtype.names:  # ... but for the frames seen
+        if name != "trust_frames":
+            assert np.array_equal(before[name], s[name], equal_nan=True), name
+    assert s.trust_frames == before.trust_frames + 1
 
 
 def test_vertical_innovation_is_the_frames_up_minus_the_accelerometers():
@@ -266,7 +269,7 @@ def test_noiseless_inputs_converge_to_the_truth():
     est = _stream(filt, 4.0, exact, noise=0.0)
     assert _tilt_deg(est[-1].R_wc) < 1e-3
     np.testing.assert_allclose(est[-1].R_wc, R_WC, atol=1e-6)
-    assert filt.views["s"][S_VISUAL_SCALE] == pytest.approx(filt.config.visual_trust_min_share)  # no spread
+    assert filt.views["s"].visual_scale == pytest.approx(filt.config.visual_trust_min_share)  # no spread
 
 
 def test_both_paths_agree_with_correlated_errors_and_blocks():

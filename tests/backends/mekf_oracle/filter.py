@@ -23,7 +23,6 @@ from uareme_fusion.backends.mekf.source_trust import (note_accel_information, no
                                                       update_visual_trust, vertical_variance,
                                                       visual_vertical_innovation)
 from uareme_fusion.backends.mekf.state import BG, ORTHONORMALISE_EVERY, ZERO_STATE, orthonormal, reset_jacobian
-from uareme_fusion.backends.mekf.state_buffer import S_ACCEL_VAR_RATE, S_VISUAL_INFO_RATE
 from uareme_fusion.types import VisualRotation
 
 from .accel import AccelPeriod
@@ -148,7 +147,7 @@ class Mekf(production.Mekf):
             d2 = np.inf
         if not np.isfinite(d2) or d2 > cfg.visual_gate_chi2:
             self._count_rejection()
-            self.x[S_VISUAL_INFO_RATE] = 0.0
+            self.views["s"].visual_info_rate = 0.0
             if not visual.is_finite():
                 self._count_nonfinite()
             if accel_rows is not None:
@@ -188,7 +187,7 @@ class Mekf(production.Mekf):
         var_v = cfg.manhattan_vertical_std_rad**2
         quiet = (cfg.accel_downweight_flag_ratio * cfg.accel_tilt_noise_rad_sqrt_s) ** 2
         e, v = visual_vertical_innovation(self.R_wc, self.R_wm, r, R_vis, self.accel.sum_c, self.accel.time_s,
-                                          s[S_ACCEL_VAR_RATE], quiet, var_v)
+                                          s.accel_var_rate, quiet, var_v)
         share, _ = update_visual_trust(s, e, v, cfg.visual_trust_frames, cfg.visual_trust_min_share,
                                        squared_rate(self.last_gyro_c, self.b_c))
         var_v = vertical_variance(s, var_v, cfg.visual_trust_frames)

@@ -6,7 +6,7 @@ and zero-rate models; the visual one is `kernel_visual.visual_model`), `accel` (
 period), `scene` (Manhattan-frame initialisation and re-initialisation), `filter` (`Mekf`, the scheduler),
 `kernels` (the one implementation: `kernel_imu`, `kernel_update`, `kernel_visual`, numba-compiled or
 plain Python), `compiled` (the filter's calls into them), `parameters` (their named parameter record),
-`state_buffer` (the one array holding the state, which the kernels update in place), `offline`
+`state_buffer` (the one record of named fields holding the state, which the kernels update in place), `offline`
 (forward-backward).
 
 See docs/design.md "Backends". Conventions:

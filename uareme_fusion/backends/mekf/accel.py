@@ -13,8 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .state_buffer import (S_ACCEL_ELAPSED, S_ACCEL_TIME, S_ACCEL_DUE, S_LP_VALID, S_REST_N, S_REST_SINCE, BufferArray,
-                           BufferScalar, field_views, new_state_buffer)
+from .state_buffer import BufferArray, BufferScalar, field_views, new_state_buffer
 
 PERIOD_TOLERANCE_S = 1e-9
 """An accelerometer period counts as complete this close to its length (sums of sample steps round)."""
@@ -57,11 +56,12 @@ class AccelPeriod:
     sum_c = BufferArray("accel_sum")
     lp_J = BufferArray("lp_J")
     rest_sums = BufferArray("rest_sums")
-    time_s = BufferScalar(S_ACCEL_TIME)
-    elapsed_s = BufferScalar(S_ACCEL_ELAPSED)
-    due = BufferScalar(S_ACCEL_DUE, bool)
-    rest_n = BufferScalar(S_REST_N, int)
-    rest_since_s = BufferScalar(S_REST_SINCE, optional=True)
+    time_s = BufferScalar("accel_time_s")
+    elapsed_s = BufferScalar("accel_elapsed_s")
+    due = BufferScalar("accel_due", bool)
+    rest_n = BufferScalar("rest_n", int)
+    rest_since_s = BufferScalar("rest_since_s", optional=True)
+    lp_valid = BufferScalar("lp_valid", bool)
 
     def __init__(self, x: np.ndarray | None = None):
         self.x = new_state_buffer() if x is None else x
@@ -69,11 +69,11 @@ class AccelPeriod:
 
     @property
     def lp_c(self) -> np.ndarray | None:
-        return self.views["lp"] if self.x[S_LP_VALID] else None
+        return self.views["lp"] if self.lp_valid else None
 
     @lp_c.setter
     def lp_c(self, value) -> None:
-        self.x[S_LP_VALID] = value is not None
+        self.lp_valid = value is not None
         if value is not None:
             self.views["lp"][...] = value
 

@@ -14,8 +14,13 @@ import numpy as np
 
 from ... import jit
 from . import kernels
-from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_SKIPPED, S_ACCEL_UPDATES, S_IMU_GAPS, S_NONFINITE,
-                           S_REST_UPDATES, S_VISUAL_REJECTED, S_VISUAL_UPDATES)
+from .state_buffer import python_state
+
+
+def _state(filt) -> np.ndarray:
+    """The filter's state buffer as the kernels take it: `x` itself when they are compiled, else its
+    `np.recarray` view (`state_buffer.python_state`: fields by attribute, as numba reads them)."""
+    return filt.x if kernels.compiled_now() else python_state(filt.x)
 
 
 def _failed(exc: BaseException) -> None:
@@ -36,10 +41,9 @@ def _parameters(filt, defer: bool) -> np.ndarray:
     return params.get(filt.manhattan_initialised, defer)
 
 
-_COUNTERS = ((S_ACCEL_UPDATES, "accel_updates"), (S_ACCEL_SKIPPED, "accel_skipped"),
-             (S_ACCEL_DOWNWEIGHTED, "accel_downweighted"), (S_REST_UPDATES, "rest_updates"),
-             (S_NONFINITE, "nonfinite_updates"), (S_VISUAL_UPDATES, "visual_updates"),
-             (S_VISUAL_REJECTED, "visual_rejected"), (S_IMU_GAPS, "imu_gaps"))
+_COUNTERS = ("accel_updates", "accel_skipped", "accel_downweighted", "rest_updates", "nonfinite_updates",
+             "visual_updates", "visual_rejected", "imu_gaps")
+"""The update counts the kernels keep in the state record: fields named as the filter's counters."""
 _FLOAT64 = np.dtype(np.float64)
 _NO_RECORD = np.empty((0, 3, 3))  # record buffers when nothing is recorded (writable: the kernels' type)
 _NO_ROWS = (np.zeros(0), np.zeros((0, 0)), np.zeros((0, 12)))  # no extra rows in a visual update
@@ -47,11 +51,11 @@ _NO_ROWS = (np.zeros(0), np.zeros((0, 0)), np.zeros((0, 12)))  # no extra rows i
 
 def harvest_kernel_counters(x: np.ndarray, counters: dict[str, int]) -> None:
     """Move the update counts the kernels keep in the state buffer `x` into `counters` (by name)."""
-    for index, name in _COUNTERS:
-        count = x[index]
+    for name in _COUNTERS:
+        count = x[name][0]
         if count:
             counters[name] += int(count)
-            x[index] = 0.0
+            x[name] = 0.0
 
 
 def _record_buffers(filt, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -75,12 +79,12 @@ def integrate(filt, rows: np.ndarray, extra_s: float, defer: bool) -> None:
     > 0) and then hold the last rate `extra_s` s longer, updating the filter's state buffer in place
     (`kernel_imu.integrate_batch`); `defer`: an update due at the end waits for the frame."""
     record_R, record_P = _record_buffers(filt, rows.shape[0])
-    args = (filt.x, rows, extra_s, _parameters(filt, defer), record_R, record_P)
+    args = (_state(filt), rows, extra_s, _parameters(filt, defer), record_R, record_P)
     try:
         code = kernels.INTEGRATE(*args)
     except Exception as exc:  # noqa: BLE001 -- compilation failed: the plain function takes the batch
         _failed(exc)
-        code = kernels.INTEGRATE(filt.x, rows, extra_s, _parameters(filt, defer), record_R, record_P)
+        code = kernels.INTEGRATE(_state(filt), rows, extra_s, _parameters(filt, defer), record_R, record_P)
     _kept(filt, code, rows, rows.shape[0], record_R, record_P)
 
 
@@ -112,10 +116,10 @@ def integrate_staged(filt, n: int, t_frame_s: float) -> bool:
     accelerometer update waits. A frame's path: the fewest Python steps around the one call."""
     record_R, record_P = _record_buffers(filt, n)
     try:
-        code = kernels.INTEGRATE_STAGED(filt.x, filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
+        code = kernels.INTEGRATE_STAGED(_state(filt), filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
     except Exception as exc:  # noqa: BLE001
         _failed(exc)
-        code = kernels.INTEGRATE_STAGED(filt.x, filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
+        code = kernels.INTEGRATE_STAGED(_state(filt), filt._stage, n, t_frame_s, _parameters(filt, True), record_R, record_P)
     if code < 0:
         return False
     _kept(filt, code, filt._stage, n, record_R, record_P)
@@ -133,10 +137,10 @@ def integrate_segments(filt, t, gyro_c, accel_c, ends: np.ndarray):
     out = np.empty((m, 3, 3)), np.empty((m, 3, 3)), np.empty((m, 3)), np.empty(m, np.int64)
     arrays = (np.ascontiguousarray(t, float), np.ascontiguousarray(gyro_c, float), np.ascontiguousarray(accel_c, float))
     try:
-        kernels.SEGMENTS(filt.x, *arrays, ends, _parameters(filt, False), record_R, record_P, *out)
+        kernels.SEGMENTS(_state(filt), *arrays, ends, _parameters(filt, False), record_R, record_P, *out)
     except Exception as exc:  # noqa: BLE001
         _failed(exc)
-        kernels.SEGMENTS(filt.x, *arrays, ends, _parameters(filt, False), record_R, record_P, *out)
+        kernels.SEGMENTS(_state(filt), *arrays, ends, _parameters(filt, False), record_R, record_P, *out)
     if record_R.shape[0]:
         filt.record_t.append(np.array(t, float))
         filt.record_R.append(record_R)
@@ -148,10 +152,10 @@ def accel_update(filt) -> None:
     """The accelerometer (and at-rest) update of the period just completed, in the filter's state
     buffer (`kernel_update.accel_update_in_place`); no longer due."""
     try:
-        code = kernels.ACCEL_UPDATE(filt.x, _parameters(filt, False))
+        code = kernels.ACCEL_UPDATE(_state(filt), _parameters(filt, False))
     except Exception as exc:  # noqa: BLE001
         _failed(exc)
-        code = kernels.ACCEL_UPDATE(filt.x, _parameters(filt, False))
+        code = kernels.ACCEL_UPDATE(_state(filt), _parameters(filt, False))
     filt.flags |= code
     filt.accel.due = False
 
@@ -159,13 +163,12 @@ def accel_update(filt) -> None:
 def update(filt, residual: np.ndarray, R: np.ndarray, H: np.ndarray) -> None:
     """One measurement `(residual (m,), R (m, m), H (m, 12))` built in Python, fused into the filter's
     state buffer (`kernel_update.update_in_place`); a non-finite result changes nothing and is flagged."""
-    args = (filt.x, np.ascontiguousarray(residual, float), np.ascontiguousarray(R, float),
-            np.ascontiguousarray(H, float))
+    rows = (np.ascontiguousarray(residual, float), np.ascontiguousarray(R, float), np.ascontiguousarray(H, float))
     try:
-        code = kernels.UPDATE(*args, _parameters(filt, False))
+        code = kernels.UPDATE(_state(filt), *rows, _parameters(filt, False))
     except Exception as exc:  # noqa: BLE001
         _failed(exc)
-        code = kernels.UPDATE(*args, _parameters(filt, False))
+        code = kernels.UPDATE(_state(filt), *rows, _parameters(filt, False))
     filt.flags |= code
 
 
@@ -185,10 +188,10 @@ def visual_update(filt, visual, share_scale: float = 1.0, rows=None) -> int:
     R_cm, cov = _as_float(visual)
     extra = _NO_ROWS if rows is None else tuple(np.ascontiguousarray(a, float) for a in rows)
     try:
-        code = kernels.VISUAL_UPDATE(filt.x, _parameters(filt, False), R_cm, cov, share_scale, *extra, filt.estimate_out)
+        code = kernels.VISUAL_UPDATE(_state(filt), _parameters(filt, False), R_cm, cov, share_scale, *extra, filt.estimate_out)
     except Exception as exc:  # noqa: BLE001
         _failed(exc)
-        code = kernels.VISUAL_UPDATE(filt.x, _parameters(filt, False), R_cm, cov, share_scale, *extra, filt.estimate_out)
+        code = kernels.VISUAL_UPDATE(_state(filt), _parameters(filt, False), R_cm, cov, share_scale, *extra, filt.estimate_out)
     filt.flags |= code
     return code & kernels.kernel_visual.VISUAL_REJECTED
 
@@ -198,20 +201,20 @@ def visual_distance(filt, visual, P: np.ndarray, relabel: bool) -> tuple[float, 
     covariance `P` (`kernel_visual.visual_distance`)."""
     R_cm, cov = _as_float(visual)
     try:
-        return kernels.VISUAL_DISTANCE(filt.x, P, R_cm, cov, relabel)
+        return kernels.VISUAL_DISTANCE(_state(filt), P, R_cm, cov, relabel)
     except Exception as exc:  # noqa: BLE001
         _failed(exc)
-        return kernels.VISUAL_DISTANCE(filt.x, P, R_cm, cov, relabel)
+        return kernels.VISUAL_DISTANCE(_state(filt), P, R_cm, cov, relabel)
 
 
 def constant_rate_predict(filt, t_s: float, q_rate: float) -> None:
     """Visual only: the state predicted to `t_s` (s) with the constant-rate model
     (`kernel_visual.constant_rate_predict`)."""
     try:
-        kernels.CONSTANT_RATE(filt.x, t_s, q_rate)
+        kernels.CONSTANT_RATE(_state(filt), t_s, q_rate)
     except Exception as exc:  # noqa: BLE001
         _failed(exc)
-        kernels.CONSTANT_RATE(filt.x, t_s, q_rate)
+        kernels.CONSTANT_RATE(_state(filt), t_s, q_rate)
 
 
 def image_rotation_predict(filt, t_s: float, R_cp: np.ndarray, var_rad2: float, q_rate: float) -> None:
@@ -219,7 +222,7 @@ def image_rotation_predict(filt, t_s: float, R_cp: np.ndarray, var_rad2: float, 
     `var_rad2` (rad^2 per axis) (`kernel_image_rotation.image_rotation_predict`)."""
     R_cp = np.ascontiguousarray(R_cp, float)
     try:
-        kernels.IMAGE_ROTATION(filt.x, t_s, R_cp, var_rad2, q_rate)
+        kernels.IMAGE_ROTATION(_state(filt), t_s, R_cp, var_rad2, q_rate)
     except Exception as exc:  # noqa: BLE001
         _failed(exc)
-        kernels.IMAGE_ROTATION(filt.x, t_s, R_cp, var_rad2, q_rate)
+        kernels.IMAGE_ROTATION(_state(filt), t_s, R_cp, var_rad2, q_rate)

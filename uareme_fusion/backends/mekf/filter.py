@@ -33,16 +33,8 @@ from .scene import ignored_too_long, initialise_manhattan
 from .segments import process_imu_segments
 from .source_trust import tilt_shares
 from .status_bits import status_of
-from .state import I3, N_STATE, TH
-from .state_buffer import (BufferArray, BufferScalar, S_IMU_T, S_IN_GAP, S_PRODUCTS, S_REJECTIONS, S_T_STATE,
-                           S_T_VISUAL, S_VISUAL_INFO_RATE, X_B_C, X_P, X_R_WC, X_R_WM, field_views, new_state_buffer)
-
-
-_P_TH = X_P + N_STATE * np.arange(N_STATE)[TH, None] + np.arange(N_STATE)[TH]  # where P[TH, TH] lies in `x`
-_ESTIMATE_INDEX = np.stack([np.arange(X_R_WC, X_R_WM).reshape(3, 3), np.arange(X_R_WM, X_B_C).reshape(3, 3), _P_TH,
-                            _P_TH.T, np.tile(np.arange(X_B_C, X_P), (3, 1))])
-"""Where R_wc, R_wm, P[TH, TH], its transpose and b_c (in each row) lie in the state buffer `x` (5, 3, 3):
-one `take` copies them."""
+from .state import I3
+from .state_buffer import ESTIMATE_INDEX, BufferArray, BufferScalar, field_views, new_state_buffer
 
 
 _CAMERA_ONLY = (float("nan"), 1.0)
@@ -96,20 +88,21 @@ class Mekf(Backend):
     """
 
     name = "mekf"
-    # The nominal state, covariance and accelerometer period live in one array, `x`, which the compiled
-    # kernels update in place (`state_buffer.py`); these attributes read and write it.
+    # The nominal state, covariance and accelerometer period live in one record of named fields, `x`, which
+    # the compiled kernels update in place (`state_buffer.py`); these attributes read and write it.
     R_wc = BufferArray("R_wc")
     R_wm = BufferArray("R_wm")
     b_c = BufferArray("b_c")
     P = BufferArray("P")
     last_gyro_c = BufferArray("last_gyro")
     omega_c = BufferArray("omega_c")  # visual only: the camera's angular rate, rad/s (camera frame)
-    t_state = BufferScalar(S_T_STATE, optional=True)
-    imu_t_s = BufferScalar(S_IMU_T)  # time of the newest integrated IMU sample (camera clock), s; -inf before any
-    products_unnormalised = BufferScalar(S_PRODUCTS, int)
-    t_visual_s = BufferScalar(S_T_VISUAL, optional=True)  # time of the previous visual update (camera clock), s
-    rejections = BufferScalar(S_REJECTIONS, int)  # consecutive frames gated out
-    in_imu_gap = BufferScalar(S_IN_GAP, bool)  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
+    t_state = BufferScalar("t_state_s", optional=True)
+    imu_t_s = BufferScalar("imu_t_s")  # time of the newest integrated IMU sample (camera clock), s; -inf before any
+    products_unnormalised = BufferScalar("products", int)
+    t_visual_s = BufferScalar("t_visual_s", optional=True)  # time of the previous visual update (camera clock), s
+    rejections = BufferScalar("rejections", int)  # consecutive frames gated out
+    in_imu_gap = BufferScalar("in_gap", bool)  # frames are being extrapolated past `imu_gap_limit_s` of no IMU
+    accel_info_rate, visual_info_rate = BufferScalar("accel_info_rate"), BufferScalar("visual_info_rate")  # tilt info/s
 
     def __init__(self, config: MekfConfig | str | None = None):
         """`config`: a `MekfConfig`, a preset name or YAML path (`Mekf("vehicle")`), or None for the defaults."""
@@ -324,7 +317,7 @@ class Mekf(Backend):
         if visual is None or not fuses_visual:
             if fuses_visual:
                 self.flags |= status_bits.VISUAL_MISSING
-                self.x[S_VISUAL_INFO_RATE] = 0.0  # no share while the camera gives nothing
+                self.visual_info_rate = 0.0  # no share while the camera gives nothing
         elif not visual.is_finite():  # never a start
             self.flags |= status_bits.VISUAL_REJECTED
             self.counters["visual_rejected"] += 1
@@ -456,7 +449,8 @@ class Mekf(Backend):
         """`_estimate` from what the compiled visual update wrote (`estimate_out`): one copy, no arithmetic."""
         R_wc, cov, R_wm, b_c = self.estimate_out.copy()
         bits, self.flags = self.flags, status_bits.OK
-        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm, self._bias_in_imu(b_c[0]), tilt_shares(self.views["s"]))
+        shares = tilt_shares(self.accel_info_rate, self.visual_info_rate)
+        return Estimate(t_s, R_wc, cov, status_of(bits), R_wm, self._bias_in_imu(b_c[0]), shares)
 
     def _bias_in_imu(self, b_c: np.ndarray) -> np.ndarray:
         """The gyro bias `b_c` (3,) rad/s (camera frame, a copy) in the IMU frame."""
@@ -468,14 +462,14 @@ class Mekf(Backend):
             return Estimate(t_s, np.eye(3), np.eye(3), status_of(bits | status_bits.NOT_INITIALISED))
         # The fewest Python steps (a frame's estimate runs between solver calls, where each costs about
         # a microsecond, and a numba call more): one gather copies R_wc, R_wm, P[TH, TH], its transpose, b_c.
-        R_wc, R_wm, P_th, P_th_T, b_c = self.x.take(_ESTIMATE_INDEX)
+        R_wc, R_wm, P_th, P_th_T, b_c = self.views["flat"].take(ESTIMATE_INDEX)
         cov = P_th + P_th_T  # into a new array: in place, numpy would check two views of one array for overlap
         cov *= 0.5
         if not self.motion.uses_imu:
             cov += self.motion.persistent_cov(self)
             bias_i, shares = None, _CAMERA_ONLY
         else:
-            bias_i, shares = self._bias_in_imu(b_c[0]), tilt_shares(self.views["s"])
+            bias_i, shares = self._bias_in_imu(b_c[0]), tilt_shares(self.accel_info_rate, self.visual_info_rate)
         return Estimate(t_s, R_wc, cov, status_of(bits), R_wm if self.manhattan_initialised else None, bias_i, shares)
 
 

@@ -19,15 +19,15 @@ import numpy as np
 from .kernel_update import matmul_into, state_views
 from .matrix3 import log3_into, matmul3_into
 from .state import orthonormal
-from .state_buffer import S_T_STATE
 
 
 def image_rotation_predict(x, t_s, R_cp, var_rad2, q_rate):
     """The state buffer `x` predicted to `t_s` (s) by the image rotation `R_cp` (3, 3) since the state's
     time, of variance `var_rad2` (rad^2 per axis), with the rate random walk `q_rate` ((rad/s^2)^2/Hz) for
     the rate's covariance (module docstring); `t_s` is later than the state's time."""
-    s, R_wc, _, _, P, _, _, _, _, _, omega_c = state_views(x)
-    dt = t_s - s[S_T_STATE]
+    s = x[0]
+    R_wc, _, _, P, _, _, _, _, _, omega_c = state_views(x)
+    dt = t_s - s.t_state_s
     R_pc = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
@@ -53,4 +53,4 @@ def image_rotation_predict(x, t_s, R_cp, var_rad2, q_rate):
         P_new[i, 9 + i] = var_rad2 / dt
         P_new[9 + i, i] = var_rad2 / dt
     P[:, :] = P_new
-    s[S_T_STATE] = t_s
+    s.t_state_s = t_s

@@ -23,8 +23,6 @@ from .accel import chunk_bounds
 from .kernel_update import accel_rows, state_views
 from .matrix3 import exp3_into, matmul3_into
 from .state import orthonormal
-from .state_buffer import (S_ACCEL_DUE, S_ACCEL_ELAPSED, S_ACCEL_TIME, S_IMU_GAPS, S_IMU_T, S_IN_GAP, S_LP_VALID,
-                           S_NONFINITE, S_PRODUCTS, S_REST_N, S_T_STATE, X_S)
 from ..imu_stream import rows_if_clean
 
 DOWNWEIGHTED, NONFINITE = status_bits.ACCEL_DOWNWEIGHTED, status_bits.UPDATE_NONFINITE
@@ -33,18 +31,18 @@ IMU_GAP, GYRO_SATURATED = status_bits.IMU_GAP, status_bits.GYRO_SATURATED
 
 def chunk_steps(s, t, gyro, saturated, extra_s, last_gyro, gap_limit_s, unknown_std_rad_s, g, dt):
     """The steps of a chunk of n samples `t` (n,), `gyro` (n, 3), `saturated` (n,) (nonzero: at the
-    gyro's range), continuing from the state time `s[S_T_STATE]` and extrapolated by `extra_s` (m = n
+    gyro's range), continuing from the state time `s.t_state_s` and extrapolated by `extra_s` (m = n
     + 1 steps then, else n): the readings into `g` (m + 1, 3) (the previous one `last_gyro` first,
     each saturated one replaced by the last reading before it, the last held over the extrapolation)
     and the step lengths into `dt` (m,), zero over gaps. Updates the gap bookkeeping in `s`
-    (`S_IMU_T`, `S_IN_GAP`, `S_IMU_GAPS`, the low-pass lost at a gap). Returns `(T_elapsed s, unknown
+    (`s.imu_t_s`, `s.in_gap`, `s.imu_gaps`, the low-pass lost at a gap). Returns `(T_elapsed s, unknown
     variance rad^2, result bits)`."""
     n, m = t.shape[0], dt.shape[0]
-    resumed = n > 0 and s[S_IN_GAP] > 0
+    resumed = n > 0 and s.in_gap > 0
     any_saturated = False
     T_elapsed, longest = 0.0, 0.0
     g[0] = last_gyro
-    t_prev = s[S_T_STATE]
+    t_prev = s.t_state_s
     for k in range(n):  # one pass: readings, steps, their sum and the longest
         if saturated[k] > 0:
             any_saturated = True
@@ -58,15 +56,15 @@ def chunk_steps(s, t, gyro, saturated, extra_s, last_gyro, gap_limit_s, unknown_
         if h > longest:
             longest = h
     if n:
-        s[S_IMU_T] = t[n - 1]
-        s[S_IN_GAP] = 0.0
+        s.imu_t_s = t[n - 1]
+        s.in_gap = 0.0
     stale = False
     if m > n:
         g[m] = g[n]
         dt[m - 1] = extra_s
         T_elapsed += extra_s
         longest = max(longest, extra_s)
-        stale = abs(s[S_IMU_T]) < np.inf and s[S_T_STATE] + extra_s - s[S_IMU_T] > gap_limit_s
+        stale = abs(s.imu_t_s) < np.inf and s.t_state_s + extra_s - s.imu_t_s > gap_limit_s
     if resumed:  # the reading before the gap is stale: the step to the first new one is unknown
         g[0] = g[1]
     if not (stale or resumed or longest > gap_limit_s or any_saturated):
@@ -83,10 +81,10 @@ def chunk_steps(s, t, gyro, saturated, extra_s, last_gyro, gap_limit_s, unknown_
     code = GYRO_SATURATED if any_saturated else 0
     if any_gap:
         code |= IMU_GAP
-        s[S_IMU_GAPS] += gaps + (1 if stale and not s[S_IN_GAP] > 0 else 0)
+        s.imu_gaps += gaps + (1 if stale and not s.in_gap > 0 else 0)
         if stale:
-            s[S_IN_GAP] = 1.0
-    s[S_LP_VALID] = 0.0  # the frame carried along by the gyro is lost
+            s.in_gap = 1.0
+    s.lp_valid = 0.0  # the frame carried along by the gyro is lost
     return T_elapsed, unknown_var, code
 
 
@@ -163,7 +161,8 @@ def integrate_chunks(x, t, gyro, accel, saturated, bounds, extra_s, p, record_R,
     by `extra_s`, with the accelerometer updates falling due (one due at the end left to a frame with
     `p.defer`); see `integrate_batch`. `C_buf`, `g_buf`, `dt_buf`: work arrays (`scratch`). Returns the
     `DOWNWEIGHTED` | `IMU_GAP` | `GYRO_SATURATED` bits."""
-    s, R_wc, R_wm, b_c, P, last_gyro, accel_sum, lp, lp_J, rest_sums, _ = state_views(x)
+    s = x[0]
+    R_wc, R_wm, b_c, P, last_gyro, accel_sum, lp, lp_J, rest_sums, _ = state_views(x)
     n_chunks = bounds.shape[0] - 1
     code = 0
     for c in range(n_chunks):
@@ -193,11 +192,11 @@ def integrate_chunks(x, t, gyro, accel, saturated, bounds, extra_s, p, record_R,
                 matmul3_into(R_wc, C_k[k], record_R[a + k])
                 record_P[a + k] = P_pred[0:3, 0:3]
         R_wc[:, :] = matmul3_into(R_wc, C_N, np.empty((3, 3)))
-        s[S_PRODUCTS] += 1
-        if s[S_PRODUCTS] >= p.orthonormalise_every:
+        s.products += 1
+        if s.products >= p.orthonormalise_every:
             R_wc[:, :] = orthonormal(R_wc)
             R_wm[:, :] = orthonormal(R_wm)
-            s[S_PRODUCTS] = 0
+            s.products = 0
         last_gyro[:] = g[n]
         # Specific force, time-weighted (not over gaps), in the chunk's end frame.
         acc = accel_sum.copy()
@@ -211,9 +210,9 @@ def integrate_chunks(x, t, gyro, accel, saturated, bounds, extra_s, p, record_R,
         for i in range(3):
             accel_sum[i] = C_N[0, i] * acc[0] + C_N[1, i] * acc[1] + C_N[2, i] * acc[2]
         if n:
-            s[S_ACCEL_TIME] += T_elapsed - extra if unknown_var == 0.0 else covered
-        s[S_ACCEL_ELAPSED] += T_elapsed
-        if s[S_LP_VALID] > 0:
+            s.accel_time_s += T_elapsed - extra if unknown_var == 0.0 else covered
+        s.accel_elapsed_s += T_elapsed
+        if s.lp_valid > 0:
             carry_lowpass_in_place(lp, lp_J, C_N, A_bias)
         if p.rest_gyro_max_rad_s > 0:
             for k in range(n):
@@ -227,11 +226,11 @@ def integrate_chunks(x, t, gyro, accel, saturated, bounds, extra_s, p, record_R,
                 rest_sums[5] += f1
                 rest_sums[6] += f2
                 rest_sums[7] += f0 * f0 + f1 * f1 + f2 * f2
-            s[S_REST_N] += n
-        s[S_T_STATE] = (t[b - 1] if n else s[S_T_STATE]) + extra
-        if not last or s[S_ACCEL_ELAPSED] >= p.due_s:
+            s.rest_n += n
+        s.t_state_s = (t[b - 1] if n else s.t_state_s) + extra
+        if not last or s.accel_elapsed_s >= p.due_s:
             if last and p.defer > 0:
-                s[S_ACCEL_DUE] = 1
+                s.accel_due = 1
             elif accel_rows(x, p, 1.0)[1]:  # updated, down-weighted
                 code |= DOWNWEIGHTED
     return code
@@ -261,20 +260,20 @@ def integrate_batch(x, rows, extra_s, params, record_R, record_P):
     """Integrate a released batch `rows` (n, 8) (`types.IMU_COLUMNS`: t s, gyro rad/s, accel m/s^2,
     camera frame, saturated flag) into the state buffer `x`, in place: chunk by chunk
     (`accel.chunk_bounds`), with the accelerometer updates that fall due, except one due at the end of
-    a batch propagated to a frame (`p.defer`): that one is left to the frame (`s[S_ACCEL_DUE]` = 1).
+    a batch propagated to a frame (`p.defer`): that one is left to the frame (`s.accel_due` = 1).
     The last chunk is extrapolated by `extra_s` s (n may be 0 then). With `p.record`, `record_R` (n, 3,
     3) receives R_wc after each sample and `record_P` the attitude covariance predicted to the end of
     its chunk. Returns the `Status` bits of what happened (`DOWNWEIGHTED`, `NONFINITE`, `IMU_GAP`,
     `GYRO_SATURATED`)."""
     p = params[0]
-    s = x[X_S:X_S + S_NONFINITE + 1]
+    s = x[0]
     t = rows[:, 0]
-    nonfinite_before = s[S_NONFINITE]
-    bounds = chunk_bounds(t, s[S_T_STATE], s[S_ACCEL_ELAPSED], p.period_s)
+    nonfinite_before = s.nonfinite_updates
+    bounds = chunk_bounds(t, s.t_state_s, s.accel_elapsed_s, p.period_s)
     C_buf, g_buf, dt_buf = scratch(t.shape[0])
     code = integrate_chunks(x, t, rows[:, 1:4], rows[:, 4:7], rows[:, 7], bounds, extra_s, p, record_R, record_P,
                             C_buf, g_buf, dt_buf)
-    return code | (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
+    return code | (NONFINITE if s.nonfinite_updates > nonfinite_before else 0)
 
 
 def stage_batch(stage, t, gyro, accel, newest_s, gyro_range_rad_s, max_span_s):
@@ -293,10 +292,10 @@ def stage_batch(stage, t, gyro, accel, newest_s, gyro_range_rad_s, max_span_s):
 def integrate_staged(x, stage, n, t_frame_s, params, record_R, record_P):
     """`integrate_batch` for the `n` rows of `stage` (`stage_batch`), propagated to a frame at
     `t_frame_s` s: -2, changing nothing, unless they are all at or before the frame and no
-    accelerometer update waits (`s[S_ACCEL_DUE]`)."""
+    accelerometer update waits (`s.accel_due`)."""
     rows = stage[:n]
     t_last = rows[n - 1, 0]
-    if not t_last <= t_frame_s or x[X_S + S_ACCEL_DUE] > 0:
+    if not t_last <= t_frame_s or x[0].accel_due > 0:
         return -2
     return integrate_batch(x, rows, t_frame_s - t_last, params, record_R, record_P)
 
@@ -308,7 +307,8 @@ def integrate_segments(x, t, gyro, accel, ends, params, record_R, record_P, out_
     none deferred), and the estimate after it written out: `out_R[i]` R_wc, `out_cov[i]` the attitude
     covariance (symmetrised), `out_b[i]` b_c, `out_flags[i]` the `Status` bits of what happened."""
     p = params[0]
-    s, R_wc, _, b_c, P = state_views(x)[:5]
+    s = x[0]
+    R_wc, _, b_c, P = state_views(x)[:4]
     # Strided views ('A' layout in numba, as a batch's columns in `integrate_batch`): `integrate_chunks`
     # and what it calls compile once for both drivers.
     t, gyro, accel = t[::1], gyro[::1], accel[::1]
@@ -318,14 +318,14 @@ def integrate_segments(x, t, gyro, accel, ends, params, record_R, record_P, out_
     for i in range(ends.shape[0]):
         end = ends[i]
         seg_t = t[start:end]
-        bounds = chunk_bounds(seg_t, s[S_T_STATE], s[S_ACCEL_ELAPSED], p.period_s)
-        nonfinite_before = s[S_NONFINITE]
+        bounds = chunk_bounds(seg_t, s.t_state_s, s.accel_elapsed_s, p.period_s)
+        nonfinite_before = s.nonfinite_updates
         bits = integrate_chunks(x, seg_t, gyro[start:end], accel[start:end], not_saturated[start:end], bounds, 0.0,
                                 p, record_R[start:end], record_P[start:end], C_buf, g_buf, dt_buf)
         out_R[i] = R_wc
         out_cov[i] = 0.5 * (P[0:3, 0:3] + P[0:3, 0:3].T)
         out_b[i] = b_c
-        out_flags[i] = bits | (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
+        out_flags[i] = bits | (NONFINITE if s.nonfinite_updates > nonfinite_before else 0)
         start = end
     return 0
 

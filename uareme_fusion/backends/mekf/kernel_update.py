@@ -18,10 +18,6 @@ from .matrix3 import exp3_into, matmul3_into
 from .measurements import gravity_model, zero_rate_model
 from .source_trust import note_accel_information
 from .state import ROTATION_BLOCKS, orthonormal, reset_jacobian
-from .state_buffer import (S_ACCEL_DOWNWEIGHTED, S_ACCEL_ELAPSED, S_ACCEL_SKIPPED, S_ACCEL_TIME, S_ACCEL_UPDATES,
-                           S_LP_VALID, S_NONFINITE, S_PRODUCTS, S_REST_N, S_REST_SINCE, S_REST_UPDATES, S_T_STATE,
-                           X_ACCEL_SUM, X_B_C, X_LAST_GYRO, X_LP, X_LP_J, X_OMEGA_C, X_P, X_REST_SUMS, X_R_WC, X_R_WM,
-                           X_S, X_SIZE)
 
 DOWNWEIGHTED, NONFINITE = status_bits.ACCEL_DOWNWEIGHTED, status_bits.UPDATE_NONFINITE
 """An accelerometer update was down-weighted; an update's result was not finite (and dropped): the
@@ -29,12 +25,11 @@ bits of the `Status` flags that say so, so that a result is or-ed into the filte
 
 
 def state_views(x):
-    """The fields of the state buffer `x` (`state_buffer.py`) as views: (s, R_wc, R_wm, b_c, P,
-    last_gyro, accel_sum, lp, lp_J, rest_sums, omega_c)."""
-    return (x[X_S:X_R_WC], x[X_R_WC:X_R_WM].reshape((3, 3)), x[X_R_WM:X_B_C].reshape((3, 3)), x[X_B_C:X_P],
-            x[X_P:X_LAST_GYRO].reshape((12, 12)), x[X_LAST_GYRO:X_ACCEL_SUM], x[X_ACCEL_SUM:X_LP],
-            x[X_LP:X_LP_J].reshape((2, 3)), x[X_LP_J:X_REST_SUMS].reshape((2, 3, 3)), x[X_REST_SUMS:X_OMEGA_C],
-            x[X_OMEGA_C:X_SIZE])
+    """The array fields of the state record `x[0]` (`state_buffer.py`) as views: (R_wc, R_wm, b_c, P,
+    last_gyro, accel_sum, lp, lp_J, rest_sums, omega_c). The record itself is not returned (numba
+    cannot return a record by value): a kernel reads the scalar fields from `s = x[0]`."""
+    s = x[0]
+    return s.R_wc, s.R_wm, s.b_c, s.P, s.last_gyro, s.accel_sum, s.lp, s.lp_J, s.rest_sums, s.omega_c
 
 
 def matmul_into(A, B, out):
@@ -85,12 +80,13 @@ def kalman_update(x, residual, R, H, p):
     stacked update passes its whole work array, so that every caller passes a C-contiguous `R` and
     numba compiles this function once) and `H` (m, 12), then
     injection into the nominal state and the reset of the error , all in
-    place; nothing changes but `s[S_NONFINITE]` when the result is not finite.
+    place; nothing changes but `s.nonfinite_updates` when the result is not finite.
     Scalar loops that use the structure (a BLAS call per small product costs more than the product,
     and more still out of the caches, after a solver call): the Joseph form expanded,
     `(I - K H) P (I - K H)^T + K R K^T = P - K (P H^T)^T - (P H^T) K^T + K S K^T` with `S` the
     innovation covariance, and the reset `G P G^T` on the rotation blocks only."""
-    s, P = x[X_S:X_R_WC], x[X_P:X_LAST_GYRO].reshape((12, 12))
+    s = x[0]
+    P = s.P
     m = residual.shape[0]
     PHt = matmul_into(P, H.T, np.empty((12, m)))
     S = matmul_into(H, PHt, np.empty((m, m)))
@@ -114,7 +110,7 @@ def kalman_update(x, residual, R, H, p):
             P_new[i, j] = v
             finite &= abs(v) < np.inf
     if not finite:
-        s[S_NONFINITE] += 1
+        s.nonfinite_updates += 1
         return
     inject_and_reset(x, dx, P_new, p)
 
@@ -123,23 +119,24 @@ def inject_and_reset(x, dx, P_new, p):
     """After an update with error estimate `dx` (12,) and covariance `P_new` (12, 12): `dx` injected
     into the nominal state (the rate only with `p.estimates_rate`, the Manhattan frame once known) and
     the low-pass stages, and `P` set to the reset `G P_new G^T`, symmetrised, all in place."""
-    s, R_wc, R_wm, b_c, P, _, _, lp, lp_J, _, omega_c = state_views(x)
+    s = x[0]
+    R_wc, R_wm, b_c, P, _, _, lp, lp_J, _, omega_c = state_views(x)
     with_manhattan = p.manhattan_initialised > 0
     G = reset_jacobian(dx, with_manhattan)
     if with_manhattan:
         R_wm[:, :] = matmul3_into(R_wm, exp3_into(dx[6], dx[7], dx[8], np.empty((3, 3))), np.empty((3, 3)))
     R_wc[:, :] = matmul3_into(R_wc, exp3_into(dx[0], dx[1], dx[2], np.empty((3, 3))), np.empty((3, 3)))
-    s[S_PRODUCTS] += 1
-    if s[S_PRODUCTS] >= p.orthonormalise_every:
+    s.products += 1
+    if s.products >= p.orthonormalise_every:
         R_wc[:, :] = orthonormal(R_wc)
         R_wm[:, :] = orthonormal(R_wm)
-        s[S_PRODUCTS] = 0
+        s.products = 0
     for i in range(3):
         b_c[i] += dx[3 + i]
     if p.estimates_rate > 0:
         for i in range(3):
             omega_c[i] += dx[9 + i]
-    if s[S_LP_VALID] > 0:
+    if s.lp_valid > 0:
         for st in range(2):
             for i in range(3):
                 lp[st, i] += lp_J[st, i, 0] * dx[3] + lp_J[st, i, 1] * dx[4] + lp_J[st, i, 2] * dx[5]
@@ -172,33 +169,34 @@ def accel_rows(x, p, update):
     measurement not `ok` near free fall.
     The compile time of the kernels grows with each function that calls into the Kalman update (each
     is optimised with all it calls): this one updates itself rather than through a wrapper."""
-    s, R_wc, _, b_c, _, _, accel_sum, lp, lp_J, rest_sums, _ = state_views(x)
-    T = s[S_ACCEL_TIME]
+    s = x[0]
+    R_wc, _, b_c, _, _, accel_sum, lp, lp_J, rest_sums, _ = state_views(x)
+    T = s.accel_time_s
     accel_c = accel_sum / T if T > 0 else accel_sum.copy()
     accel_sum[:] = 0.0
-    s[S_ACCEL_TIME] = 0.0
-    s[S_ACCEL_ELAPSED] = 0.0
+    s.accel_time_s = 0.0
+    s.accel_elapsed_s = 0.0
     if p.rest_gyro_max_rad_s > 0:
-        n = s[S_REST_N]
+        n = s.rest_n
         if n >= 2 and T > 0:
             rest = zero_rate_model(rest_sums, n, T, b_c, p.q_gyro, p.rest_gyro_max_rad_s, p.rest_accel_max_m_s2,
                                    p.rest_rate_std_rad_s)
             if not rest.ok:
-                s[S_REST_SINCE] = np.nan
+                s.rest_since_s = np.nan
             else:
-                if math.isnan(s[S_REST_SINCE]):
-                    s[S_REST_SINCE] = s[S_T_STATE] - T
-                if s[S_T_STATE] - s[S_REST_SINCE] >= p.rest_min_duration_s:
+                if math.isnan(s.rest_since_s):
+                    s.rest_since_s = s.t_state_s - T
+                if s.t_state_s - s.rest_since_s >= p.rest_min_duration_s:
                     kalman_update(x, rest.residual, rest.covariance, rest.jacobian, p)
-                    s[S_REST_UPDATES] += 1
+                    s.rest_updates += 1
         rest_sums[:] = 0.0
-        s[S_REST_N] = 0
+        s.rest_n = 0
     tau = p.lowpass_tau_s
     if tau > 0 and T > 0:
-        if s[S_LP_VALID] == 0:
+        if s.lp_valid == 0:
             lp[0], lp[1] = accel_c, accel_c
             lp_J[:] = 0.0
-            s[S_LP_VALID] = 1
+            s.lp_valid = 1
         else:
             alpha = 1.0 - math.exp(-T / tau)
             lp[0] += alpha * (accel_c - lp[0])
@@ -210,12 +208,12 @@ def accel_rows(x, p, update):
                                           p.accel_norm_scale, p.accel_innovation_scale_rad,
                                           p.accel_downweight_flag_ratio)
     if not gravity.ok:
-        s[S_ACCEL_SKIPPED] += 1
+        s.accel_skipped += 1
         return gravity, False
     note_accel_information(s, gravity.covariance[0, 0], T)
     if downweighted:
-        s[S_ACCEL_DOWNWEIGHTED] += 1
-    s[S_ACCEL_UPDATES] += 1
+        s.accel_downweighted += 1
+    s.accel_updates += 1
     if update > 0:
         kalman_update(x, gravity.residual, gravity.covariance, gravity.jacobian, p)
     return gravity, downweighted
@@ -225,15 +223,15 @@ def accel_update_in_place(x, params):
     """The update at the end of an accelerometer period (`accel_rows`) on the state buffer `x`, in
     place: the `DOWNWEIGHTED` | `NONFINITE` bits of what happened."""
     p = params[0]
-    nonfinite_before = x[X_S + S_NONFINITE]
+    nonfinite_before = x[0].nonfinite_updates
     downweighted = accel_rows(x, p, 1.0)[1]
-    return (DOWNWEIGHTED if downweighted else 0) + (NONFINITE if x[X_S + S_NONFINITE] > nonfinite_before else 0)
+    return (DOWNWEIGHTED if downweighted else 0) + (NONFINITE if x[0].nonfinite_updates > nonfinite_before else 0)
 
 
 def update_in_place(x, residual, R, H, params):
     """`kalman_update` of one measurement (`residual` (m,), `R` (m, m), `H` (m, 12)) on the state
     buffer `x`, for the rows the filter builds in Python (the gravity of an accelerometer without
     gyro): the `NONFINITE` bit when its result was dropped."""
-    nonfinite_before = x[X_S + S_NONFINITE]
+    nonfinite_before = x[0].nonfinite_updates
     kalman_update(x, residual, R, H, params[0])
-    return NONFINITE if x[X_S + S_NONFINITE] > nonfinite_before else 0
+    return NONFINITE if x[0].nonfinite_updates > nonfinite_before else 0

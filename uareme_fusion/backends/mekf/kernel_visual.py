@@ -21,8 +21,6 @@ from .measurements import Measurement, correlated_noise_scale, vertical_model
 from .source_trust import (note_visual_information, share_tilt_covariance, squared_rate, update_visual_trust,
                            vertical_variance, visual_vertical_innovation)
 from .state import orthonormal
-from .state_buffer import (S_ACCEL_DUE, S_ACCEL_TIME, S_ACCEL_VAR_RATE, S_NONFINITE, S_REJECTIONS, S_REST_UPDATES,
-                           S_T_STATE, S_T_VISUAL, S_VISUAL_INFO_RATE, S_VISUAL_REJECTED, S_VISUAL_UPDATES)
 
 VISUAL_REJECTED = status_bits.VISUAL_REJECTED
 """`visual_update`: the frame's rotation failed the gate (a `Status` bit)."""
@@ -83,7 +81,7 @@ def visual_rows(R_wc, R_wm, R_cm, cov, relabel, r, R_vis, H):
 def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, estimate):
     """A frame's rotation `R_cm` (3, 3) with covariance `cov` (3, 3) rad^2, fused into the state
     buffer `x` in place: gated on its Mahalanobis distance (`p.visual_gate_chi2`; past it the other
-    rows alone, the frame counted in `s[S_REJECTIONS]` and `s[S_VISUAL_REJECTED]`), its covariance
+    rows alone, the frame counted in `s.rejections` and `s.visual_rejected`), its covariance
     scaled for correlated errors (`p.visual_correlation_s`), by the Huber weight (`p.visual_huber_k`)
     and by the independent share (`share_scale` given, visual only: `VisualNoiseShare`), stacked into
     one update with:
@@ -96,37 +94,38 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
     `DOWNWEIGHTED` | `NONFINITE` bits of what happened; the re-initialisation after many rejections is
     left to the caller."""
     p = params[0]
-    s, R_wc, R_wm, b_c, P, last_gyro, accel_sum = state_views(x)[:7]
+    s = x[0]
+    R_wc, R_wm, b_c, P, last_gyro, accel_sum = state_views(x)[:6]
     with_imu = p.uses_imu > 0
-    nonfinite_before = s[S_NONFINITE]
+    nonfinite_before = s.nonfinite_updates
     code = 0
     r, R_all, H = np.zeros(9), np.zeros((9, 9)), np.zeros((9, 12))
     visual_rows(R_wc, R_wm, R_cm, cov, with_imu, r, R_all, H)
     share, var_v = 1.0, math.inf
-    t_prev = s[S_T_VISUAL]
-    s[S_T_VISUAL] = s[S_T_STATE]
+    t_prev = s.t_visual_s
+    s.t_visual_s = s.t_state_s
     with_accel, downweighted = False, False
     if with_imu:
         # How far the camera is trusted (`source_trust.py`), from the frame before the accelerometer
         # rows consume the period's specific force.
         var_v = p.vertical_std_rad ** 2
         quiet = (p.accel_downweight_flag_ratio * p.accel_tilt_noise) ** 2
-        e, v = visual_vertical_innovation(R_wc, R_wm, r, R_all, accel_sum, s[S_ACCEL_TIME], s[S_ACCEL_VAR_RATE],
+        e, v = visual_vertical_innovation(R_wc, R_wm, r, R_all, accel_sum, s.accel_time_s, s.accel_var_rate,
                                           quiet, var_v)
         share, _ = update_visual_trust(s, e, v, p.visual_trust_frames, p.visual_trust_min_share,
                                        squared_rate(last_gyro, b_c))
         var_v = vertical_variance(s, var_v, p.visual_trust_frames)
-        note_visual_information(s, R_all, share, var_v, s[S_T_STATE] - t_prev if t_prev == t_prev else 0.0)
-        if s[S_ACCEL_DUE] > 0:  # left to the frame at the end of its batch (`p.defer`)
-            s[S_ACCEL_DUE] = 0
-            rest_before = s[S_REST_UPDATES]
+        note_visual_information(s, R_all, share, var_v, s.t_state_s - t_prev if t_prev == t_prev else 0.0)
+        if s.accel_due > 0:  # left to the frame at the end of its batch (`p.defer`)
+            s.accel_due = 0
+            rest_before = s.rest_updates
             gravity, downweighted = accel_rows(x, p, 0.0)  # stacked below
             with_accel = gravity.ok
-            if s[S_REST_UPDATES] > rest_before:  # the zero-rate update moved the state: the residual again
+            if s.rest_updates > rest_before:  # the zero-rate update moved the state: the residual again
                 r[:], R_all[:, :], H[:, :] = 0.0, 0.0, 0.0
                 visual_rows(R_wc, R_wm, R_cm, cov, with_imu, r, R_all, H)
     if t_prev == t_prev:  # not NaN: a previous visual update
-        R_all[0:3, 0:3] *= correlated_noise_scale(s[S_T_STATE] - t_prev, p.visual_correlation_s)
+        R_all[0:3, 0:3] *= correlated_noise_scale(s.t_state_s - t_prev, p.visual_correlation_s)
     PHt = matmul_into(P, H[0:3].T, np.empty((12, 3)))  # the gate and Huber weigh the frame's full error
     S = matmul_into(H[0:3], PHt, np.empty((3, 3)))
     S += R_all[0:3, 0:3]
@@ -137,15 +136,15 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
     k = extra_r.shape[0]
     if not -np.inf < d2 <= p.visual_gate_chi2:  # NaN and a singular innovation covariance too
         code |= VISUAL_REJECTED
-        s[S_VISUAL_REJECTED] += 1
-        s[S_REJECTIONS] += 1
-        s[S_VISUAL_INFO_RATE] = 0.0  # no share while the camera is gated out
+        s.visual_rejected += 1
+        s.rejections += 1
+        s.visual_info_rate = 0.0  # no share while the camera is gated out
         if with_accel:
             kalman_update(x, gravity.residual, gravity.covariance, gravity.jacobian, p)
         if k:
             kalman_update(x, extra_r, extra_R, extra_H, p)
     else:
-        s[S_REJECTIONS] = 0
+        s.rejections = 0
         if share_scale != 1.0:  # the independent share, as estimated over the previous frames (visual only)
             R_all[0:3, 0:3] *= share_scale
         d = math.sqrt(d2)
@@ -173,14 +172,14 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
             R_all[m:m + k, m:m + k] = extra_R
             m += k
         kalman_update(x, r[:m], R_all, H[:m], p)  # R_all's leading m x m block
-        s[S_VISUAL_UPDATES] += 1
+        s.visual_updates += 1
     for i in range(3):
         for j in range(3):
             estimate[0, i, j] = R_wc[i, j]
             estimate[1, i, j] = 0.5 * (P[i, j] + P[j, i])
             estimate[2, i, j] = R_wm[i, j]
         estimate[3, 0, i] = b_c[i]
-    return code | (DOWNWEIGHTED if downweighted else 0) | (NONFINITE if s[S_NONFINITE] > nonfinite_before else 0)
+    return code | (DOWNWEIGHTED if downweighted else 0) | (NONFINITE if s.nonfinite_updates > nonfinite_before else 0)
 
 
 def visual_distance(x, P, R_cm, cov, relabel):
@@ -188,7 +187,7 @@ def visual_distance(x, P, R_cm, cov, relabel):
     of its residual (`visual_model`, relabelled nearest the prediction with `relabel`) and its
     squared Mahalanobis distance under the error covariance `P` (12, 12) and its own (inf for a
     singular innovation covariance)."""
-    R_wc, R_wm = state_views(x)[1:3]
+    R_wc, R_wm = state_views(x)[:2]
     r, R_vis, H = visual_model(R_wc, R_wm, R_cm, cov, relabel)[1:]
     PHt = matmul_into(P, H.T, np.empty((12, 3)))
     S = matmul_into(H, PHt, np.empty((3, 3)))
@@ -206,8 +205,9 @@ def constant_rate_predict(x, t_s, q_rate):
     random walk `q_rate` ((rad/s^2)^2/Hz): `R_wc <- R_wc Exp(omega_c dt)` (re-orthonormalised), `P <-
     F P F^T + Q` with `F = I` but `F[TH, TH] = M^T`, `F[TH, RATE] = dt I`, and `Q` the integrated
     random walk (`dt^3/3`, `dt^2/2`, `dt` blocks)."""
-    s, R_wc, _, _, P, _, _, _, _, _, omega_c = state_views(x)
-    dt = t_s - s[S_T_STATE]
+    s = x[0]
+    R_wc, _, _, P, _, _, _, _, _, omega_c = state_views(x)
+    dt = t_s - s.t_state_s
     M = exp3_into(omega_c[0] * dt, omega_c[1] * dt, omega_c[2] * dt, np.empty((3, 3)))
     R_wc[:, :] = orthonormal(matmul3_into(R_wc, M, np.empty((3, 3))))
     F = np.eye(12)
@@ -222,6 +222,6 @@ def constant_rate_predict(x, t_s, q_rate):
         P_new[9 + i, i] += q_rate * dt**2 / 2.0
         P_new[9 + i, 9 + i] += q_rate * dt
     P[:, :] = P_new
-    s[S_T_STATE] = t_s
+    s.t_state_s = t_s
 
 

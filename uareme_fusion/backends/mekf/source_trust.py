@@ -30,8 +30,8 @@ Shares (reported per estimate): information per second on tilt of each source, t
 (v_vis the visual tilt variance of one frame, dt the time between visual updates);
 `share_visual = I_vis / (I_vis + I_acc)`.
 
-Plain-array functions on the filter's scalar block `s` (`state_buffer.py`): the compiled kernels call
-the very same ones.
+Functions on the filter's state record `s` (`state_buffer.py`: scalar fields by name): the compiled
+kernels call the very same ones.
 """
 
 from __future__ import annotations
@@ -40,10 +40,6 @@ import math
 
 import numpy as np
 
-from .state_buffer import (S_ACCEL_INFO_RATE, S_ACCEL_VAR_RATE, S_BLOCK_COUNT, S_BLOCK_MEAN, S_BLOCK_N,
-                           S_BLOCK_SQUARE, S_BLOCK_SUM, S_BLOCK_WEIGHT, S_TRUST_COUNT, S_TRUST_FRAMES,
-                           S_TRUST_MEAN, S_TRUST_PERSISTENT, S_TRUST_SQUARE, S_TRUST_VAR, S_TRUST_WEIGHT,
-                           S_VISUAL_INFO_RATE, S_VISUAL_SCALE)
 
 STILL_RATE_RAD_S = 0.15
 """Below this gyro rate (rad/s, about 9 deg/s: above an uncalibrated MEMS gyro's bias, EuRoC's 0.08)
@@ -116,60 +112,60 @@ def update_visual_trust(s, e, v, frames, min_share, rate_rad_s2):
     motion); a block is cut short by motion."""
     if not frames > 0:
         return 1.0, 0.0
-    s[S_TRUST_FRAMES] += 1.0
+    s.trust_frames += 1.0
     if not (abs(e[0]) + abs(e[1]) + abs(e[2]) < np.inf and 0.0 < v < np.inf):  # also: no sample
-        return s[S_VISUAL_SCALE], s[S_TRUST_PERSISTENT]
+        return s.visual_scale, s.trust_persistent
     if not rate_rad_s2 < STILL_RATE_RAD_S**2:  # in motion: the frame says nothing of the camera's trust
-        s[S_BLOCK_N] = 0.0
+        s.block_n = 0.0
         for i in range(3):
-            s[S_BLOCK_SUM + i] = 0.0
-        return 1.0, s[S_TRUST_PERSISTENT]
+            s.block_sum[i] = 0.0
+        return 1.0, s.trust_persistent
     a = min(1.0 / frames, 1.0)
-    w = (1.0 - a) * s[S_TRUST_WEIGHT] + a
-    s[S_TRUST_WEIGHT] = w
+    w = (1.0 - a) * s.trust_weight + a
+    s.trust_weight = w
     e2 = 0.0
     for i in range(3):
-        s[S_TRUST_MEAN + i] = (1.0 - a) * s[S_TRUST_MEAN + i] + a * e[i]
-        s[S_BLOCK_SUM + i] += e[i]
+        s.trust_mean[i] = (1.0 - a) * s.trust_mean[i] + a * e[i]
+        s.block_sum[i] += e[i]
         e2 += e[i] * e[i]
-    s[S_TRUST_SQUARE] = (1.0 - a) * s[S_TRUST_SQUARE] + a * e2
-    s[S_TRUST_VAR] = (1.0 - a) * s[S_TRUST_VAR] + a * v
-    s[S_TRUST_COUNT] += 1.0
-    s[S_BLOCK_N] += 1.0
-    if s[S_BLOCK_N] >= BLOCK_FRAMES:  # a block of still frames closed: its mean into the block moments
+    s.trust_square = (1.0 - a) * s.trust_square + a * e2
+    s.trust_var = (1.0 - a) * s.trust_var + a * v
+    s.trust_count += 1.0
+    s.block_n += 1.0
+    if s.block_n >= BLOCK_FRAMES:  # a block of still frames closed: its mean into the block moments
         a_b = min(1.0 / frames, 1.0)
-        w_b = (1.0 - a_b) * s[S_BLOCK_WEIGHT] + a_b
-        s[S_BLOCK_WEIGHT] = w_b
+        w_b = (1.0 - a_b) * s.block_weight + a_b
+        s.block_weight = w_b
         b2 = 0.0
         for i in range(3):
-            b = s[S_BLOCK_SUM + i] / BLOCK_FRAMES
-            s[S_BLOCK_MEAN + i] = (1.0 - a_b) * s[S_BLOCK_MEAN + i] + a_b * b
+            b = s.block_sum[i] / BLOCK_FRAMES
+            s.block_mean[i] = (1.0 - a_b) * s.block_mean[i] + a_b * b
             b2 += b * b
-            s[S_BLOCK_SUM + i] = 0.0
-        s[S_BLOCK_SQUARE] = (1.0 - a_b) * s[S_BLOCK_SQUARE] + a_b * b2
-        s[S_BLOCK_N] = 0.0
-        s[S_BLOCK_COUNT] += 1.0
-    m0, m1, m2 = s[S_TRUST_MEAN] / w, s[S_TRUST_MEAN + 1] / w, s[S_TRUST_MEAN + 2] / w
+            s.block_sum[i] = 0.0
+        s.block_square = (1.0 - a_b) * s.block_square + a_b * b2
+        s.block_n = 0.0
+        s.block_count += 1.0
+    m0, m1, m2 = s.trust_mean[0] / w, s.trust_mean[1] / w, s.trust_mean[2] / w
     mean2 = m0 * m0 + m1 * m1 + m2 * m2
-    v_mean = s[S_TRUST_VAR] / w
-    n_eff = min(s[S_TRUST_COUNT], (2.0 - a) / a)
+    v_mean = s.trust_var / w
+    n_eff = min(s.trust_count, (2.0 - a) / a)
     # The varying error's variance per tilt axis and frame, as fused frames average it: from the blocks
     # once there are enough of them (the camera fully trusted until then), else from the frames.
     share = 1.0
     varying = 0.0
-    if s[S_BLOCK_COUNT] >= MIN_SAMPLES:
-        w_b = s[S_BLOCK_WEIGHT]
+    if s.block_count >= MIN_SAMPLES:
+        w_b = s.block_weight
         a_b = min(1.0 / frames, 1.0)
-        n_b = min(s[S_BLOCK_COUNT], (2.0 - a_b) / a_b)
-        c0, c1, c2 = s[S_BLOCK_MEAN] / w_b, s[S_BLOCK_MEAN + 1] / w_b, s[S_BLOCK_MEAN + 2] / w_b
-        spread_b = max(s[S_BLOCK_SQUARE] / w_b - (c0 * c0 + c1 * c1 + c2 * c2), 0.0) * n_b / (n_b - 1.0)
+        n_b = min(s.block_count, (2.0 - a_b) / a_b)
+        c0, c1, c2 = s.block_mean[0] / w_b, s.block_mean[1] / w_b, s.block_mean[2] / w_b
+        spread_b = max(s.block_square / w_b - (c0 * c0 + c1 * c1 + c2 * c2), 0.0) * n_b / (n_b - 1.0)
         varying = 0.5 * BLOCK_FRAMES * spread_b
         share = min(max(varying / v_mean, min_share), 1.0)
-    elif s[S_TRUST_COUNT] >= MIN_SAMPLES:
-        varying = 0.5 * max(s[S_TRUST_SQUARE] / w - mean2, 0.0) * n_eff / (n_eff - 1.0)
+    elif s.trust_count >= MIN_SAMPLES:
+        varying = 0.5 * max(s.trust_square / w - mean2, 0.0) * n_eff / (n_eff - 1.0)
     persistent = max(0.5 * mean2 - min(varying, v_mean) / n_eff, 0.0)
-    s[S_VISUAL_SCALE] = share
-    s[S_TRUST_PERSISTENT] = persistent
+    s.visual_scale = share
+    s.trust_persistent = persistent
     return share, persistent
 
 
@@ -205,20 +201,20 @@ def note_visual_information(s, R_vis, share, vertical_var, dt_s):
     `dt_s` s, its tilt variance from `R_vis` (3, 3) times `share` in series with the vertical
     pseudo-measurement's `vertical_var` (rad^2; the camera's up reaches the world only through it)."""
     v = 0.5 * (R_vis[0, 0] + R_vis[1, 1]) * share + vertical_var
-    s[S_VISUAL_INFO_RATE] = 1.0 / (v * dt_s) if 0 < v < np.inf and dt_s > 0 else 0.0
+    s.visual_info_rate = 1.0 / (v * dt_s) if 0 < v < np.inf and dt_s > 0 else 0.0
 
 
 def note_accel_information(s, var_rad2, T_s):
     """Keep the accelerometer's tilt information per second (one update of variance `var_rad2` per `T_s`
     s), and its variance rate `var_rad2 * T_s`."""
-    s[S_ACCEL_VAR_RATE] = var_rad2 * T_s
-    s[S_ACCEL_INFO_RATE] = 1.0 / (var_rad2 * T_s) if var_rad2 > 0 and T_s > 0 else 0.0
+    s.accel_var_rate = var_rad2 * T_s
+    s.accel_info_rate = 1.0 / (var_rad2 * T_s) if var_rad2 > 0 and T_s > 0 else 0.0
 
 
-def tilt_shares(s):
-    """`(share_accel, share_visual)` of the tilt information per second (module docstring); NaN for a
+def tilt_shares(i_a, i_v):
+    """`(share_accel, share_visual)` of the tilt information per second `i_a` of the accelerometer and
+    `i_v` of the camera (`s.accel_info_rate`, `s.visual_info_rate`; module docstring); NaN for a
     source not seen yet."""
-    i_a, i_v = s[S_ACCEL_INFO_RATE], s[S_VISUAL_INFO_RATE]
     total = i_a + i_v
     if not total > 0 or not math.isfinite(total):
         return math.nan, math.nan
@@ -234,9 +230,9 @@ def vertical_variance(s, vertical_var, frames):
     off (`frames` 0), `vertical_var`."""
     if not frames > 0:
         return vertical_var
-    if s[S_TRUST_FRAMES] < MIN_SAMPLES and s[S_TRUST_COUNT] < MIN_SAMPLES:
+    if s.trust_frames < MIN_SAMPLES and s.trust_count < MIN_SAMPLES:
         return math.inf
-    return vertical_var + max(s[S_TRUST_PERSISTENT] - PERSISTENT_MARGIN * vertical_var, 0.0) * frames
+    return vertical_var + max(s.trust_persistent - PERSISTENT_MARGIN * vertical_var, 0.0) * frames
 
 
 def squared_rate(gyro_c, b_c):
