@@ -9,11 +9,10 @@ Relations used throughout: `R_wc = R_wm @ R_cm^T` and so `R_cm = R_wc^T @ R_wm`.
 
 from __future__ import annotations
 
+import dataclasses
 from abc import ABC, abstractmethod
 
 import numpy as np
-
-import dataclasses
 
 from ..types import Estimate, Estimates, Status, VisualRotation, steady_within, visual_R_wc_steady
 
