@@ -27,7 +27,7 @@ from scipy.spatial.transform import Rotation
 
 from ...types import VisualRotation
 from ..visual_error_persistence import VisualErrorPersistence
-from .compiled import constant_rate_predict, image_rotation_predict
+from .compiled import image_rotation_predict
 from .config import MekfMode
 from .motion import ConstantRateMotion
 
@@ -60,9 +60,9 @@ class ImageRotationMotion(ConstantRateMotion):
         if not filt.initialised:
             return
         if visual is None:
-            if self.persistence is not None and t_s > filt.t_state:
-                self.persistence.update(t_s, None)  # a frame without a rotation: the chain breaks
             if t_s > filt.t_state:
+                if self.persistence is not None:
+                    self.persistence.update(t_s, None)  # a frame without a rotation: the chain breaks
                 if self._before_gap is None:
                     self._before_gap = (filt.t_state, filt.R_wc.copy(), filt.R_wm.copy(), filt.P.copy(),
                                         filt.omega_c.copy())
@@ -80,10 +80,6 @@ class ImageRotationMotion(ConstantRateMotion):
         self.measures_motion = t_s > filt.t_state
         if self.measures_motion:
             self.predict_by_image(filt, t_s, visual.R_cp, float(visual.R_cp_std_rad) ** 2)
-
-    def predict_by_rate(self, filt, t_s: float) -> None:
-        """The constant-rate prediction to `t_s` (s) (`kernel_visual.constant_rate_predict`)."""
-        constant_rate_predict(filt, t_s, filt.config.rate_rw_rad_s2_sqrt_hz**2)
 
     def predict_by_image(self, filt, t_s: float, R_cp: np.ndarray, var_rad2: float) -> None:
         """The prediction to `t_s` (s) by the image rotation `R_cp` of variance `var_rad2` (rad^2 per axis)

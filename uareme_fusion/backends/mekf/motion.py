@@ -48,7 +48,12 @@ class ConstantRateMotion:
         """`R_wc <- R_wc Exp(omega_c dt)` and the covariance prediction, to `t_s` (s) (`visual`, the
         frame's: not used)."""
         if filt.initialised and t_s > filt.t_state:
-            constant_rate_predict(filt, t_s, filt.config.rate_rw_rad_s2_sqrt_hz**2)
+            self.predict_by_rate(filt, t_s)
+
+    def predict_by_rate(self, filt, t_s: float) -> None:
+        """The constant-rate prediction to `t_s` (s), later than the state's time
+        (`kernel_visual.constant_rate_predict`)."""
+        constant_rate_predict(filt, t_s, filt.config.rate_rw_rad_s2_sqrt_hz**2)
 
     def visual_noise_scale(self, filt) -> float:
         """The factor on a frame's visual covariance as fused: its independent share (`VisualNoiseShare`;
