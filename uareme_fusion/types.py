@@ -236,6 +236,18 @@ def visual_R_wc_steady(visual: VisualRotation) -> np.ndarray | None:
     return 0.5 * (cov + cov.T)
 
 
+def stacked_steady(n: int, steady_at: dict[int, np.ndarray]) -> np.ndarray | None:
+    """The steady parts (`Estimate.cov_steady`, rad^2) of `n` estimates as one (n, 3, 3) array, from
+    `{index: cov_steady}` of those that have one, NaN elsewhere (as `scoring.metrics.attitude_errors` takes
+    them); None when none has one."""
+    if not steady_at:
+        return None
+    out = np.full((n, 3, 3), np.nan)
+    for k, cov in steady_at.items():
+        out[k] = cov
+    return out
+
+
 def steady_within(cov: np.ndarray, steady: np.ndarray | None) -> np.ndarray | None:
     """`steady` (rad^2) shrunk, direction by direction, until `cov - steady` is positive semi-definite: the
     steady part an estimate of covariance `cov` can carry (a filter's covariance may be smaller than a

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..io.safe_files import save_figure_atomic, write_text_atomic
 from ..backends.base import Backend, SteadyPart
-from ..types import Status
+from ..types import Status, stacked_steady
 from ..backends.factory import BACKEND_NAMES, knows_gravity, make_backend
 from ..scoring.metrics import JUMP_DEG, attitude_errors, jump_counts
 from .sequence import VisualSequence
@@ -80,17 +80,12 @@ def errors_over_time(run: BackendRun, R_wc_true: np.ndarray, yaw_only_nees: bool
     """Per-frame ARE, tilt (deg) and NEES of an initialised run (`metrics.attitude_errors`); NaN where
     not initialised. `initialised` marks the scored frames."""
     ok = np.array([not (e.status & Status.NOT_INITIALISED) for e in run.estimates])
+    steady = stacked_steady(len(run.estimates), {k: e.cov_steady for k, e in enumerate(run.estimates)
+                                                 if e.cov_steady is not None})
     err = attitude_errors(np.array([e.R_wc for e in run.estimates]), np.array([e.cov for e in run.estimates]),
-                          ok, R_wc_true, yaw_only_nees, steady_covariances(run.estimates))
+                          ok, R_wc_true, yaw_only_nees, steady)
     err["initialised"] = err.pop("valid")
     return err
-
-
-def steady_covariances(estimates: list) -> np.ndarray | None:
-    """`Estimate.cov_steady` of each estimate (M, 3, 3), NaN where one has none; None when none has."""
-    if all(e.cov_steady is None for e in estimates):
-        return None
-    return np.array([np.full((3, 3), np.nan) if e.cov_steady is None else e.cov_steady for e in estimates])
 
 
 def summarise(run: BackendRun, R_wc_true: np.ndarray | None, yaw_only_nees: bool = False) -> dict:

@@ -21,7 +21,7 @@ import numpy as np
 from ..formats.tum import TUM_ROW
 from ..io.safe_files import RowFile
 from ..rotations import quat_xyzw
-from ..types import Estimates, FrameResult, Status
+from ..types import Estimates, FrameResult, Status, stacked_steady
 
 ESTIMATE_COLUMNS = (
     ["t_s", "qx", "qy", "qz", "qw"]
@@ -95,7 +95,7 @@ def steady_cells(cov_steady) -> str:
     return ",".join(f"{x:.6e}" for x in np.asarray(cov_steady, float).ravel().tolist())
 
 
-_IMU_ONLY_SHARES = "," + "," * 9
+_IMU_ONLY_SHARES = share_cells(None) + "," + steady_cells(None)
 """The share and steady cells of estimates from an IMU-only stream in bulk: empty (no camera)."""
 
 
@@ -175,12 +175,7 @@ class EstimateLog:
 
     def steady(self) -> np.ndarray | None:
         """`Estimate.cov_steady` of every estimate (N, 3, 3), NaN where one has none; None when none has."""
-        if not self._steady:
-            return None
-        out = np.full((len(self._t), 3, 3), np.nan)
-        for k, cov in self._steady.items():
-            out[k] = cov
-        return out
+        return stacked_steady(len(self._t), self._steady)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         n = len(self._t)
