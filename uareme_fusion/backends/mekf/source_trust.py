@@ -180,13 +180,11 @@ def share_tilt_covariance(R_vis, share, R_wm):
     if share == 1.0:
         return
     g = math.sqrt(share)
-    u0, u1, u2 = R_wm[2, 0], R_wm[2, 1], R_wm[2, 2]
+    u = R_wm[2]
     S = np.empty((3, 3))
     for i in range(3):
-        ui = u0 if i == 0 else u1 if i == 1 else u2
         for j in range(3):
-            uj = u0 if j == 0 else u1 if j == 1 else u2
-            S[i, j] = (1.0 - g) * ui * uj + (g if i == j else 0.0)
+            S[i, j] = (1.0 - g) * u[i] * u[j] + (g if i == j else 0.0)
     T = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
