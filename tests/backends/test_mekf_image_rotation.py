@@ -180,23 +180,22 @@ def test_the_kernels_match_the_oracle_on_an_image_rotation_stream(correlation_s)
     assert [int(e.status) for e in a] == [int(e.status) for e in b]
 
 
-def test_a_source_without_intrinsics_runs_the_constant_rate_model():
-    """Its K is estimated from the scene, and the image rotation measured at it is scaled by the focal
-    error (`stages.backend_for_run`); a run config may still ask for it."""
+def test_a_source_without_intrinsics_is_propagated_by_its_image_rotation_too():
+    """Its K is estimated from the scene and the image rotation's std widened for it at the source
+    (`FrameMotionConfig.scene_K_std_scale`), so the run's EKF is the same as with a K given; a run config
+    may still ask for the constant-rate model."""
     from uareme_fusion.drivers.base import SourceInfo
     from uareme_fusion.pipeline import RunConfig
     from uareme_fusion.pipeline.stages import backend_for_run
 
     K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
-    with_K, without_K = SourceInfo(name="a", K=K, has_frames=True), SourceInfo(name="b", K=None, has_frames=True)
-    backend = backend_for_run(RunConfig(backend="mekf"), without_K)
-    backend.resolve_mode(backend.mode.VISUAL_ONLY)
-    assert isinstance(backend.motion, ConstantRateMotion) and not isinstance(backend.motion, ImageRotationMotion)
-    backend = backend_for_run(RunConfig(backend="mekf"), with_K)
-    backend.resolve_mode(backend.mode.VISUAL_ONLY)
-    assert isinstance(backend.motion, ImageRotationMotion)
-    asked = backend_for_run(RunConfig(backend="mekf", mekf={"visual_only_image_rotation": True}), without_K)
-    assert asked.config.visual_only_image_rotation
+    for info in (SourceInfo(name="a", K=K, has_frames=True), SourceInfo(name="b", K=None, has_frames=True)):
+        backend = backend_for_run(RunConfig(backend="mekf"), info)
+        backend.resolve_mode(backend.mode.VISUAL_ONLY)
+        assert isinstance(backend.motion, ImageRotationMotion)
+        asked = backend_for_run(RunConfig(backend="mekf", mekf={"visual_only_image_rotation": False}), info)
+        asked.resolve_mode(asked.mode.VISUAL_ONLY)
+        assert not isinstance(asked.motion, ImageRotationMotion)
 
 
 @pytest.mark.slow

@@ -48,3 +48,22 @@ def test_icsl_more_lines_only_filters_are_no_worse_than_single(shared_data):
     if not found:
         pytest.skip(skipped[0])
     assert_no_worse_than_single(backend_are(found[0], "learned", "lines"))
+
+
+@pytest.mark.slow
+def test_icsl_more_filters_with_a_scene_K_are_no_worse_than_single(shared_data):
+    """ICSL corridor_more, all 140 frames, learned normals + lines and learned normals: its K estimated
+    from the scene and the image rotations' std widened for it (`FrameMotionConfig.scene_K_std_scale`),
+    the mekf propagated by them is no worse than `single` beyond the paired 95 % interval. Before (the
+    constant-rate model, the std unscaled): mekf on normals 2.93 deg against single's 2.89 (paired +0.04,
+    +0.00 .. +0.07). The smoother on normals + lines is not there yet: +0.03 (+0.02 .. +0.06), from +0.12
+    (+0.06 .. +0.20) before; held to that."""
+    found, skipped = realdata.sequences(shared_data, None, ("icsl_more",))
+    if not found:
+        pytest.skip(skipped[0])
+    for cues in ("normals,lines", "normals"):
+        visual, info, _ = realdata.cue_set_sequence(found[0], "learned", cues, None, lambda *a: None)
+        are = {name: err["are_deg"] for name, err in realdata.backend_errors(visual, info).items()}
+        mekf, smoother = (paired_difference(are[name], are["single"]) for name in ("mekf", "smoother"))
+        assert mekf["low"] <= 0.0 and mekf["mean"] < 0.02, (cues, mekf)
+        assert smoother["mean"] < 0.05, (cues, smoother)  # normals + lines: +0.03 (before +0.12)

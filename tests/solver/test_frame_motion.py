@@ -73,3 +73,48 @@ def test_cue_solver_hands_the_image_rotation_to_the_stream(room):
     R_cm_moved = out[1].R_cp @ out[0].R_cm  # R_cm = R_cp R_pm: the image rotation and the solves agree
     assert np.degrees(angle_between(out[1].symmetric_to(R_cm_moved).R_cm, R_cm_moved)) < 1.0
     assert plain.solve(Frame(0.0, rgb=image, K=K, index=0), maps[0]).R_cp is None
+
+
+def test_a_K_from_the_scene_widens_the_std_by_its_factor_not_the_rotation(room):
+    """The std model: `std_base + std_per_step |step| + std_per_residual rms`, times `scene_K_std_scale`
+    when the K was estimated from the scene; the rotation itself is the same."""
+    image, K = room
+    R_cp = Rotation.from_euler("xyz", (2.0, -1.0, 0.5), degrees=True).as_matrix()
+    views = (image, _turned(image, K, R_cp))
+    steps = {}
+    for from_scene in (False, True):
+        motion = FrameMotion()
+        motion.step(0.0, views[0], K, K_from_scene=from_scene)
+        steps[from_scene] = motion.step(1 / 30, views[1], K, K_from_scene=from_scene)
+    given, scene = steps[False], steps[True]
+    cfg = FrameMotionConfig()
+    assert cfg.scene_K_std_scale == 3.0
+    np.testing.assert_allclose(scene.R_cp, given.R_cp, atol=1e-12)
+    assert scene.std_rad == pytest.approx(cfg.scene_K_std_scale * given.std_rad, rel=1e-12)
+    step_rad = Rotation.from_matrix(given.R_cp).magnitude()
+    assert given.std_rad >= cfg.std_base_rad + cfg.std_per_step * step_rad  # plus the residual's share
+    assert given.std_rad < cfg.std_base_rad + cfg.std_per_step * step_rad + np.radians(0.3)
+    scaled = FrameMotion(FrameMotionConfig(scene_K_std_scale=1.5))
+    scaled.step(0.0, views[0], K, K_from_scene=True)
+    assert scaled.step(1 / 30, views[1], K, K_from_scene=True).std_rad == pytest.approx(1.5 * given.std_rad, rel=1e-12)
+
+
+def test_cue_solver_widens_the_image_rotation_of_a_K_it_estimated(room):
+    """A frame without K (the stream's K estimated from the scene) hands a std `scene_K_std_scale` times
+    that of the same frames with that K given."""
+    from uareme_fusion.solver.focal import FocalEstimate
+
+    image, K = room
+    R_cp = Rotation.from_euler("y", 3.0, degrees=True).as_matrix()
+    R_pm = Rotation.from_euler("xyz", [10.0, 25.0, -5.0], degrees=True).as_matrix()
+    normals = manhattan_normal_map(R_pm, np.random.default_rng(1), noise_deg=3.0)
+    stds = {}
+    for given in (True, False):
+        cues = CueSolver(lines=False)
+        cues.focal = FocalEstimate(K, "estimated", width=W)  # as the stream's K pooled from the scene
+        solved = CueSolver(lines=False, motion=False).solve(Frame(0.0, rgb=image, K=K, index=0), normals)
+        for k, rgb in enumerate((image, _turned(image, K, R_cp))):
+            out = cues._with_motion(Frame(k / 30, rgb=rgb, K=K if given else None, index=k), solved)
+        stds[given] = out.R_cp_std_rad
+    assert np.isfinite(stds[True])
+    assert stds[False] == pytest.approx(FrameMotionConfig().scene_K_std_scale * stds[True], rel=1e-9)

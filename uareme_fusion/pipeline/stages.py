@@ -195,19 +195,15 @@ def backend_for_run(cfg: RunConfig, info: SourceInfo) -> Backend:
 
     A source without intrinsics has its K estimated from the scene (focal length a few per cent off: real
     ICSL corridor_more 578.5 px against 537.6), and the image rotation between frames, measured at that K,
-    is scaled by the error (7 % of a 90 deg corner): the visual-only EKF is then not propagated by it
-    (`MekfConfig.visual_only_image_rotation` False unless `cfg` sets it). Real ICSL corridor_more, RGB
-    normals+lines, with it: ARE 1.51 deg against `single`'s 1.45 (paired 95 % low +0.01); without, 1.45.
-    The paper smoother then gives the image rotations' rate bias room to follow that scaling
-    (`smoother.SCENE_K_IMAGE_ROTATION_BIAS`, for the keys `cfg` does not set)."""
+    is scaled by the error (7 % of a 90 deg corner): its std is widened for it
+    (`FrameMotionConfig.scene_K_std_scale`), and the paper smoother gives the image rotations' rate bias
+    room to follow that scaling (`smoother.SCENE_K_IMAGE_ROTATION_BIAS`, for the keys `cfg` does not set)."""
     from ..backends.factory import backend_kind, make_backend
     from ..backends.smoother import SCENE_K_IMAGE_ROTATION_BIAS
 
     imu_geometry = {"R_ci": np.asarray(info.R_ci, float).tolist(), "imu_time_offset_s": info.imu_time_offset_s}
     kind = backend_kind(cfg.backend, info.has_imu)
     overrides = cfg.mekf if kind.name == "mekf" else cfg.smoother
-    if kind.name == "mekf" and info.K is None and "visual_only_image_rotation" not in overrides:
-        overrides = {**overrides, "visual_only_image_rotation": False}
     if kind.name == "smoother" and info.K is None:
         overrides = {**SCENE_K_IMAGE_ROTATION_BIAS, **overrides}
     preset = mekf_preset_for(cfg.mekf_preset, info)[0] if kind.name == "mekf" else None

@@ -131,11 +131,12 @@ class CueSolver:
         return self._with_motion(frame, visual) if image_motion else visual
 
     def _with_motion(self, frame: Frame, visual: VisualRotation) -> VisualRotation:
-        """`visual` with the image rotation since the previous frame (`FrameMotion`, at the K in use)."""
+        """`visual` with the image rotation since the previous frame (`FrameMotion`, at the K in use; its std
+        widened when that K is the scene's, `FrameMotionConfig.scene_K_std_scale`)."""
         if self.motion is None:
             return visual
         K = frame.K if frame.K is not None else (self.focal.K if self.focal is not None else None)
-        step = self.motion.step(frame.t_s, frame.rgb, K)
+        step = self.motion.step(frame.t_s, frame.rgb, K, K_from_scene=frame.K is None)
         return visual if step is None else dataclasses.replace(visual, R_cp=step.R_cp, R_cp_std_rad=step.std_rad)
 
     def _other_size(self, frame: Frame) -> bool:
