@@ -150,6 +150,16 @@ class MekfConfig(GyroNoiseConfig):
     13.89 -> 9.98 (single 18.77); depth train 4.94 -> 4.18 (7.99), eval 3.78 -> 4.10 (3.71; paired
     +0.39, 95 % -0.18 .. +0.87); ICL kt3 learned normals 3.60 -> 0.91 (4.38), NEES 1.80 -> 1.80; the
     other kt3 rows unchanged (learned time 0). Off by default for the TUM depth eval row."""
+    image_rotation_visual_bias_std_rad: float = Field(0.05, ge=0.0, le=1.0)
+    """Visual only, a frame predicted by its image rotation: the frames' persistent error as a state, a
+    Gauss-Markov rotation of this steady std per axis (rad) in the Manhattan frame's error block, which the
+    visual residual sees (`image_rotation_motion.visual_bias_predict`); each frame is then fused with its
+    whole covariance (0: off, the Manhattan frame fixed and the independent share or the correlation times
+    below). Networks' normals err more and longer (`pipeline.stages.LEARNED_NORMALS_VISUAL_BIAS`). Real TUM
+    fr1 rpy, depth normals+lines, no IMU, train: ARE 4.94 -> 4.06 deg (NEES 2.73 -> 2.76), eval 3.78 -> 3.39
+    (single 3.71; NEES 1.42 -> 1.53)."""
+    image_rotation_visual_bias_correlation_s: float = Field(3.0, gt=0.0, le=600.0)
+    """The visual bias's correlation time, s (`image_rotation_visual_bias_std_rad`)."""
     image_rotation_error_persistence_frames: float = Field(100.0, gt=0.0, le=1e6)
     """Frames over which the learned correlation time's lagged differences are averaged (exponentially)."""
     image_rotation_error_persistence_max_s: float = Field(2.0, gt=0.0, le=600.0)

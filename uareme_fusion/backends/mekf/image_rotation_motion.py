@@ -30,6 +30,7 @@ from ..visual_error_persistence import VisualErrorPersistence
 from .compiled import image_rotation_predict
 from .config import MekfMode
 from .motion import ConstantRateMotion
+from .state import MF, TH
 
 
 _NO_COV = np.zeros((3, 3))
@@ -84,7 +85,16 @@ class ImageRotationMotion(ConstantRateMotion):
     def predict_by_image(self, filt, t_s: float, R_cp: np.ndarray, var_rad2: float) -> None:
         """The prediction to `t_s` (s) by the image rotation `R_cp` of variance `var_rad2` (rad^2 per axis)
         (`kernel_image_rotation.image_rotation_predict`)."""
+        dt = t_s - filt.t_state
         image_rotation_predict(filt, t_s, R_cp, var_rad2, filt.config.rate_rw_rad_s2_sqrt_hz**2)
+        if self.has_bias(filt):
+            visual_bias_predict(filt, dt, filt.config.image_rotation_visual_bias_std_rad,
+                                filt.config.image_rotation_visual_bias_correlation_s)
+
+    @staticmethod
+    def has_bias(filt) -> bool:
+        """Whether the frames' persistent error is a state (`image_rotation_visual_bias_std_rad`)."""
+        return filt.config.image_rotation_visual_bias_std_rad > 0
 
     def visual_noise_scale(self, filt) -> float:
         """Predicted by its image rotation, a frame's visual error has an independent share `lam`
@@ -95,6 +105,8 @@ class ImageRotationMotion(ConstantRateMotion):
         Gauss-Markov of that time: `C (1 + rho) / (1 - rho)`, `rho = exp(-dt / tau)`, the variance of a
         mean of such looks per look. Predicted by the rate: `ConstantRateMotion`'s."""
         share = super().visual_noise_scale(filt)
+        if self.has_bias(filt):
+            return 1.0
         tau_s = self.correlation_s(filt)
         t_prev = filt.t_visual_s
         if not self.measures_motion or tau_s <= 0 or t_prev is None or not filt.t_state > t_prev:
@@ -108,7 +120,7 @@ class ImageRotationMotion(ConstantRateMotion):
         """Predicted by its image rotation with a correlation time, the filter averages the persistent error
         over it (`visual_noise_scale`), and its own covariance says how well: nothing is added. Else
         `ConstantRateMotion`'s (the frame's persistent share, which the filter carries)."""
-        if self.measures_motion and self.correlation_s(filt) > 0:
+        if self.has_bias(filt) or (self.measures_motion and self.correlation_s(filt) > 0):
             return _NO_COV
         return super().persistent_cov(filt)
 
@@ -139,6 +151,26 @@ class ImageRotationMotion(ConstantRateMotion):
 
     def _restart(self, filt, visual: VisualRotation) -> None:
         super()._restart(filt, visual)
+        if self.has_bias(filt):  # the frame's bias is the Manhattan block's error and part of the attitude's
+            var, R_cw = filt.config.image_rotation_visual_bias_std_rad**2, filt.R_wc.T
+            filt.P[MF, MF] = var * np.eye(3)
+            filt.P[TH, MF] = var * R_cw
+            filt.P[MF, TH] = var * R_cw.T
+            filt.P[TH, TH] += var * np.eye(3)  # R_cw (var I) R_cw^T
         self._before_gap = None
         if self.persistence is not None:
             self.persistence.update(filt.t_state, None)  # a new labelling: the chain restarts
+
+
+def visual_bias_predict(filt, dt_s: float, std_rad: float, correlation_s: float) -> None:
+    """The visual bias (the Manhattan frame's error block, visual only) predicted over `dt_s` (s) as a
+    Gauss-Markov rotation of steady std `std_rad` (rad per axis) and correlation time `correlation_s` (s):
+    `R_wm <- Exp(rho Log R_wm)`, `P[MF, :] *= rho`, `P[:, MF] *= rho`, `P[MF, MF] += std^2 (1 - rho^2) I`,
+    `rho = exp(-dt / tau)`."""
+    rho = float(np.exp(-dt_s / correlation_s))
+    filt.R_wm = Rotation.from_rotvec(rho * Rotation.from_matrix(filt.R_wm).as_rotvec()).as_matrix()
+    P = filt.P.copy()
+    P[MF, :] *= rho
+    P[:, MF] *= rho
+    P[MF, MF] += std_rad**2 * (1.0 - rho**2) * np.eye(3)
+    filt.P = P
