@@ -44,15 +44,17 @@ def build(data: Path, cache: Path, wanted) -> None:
 
 
 def backend_errors(visual, info, mekf: dict, smoother: dict, normals: str = "auto") -> dict:
-    """`realdata.backend_errors` with `RunConfig.mekf` / `.smoother` overrides."""
+    """`realdata.backend_errors` with `RunConfig.mekf` / `.smoother` overrides (and `--normals normals`)."""
     from uareme_fusion.benchmarks.realdata import BACKENDS
     from uareme_fusion.evaluation.compare import errors_over_time, run_backend
     from uareme_fusion.pipeline import RunConfig
     from uareme_fusion.pipeline.stages import backend_for_run
 
     camera_axes = dataclasses.replace(info, R_ci=np.eye(3), imu_time_offset_s=0.0, has_imu=False)
-    return {name: errors_over_time(run_backend(backend_for_run(RunConfig(backend=name, mekf=mekf, smoother=smoother, normals=normals),
-                                                            camera_axes), visual), visual.R_wc_true)
+    def config(name):
+        return RunConfig(backend=name, mekf=mekf, smoother=smoother, normals=normals)
+
+    return {name: errors_over_time(run_backend(backend_for_run(config(name), camera_axes), visual), visual.R_wc_true)
             for name in BACKENDS}
 
 

@@ -81,15 +81,59 @@ def test_the_bias_state_converges_without_noise():
     assert filt.counters["visual_ignored"] == filt.counters["reinitialised"] == 0
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
-def test_a_persistent_visual_error_is_followed_better_with_the_bias_state_and_consistently(seed):
+def test_a_persistent_visual_error_is_followed_better_with_the_bias_state_and_consistently():
     """Frames 3 deg off by a 1 s Gauss-Markov error plus 0.5 deg white noise (stated), image rotations
     0.3 deg: with the bias state the filter follows the truth better than taking the frames as stated
-    (independent), and its NEES is near 3 (seeded)."""
+    (independent), and its NEES over six seeded runs is near 3 (one 12 s run holds few independent
+    looks at a 1 s error: 1.6 to 7 alone)."""
     t, R_wc = handheld_truth(12.0)
-    frames = biased_stream(t, R_wc, np.radians(3.0), 1.0, np.radians(0.5), np.radians(0.3), seed)
-    biased, plain = run(with_bias(np.radians(3.0), 1.0), t, frames), run(with_bias(0.0, 1.0), t, frames)
-    are_biased, are_plain = are_deg(biased, R_wc), are_deg(plain, R_wc)
-    assert are_biased.mean() < 0.8 * are_plain.mean(), (are_biased.mean(), are_plain.mean())
-    n = nees(np.array([e.R_wc for e in biased]), R_wc, np.array([e.cov for e in biased]))[30:]
-    assert 1.0 < n.mean() < 6.0, n.mean()
+    nees_means = []
+    for seed in range(6):
+        frames = biased_stream(t, R_wc, np.radians(3.0), 1.0, np.radians(0.5), np.radians(0.3), seed)
+        biased, plain = run(with_bias(np.radians(3.0), 1.0), t, frames), run(with_bias(0.0, 1.0), t, frames)
+        are_biased, are_plain = are_deg(biased, R_wc), are_deg(plain, R_wc)
+        assert are_biased.mean() < 0.8 * are_plain.mean(), (seed, are_biased.mean(), are_plain.mean())
+        nees_means.append(nees(np.array([e.R_wc for e in biased]), R_wc, np.array([e.cov for e in biased]))[30:].mean())
+    assert 2.0 < np.mean(nees_means) < 5.0, nees_means
+
+
+@pytest.mark.slow
+def test_tum_training_frames_rgb_follow_better_with_the_visual_bias_state(tmp_path):
+    """Real TUM fr1 rpy training frames (handheld, learned normals and lines, RGB only, no IMU), the first
+    150, the EKF made as `run` makes it (`stages.LEARNED_NORMALS_VISUAL_BIAS`): ARE 6.30 deg without the
+    bias state, 4.94 with it (single 10.45), the paired difference below 0."""
+    from uareme_fusion.backends.single import SingleFrame
+    from uareme_fusion.benchmarks import realdata
+    from uareme_fusion.evaluation.paired_difference import paired_difference
+    from uareme_fusion.formats.fetched import tum_rpy_root, tum_rpy_split
+    from uareme_fusion.pipeline import RunConfig
+    from uareme_fusion.pipeline.stages import backend_for_run
+
+    root = tum_rpy_root()
+    if root is None:
+        pytest.skip("the fetched TUM freiburg1_rpy folder is not there (formats.fetched.tum_rpy_root)")
+    seq = realdata.RealSequence("tum_train", "TUM fr1 rpy train", str(tum_rpy_split(root, "train", tmp_path)))
+    visual, info, _ = realdata.cue_set_sequence(seq, "learned", "normals,lines", 150, lambda *a: None)
+    t, truth = visual.t_frame_s, visual.R_wc_true
+
+    def mekf(**keys):
+        backend = backend_for_run(RunConfig(backend="mekf", normals="learned", mekf=keys), info)
+        backend.resolve_mode(backend.mode.VISUAL_ONLY)
+        return are_deg(run(backend, t, visual.visuals), truth)
+
+    biased, off = mekf(), mekf(image_rotation_visual_bias_std_rad=0.0)
+    single = are_deg(run(SingleFrame(), t, visual.visuals), truth)
+    figures = (biased.mean(), off.mean(), single.mean())
+    assert biased.mean() < 5.5 and paired_difference(biased, off)["high"] < 0.0, figures
+    assert paired_difference(biased, single)["high"] < 0.0, figures
+
+
+def test_the_bias_shrinks_towards_the_relabelling_the_world_chose():
+    """After the accelerometer's up relabels the world (`gravity_only.py`: `R_wm` a signed permutation
+    times the bias), the bias shrinks towards that relabelling, not towards the identity."""
+    filt = with_bias(0.03, 1.5)
+    S = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    b = np.radians([2.0, -1.0, 3.0])
+    filt.R_wm = S @ exp_so3(b)
+    visual_bias_predict(filt, 1.5, 0.03, 1.5)
+    np.testing.assert_allclose(log_so3(S.T @ filt.R_wm), np.exp(-1.0) * b, atol=1e-12)
