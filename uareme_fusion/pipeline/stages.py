@@ -192,8 +192,8 @@ def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str |
 LEARNED_NORMALS_VISUAL_BIAS = {"image_rotation_visual_bias_std_rad": 0.1, "image_rotation_visual_bias_correlation_s": 10.0}
 """The visual-only EKF's visual bias (`MekfConfig.image_rotation_visual_bias_std_rad`) for normals from a
 network (`image_normals`): its errors are larger and last longer than depth's. Real TUM fr1 rpy, learned
-normals+lines, no IMU, mekf: train ARE 6.33 -> 4.71 deg (NEES 4.20 -> 1.02), eval 13.89 -> 10.83 (single
-18.77; NEES 1.81 -> 3.58); depth's 0.05 rad, 3 s there: eval 11.47, NEES 10.4."""
+normals+lines, no IMU, mekf: train ARE 6.33 -> 4.72 deg (NEES 4.20 -> 1.15), eval 13.89 -> 10.85 (single
+18.77; NEES 1.81 -> 3.61); depth's 0.05 rad, 3 s there (uncapped): eval 11.47, NEES 10.4."""
 
 
 def image_normals(spec: str) -> bool:

@@ -143,10 +143,11 @@ class MekfConfig(GyroNoiseConfig):
     """Visual only, a frame predicted by its image rotation: the frames' persistent error as a state, a
     Gauss-Markov rotation of this steady std per axis (rad) in the Manhattan frame's error block, which the
     visual residual sees (`image_rotation_motion.visual_bias_predict`); each frame is then fused with its
-    whole covariance (0: off, the Manhattan frame fixed and the independent share or the correlation times
-    below). Networks' normals err more and longer (`pipeline.stages.LEARNED_NORMALS_VISUAL_BIAS`). Real TUM
-    fr1 rpy, depth normals+lines, no IMU, train: ARE 4.94 -> 4.06 deg (NEES 2.73 -> 2.76), eval 3.78 -> 3.39
-    (single 3.71; NEES 1.42 -> 1.53)."""
+    whole covariance (0: off, the Manhattan frame fixed and only the frame's independent share fused,
+    `visual_noise_share_frames`). Networks' normals err more and longer
+    (`pipeline.stages.LEARNED_NORMALS_VISUAL_BIAS`). Real TUM fr1 rpy, depth normals+lines, no IMU, with
+    `image_rotation_visual_bias_max_share` 0.5: train ARE 4.94 -> 3.95 deg (NEES 2.73 -> 2.91), eval 3.78 ->
+    3.35 (single 3.71; NEES 1.42 -> 1.77)."""
     image_rotation_visual_bias_correlation_s: float = Field(3.0, gt=0.0, le=600.0)
     """The visual bias's correlation time, s (`image_rotation_visual_bias_std_rad`)."""
     image_rotation_visual_bias_max_share: float = Field(0.5, gt=0.0, le=1e6)
