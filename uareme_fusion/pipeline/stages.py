@@ -189,7 +189,8 @@ def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str |
     return requested or IMU_ONLY_PRESET, None
 
 
-LEARNED_NORMALS_VISUAL_BIAS = {"image_rotation_visual_bias_std_rad": 0.1, "image_rotation_visual_bias_correlation_s": 10.0}
+LEARNED_NORMALS_VISUAL_BIAS = {"image_rotation_visual_bias_std_rad": 0.1, "image_rotation_visual_bias_correlation_s": 10.0,
+                               "image_rotation_visual_bias_max_share": 0.15}
 """The visual-only EKF's visual bias (`MekfConfig.image_rotation_visual_bias_std_rad`) for normals from a
 network (`image_normals`): its errors are larger and last longer than depth's. Real TUM fr1 rpy, learned
 normals+lines, no IMU, mekf: train ARE 6.33 -> 4.72 deg (NEES 4.20 -> 1.15), eval 13.89 -> 10.85 (single

@@ -150,7 +150,7 @@ class MekfConfig(GyroNoiseConfig):
     3.35 (single 3.71; NEES 1.42 -> 1.77)."""
     image_rotation_visual_bias_correlation_s: float = Field(3.0, gt=0.0, le=600.0)
     """The visual bias's correlation time, s (`image_rotation_visual_bias_std_rad`)."""
-    image_rotation_visual_bias_max_share: float = Field(0.5, gt=0.0, le=1e6)
+    image_rotation_visual_bias_max_share: float = Field(0.25, gt=0.0, le=1e6)
     """The visual bias's variance is at most this share of each frame's own (`tr(cov) / 3`), dimensionless:
     a frame as precise as ICL kt3's (0.1 deg) cannot err by a 3 deg bias."""
     visual_error_correlation_s: float = Field(0.0, ge=0, le=600.0)
