@@ -107,7 +107,7 @@ def test_a_persistent_visual_error_is_followed_better_with_the_bias_state_and_co
 def test_tum_training_frames_rgb_follow_better_with_the_visual_bias_state(tmp_path):
     """Real TUM fr1 rpy training frames (handheld, learned normals and lines, RGB only, no IMU), the first
     150, the EKF made as `run` makes it (`stages.LEARNED_NORMALS_VISUAL_BIAS`): ARE 6.30 deg without the
-    bias state, 4.94 with it (single 10.45), the paired difference below 0."""
+    bias state, 5.19 with it (single 10.45), the paired difference below 0."""
     from uareme_fusion.backends.single import SingleFrame
     from uareme_fusion.benchmarks import realdata
     from uareme_fusion.evaluation.paired_difference import paired_difference
@@ -130,7 +130,7 @@ def test_tum_training_frames_rgb_follow_better_with_the_visual_bias_state(tmp_pa
     biased, off = mekf(), mekf(image_rotation_visual_bias_std_rad=0.0)
     single = are_deg(run(SingleFrame(), t, visual.visuals), truth)
     figures = (biased.mean(), off.mean(), single.mean())
-    assert biased.mean() < 5.5 and paired_difference(biased, off)["high"] < 0.0, figures
+    assert biased.mean() < 5.7 and paired_difference(biased, off)["high"] < 0.0, figures
     assert paired_difference(biased, single)["high"] < 0.0, figures
 
 

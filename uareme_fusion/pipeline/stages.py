@@ -192,9 +192,11 @@ def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str |
 LEARNED_NORMALS_VISUAL_BIAS = {"image_rotation_visual_bias_std_rad": 0.1, "image_rotation_visual_bias_correlation_s": 10.0,
                                "image_rotation_visual_bias_max_share": 0.15}
 """The visual-only EKF's visual bias (`MekfConfig.image_rotation_visual_bias_std_rad`) for normals from a
-network (`image_normals`): its errors are larger and last longer than depth's. Real TUM fr1 rpy, learned
-normals+lines, no IMU, mekf: train ARE 6.33 -> 4.72 deg (NEES 4.20 -> 1.15), eval 13.89 -> 10.85 (single
-18.77; NEES 1.81 -> 3.61); depth's 0.05 rad, 3 s there (uncapped): eval 11.47, NEES 10.4."""
+network (`image_normals`): its errors are larger and last longer than depth's. Real, no IMU, mekf: TUM fr1
+rpy learned normals+lines train ARE 6.33 -> 5.01 deg (NEES 4.20 -> 1.64), eval 13.89 -> 11.20 (single 18.77;
+NEES 1.81 -> 3.94); ICL kt3 RGB normals 3.60 -> 1.71 (single 4.38; NEES 1.80 -> 2.58), normals+lines 0.23
+-> 0.20 (NEES 1.15 -> 1.19). Depth's 0.05 rad, 3 s, uncapped: TUM eval 11.47, NEES 10.4; a cap of 0.5:
+kt3 NEES 0.75."""
 
 
 def image_normals(spec: str) -> bool:
