@@ -135,8 +135,8 @@ def test_tum_training_frames_rgb_follow_better_with_the_visual_bias_state(tmp_pa
 
 
 def test_the_bias_shrinks_towards_the_relabelling_the_world_chose():
-    """After the accelerometer's up relabels the world (`gravity_only.py`: `R_wm` a signed permutation
-    times the bias), the bias shrinks towards that relabelling, not towards the identity."""
+    """In a relabelled world (`R_wm` a signed permutation times the bias), the bias shrinks towards that
+    relabelling, not towards the identity."""
     filt = with_bias(0.03, 1.5)
     S = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     b = np.radians([2.0, -1.0, 3.0])

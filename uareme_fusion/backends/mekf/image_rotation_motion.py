@@ -139,8 +139,8 @@ def bias_std_rad(cfg, visual: VisualRotation) -> float:
 def visual_bias_predict(filt, dt_s: float, std_rad: float, correlation_s: float) -> None:
     """The visual bias (the Manhattan frame's error block, visual only) predicted over `dt_s` (s) as a
     Gauss-Markov rotation of steady std `std_rad` (rad per axis) and correlation time `correlation_s` (s):
-    `R_wm <- G Exp(rho Log(G^T R_wm))` for `G` the relabelling nearest `R_wm` (the identity, or the one the
-    accelerometer's up chose: `gravity_only.py`), `P[MF, :] *= rho`, `P[:, MF] *= rho`, `P[MF, MF] +=
+    `R_wm <- G Exp(rho Log(G^T R_wm))` for `G` the relabelling nearest `R_wm` (the identity unless the world
+    was relabelled), `P[MF, :] *= rho`, `P[:, MF] *= rho`, `P[MF, MF] +=
     std^2 (1 - rho^2) I`, `rho = exp(-dt / tau)`."""
     rho = float(np.exp(-dt_s / correlation_s))
     G = nearest_symmetric(np.eye(3), filt.R_wm)[0]
