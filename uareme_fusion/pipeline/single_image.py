@@ -190,7 +190,7 @@ class ImageAnalyser:
         that the boundary's sky is on top, carried back, when it is known and agrees with the boundary
         (`TurnConfig`); else `analysis` (declined)."""
         quarters = sky_quarters(seen.sky_boundary.line)
-        if quarters == 0:
+        if quarters == 0 or seen.sky_boundary.separation < self.turn.min_separation:
             return analysis
         upright = self.analyse(seen.path, turned_photo(seen.rgb, quarters), turn=False)
         if not upright.known:

@@ -24,9 +24,17 @@ import numpy as np
 
 @dataclass(frozen=True)
 class TurnConfig:
-    max_sky_angle_deg: float = 30.0
-    """The turned analysis' horizon must have its up within this (image plane) of the sky boundary's sky
-    direction to be taken (the boundary is too rough to be the horizon, but not to tell where the sky is)."""
+    """When a sky boundary turns the photo (measured, REAL: `tools/turned_photos.py` on ECD turned by 90, 180
+    and 270 deg, chosen on the odd-numbered photos, the even ones held out)."""
+
+    min_separation: float = 1.4
+    """The boundary's separation (`SkyHorizon.separation`) from which it may turn the photo: above the 1.35
+    that indoor walls and floors reached (every 4th ICSL, ICSL-more and ICL kt3 frame); ECD 076, its sky
+    found below at 1.35, would have been turned upside down."""
+    max_sky_angle_deg: float = 15.0
+    """The turned analysis' horizon must have its up within this (image plane) of the boundary's sky
+    direction to be taken (the boundary is too rough to be the horizon, but not to tell where the sky is;
+    ECD odd photos: 15 right and none wrong at 15 deg, 3 off by more than 0.05 H at 20 deg)."""
 
 
 def turned_photo(rgb: np.ndarray, quarters: int) -> np.ndarray:
