@@ -1,5 +1,5 @@
 """Bad input made from real dev photos (issue 26): a night shot, all-sky and all-ground crops, a horizon
-off-screen, a photo turned 90 deg; the closed-form focal length on ECD; one answer on every dev image.
+off-screen, photos turned 90, 180 and 270 deg; the closed-form focal length on ECD; one answer on every dev image.
 Each gives a finite answer, and a horizon it calls known is right within max(0.05 H, 3 std)."""
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import scipy.io
 
 from uareme_fusion.benchmarks.horizon import label_focal
 from uareme_fusion.benchmarks.horizon_uav import label_line, roll_error_deg
+from uareme_fusion.overlay.horizon import horizon_line
 from uareme_fusion.scoring.horizon import horizon_error
 
 ECD_PHOTOS = ("014", "039", "066")
@@ -111,6 +112,43 @@ def test_street_photo_turned_90_deg_is_right_or_declined(shared_data, analyser, 
     assert not doc["horizon_known"] and doc["horizon_orientation_doubt_deg"] > 70  # measured: 90 deg
 
 
+@pytest.fixture(scope="module")
+def upright_069(shared_data, analyser):
+    rgb, truth = _ecd(shared_data, "069")
+    return rgb, truth, analyser.analyse("069.png", rgb)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("quarters", [1, 2, 3])
+def test_street_photo_turned_with_a_clear_sky_is_answered_upright(analyser, upright_069, quarters):
+    """ECD 069 turned by 90, 180 and 270 deg clockwise: its sky boundary (separation 1.47, too rough to be the
+    horizon) lies off to the side or below the segments' horizon, so the photo is analysed again turned
+    back (`pipeline/turned_photo.py`) and that answer, carried into the turned photo, is the upright photo's
+    own horizon (measured: the same line, turned_deg 270, 180, 90) and right."""
+    from uareme_fusion.benchmarks.turned import sky_side_up, verdict
+    from uareme_fusion.pipeline.turned_photo import mapped_line, quarter_turn, turned_photo
+
+    rgb, truth, upright = upright_069
+    h, w = rgb.shape[:2]
+    result = analyser.analyse("turned.png", turned_photo(rgb, quarters))
+    assert result.known and result.turned_deg == 90.0 * ((4 - quarters) % 4)
+    back = mapped_line(result.horizon, np.linalg.inv(quarter_turn(h, w, quarters)[0]))
+    assert np.allclose(back, upright.horizon, atol=1e-6 * h)
+    assert verdict(result.known, result.horizon, sky_side_up(truth), h, w, quarters)["verdict"] == "right"
+    R, up = result.R_cm, result.up_c
+    assert np.max(np.abs(R.T @ up)) == pytest.approx(1.0, abs=1e-9)
+    assert np.allclose(result.horizon, horizon_line(up, result.focal.K), atol=1e-9)
+
+
+@pytest.mark.slow
+def test_a_sky_found_below_at_indoor_separation_does_not_turn_the_photo(shared_data, analyser):
+    """ECD 076 upright: a boundary found below its horizon (separation 1.35, no more than indoor walls and
+    floors reach) keeps it declined (`TurnConfig.min_separation`): turned 180 deg it was upside down."""
+    rgb, _ = _ecd(shared_data, "076")
+    result = analyser.analyse("076.png", rgb)
+    assert not result.known and result.turned_deg == 0.0 and result.orientation_doubt_deg > 70
+
+
 @pytest.mark.slow
 def test_the_same_street_photo_upright_keeps_its_horizon(shared_data, analyser, tmp_path):
     """The photo of the turned test, upright: its sky boundary agrees with the segments (3 deg), the horizon
@@ -152,7 +190,6 @@ def test_label_focal_of_a_synthetic_camera(tmp_path):
 def test_one_answer_on_every_ecd_and_drone_photo(shared_data, analyser):
     """Every ECD and horizon_uav photo: the horizon line, up_c and R_cm (the up glyph's axes) from one
     estimate (`test_horizon_answer._check_one_answer` on every 12th photo of each dev folder)."""
-    from uareme_fusion.overlay.horizon import horizon_line
 
     paths = sorted((shared_data / "eurasian_cities").glob("*.jpg")) + sorted(
         (shared_data / "horizon_uav" / "images").glob("*.jpg"))

@@ -34,11 +34,12 @@ from ..overlay.compose import draw_overlay
 from ..overlay.horizon import horizon_line
 from ..rotations import quat_xyzw
 from ..solver.atlanta import AtlantaHorizon, estimate_horizon
+from ..solver.evidence import no_evidence_reason, without_evidence
 from ..solver.focal import (FocalConfig, FocalEstimate, assumed_focal, closed_form_focal, solve_given_K,
                             solve_with_focal, unknown_centre_floor)
 from ..solver.horizon_estimate import (HorizonKnownConfig, HorizonUncertainty, SkyVetoConfig, aligned_rotation,
                                       horizon_known, horizon_uncertainty, sky_and_segments, sky_decides,
-                                      sky_orientation_doubt_deg, sky_start, up_covariance)
+                                      sky_angle_deg, sky_orientation_doubt_deg, sky_start, up_covariance)
 from ..solver.joint import JointSolver
 from ..solver.sky_horizon import SkyDetector, SkyHorizon
 from ..solver.manhattan import up_candidate
@@ -46,6 +47,7 @@ from ..solver.self_calibration import FrameEvidence, SelfCalibrationConfig, pool
 from ..types import Frame, NormalMap, VisualRotation
 from ..solver.cues import DEFAULT_CUES, VALID_CUES, parse_cues
 from .stages import CappedNormals, make_normal_estimator
+from .turned_photo import TurnConfig, sky_quarters, turned_back, turned_photo
 
 IMAGE_DETECT_WIDTH_PX = 640
 """Single images are not time-critical: LSD at 640 px wide scores ECD AUC 63.4% against 60.5% at
@@ -82,6 +84,10 @@ class ImageAnalysis:
     two differ when the Atlanta horizon sets up (ICSL, K pooled, vs depth: 1.65 deg mean for the solve's,
     1.93 for the turned one; on ECD the Atlanta horizon is the better one)."""
 
+    turned_deg: float = 0.0
+    """How far (deg, clockwise) the photo was turned to be answered upright (`pipeline/turned_photo.py`: its
+    sky boundary put the sky off to the side or below); 0: answered as it is."""
+
     @property
     def R_cm(self) -> np.ndarray:
         """The reported rotation (Manhattan to camera): `R_cm_reported`, else the solve's."""
@@ -102,7 +108,7 @@ class ImageAnalysis:
         return {"image": str(self.path), "R_cm": self.R_cm.tolist(), "q_cm_xyzw": quat_xyzw(self.R_cm).tolist(),
                 "cov_rad2": v.cov.tolist(), "std_deg": np.degrees(np.sqrt(np.diag(v.cov))).tolist(),
                 "up_c": self.up_c.tolist(), "analysed_size_px": [self.rgb.shape[1], self.rgb.shape[0]],
-                "quality": v.quality, "cost": v.cost, "valid_pixels": v.n_valid,
+                "quality": v.quality, "cost": v.cost, "valid_pixels": v.n_valid, "reason": v.reason,
                 **self.focal.as_dict(), "horizon_known": self.known,
                 "horizon": self.horizon.tolist() if self.known else None, **self._horizon_source(), "cues": cues,
                 "timing_ms": self.timing_ms,
@@ -121,7 +127,7 @@ class ImageAnalysis:
                 "horizon_angle_std_deg": _finite_or_none(u.angle_std_deg) if u is not None else None,
                 "horizon_in_image": u.in_image if u is not None else None,
                 "horizon_centre_offset_px": _finite_or_none(u.centre_offset_px) if u is not None else None,
-                "horizon_orientation_doubt_deg": self.orientation_doubt_deg,
+                "horizon_orientation_doubt_deg": self.orientation_doubt_deg, "turned_deg": self.turned_deg,
                 "sky": self.sky.as_dict() if self.sky is not None else None}
 
 
@@ -166,12 +172,33 @@ class ImageAnalyser:
         self.focal_config = FocalConfig(assumed_fov_deg=assumed_fov_deg)
         self.solver = JointSolver()
         self.calibration_config = SelfCalibrationConfig()
+        self.turn = TurnConfig()
 
-    def analyse(self, path: str | Path, rgb: np.ndarray | None = None) -> ImageAnalysis:
+    def analyse(self, path: str | Path, rgb: np.ndarray | None = None, turn: bool = True) -> ImageAnalysis:
+        """The image's answer; with `turn`, a photo whose sky boundary contradicts its horizon is analysed
+        again turned upright by that boundary (`pipeline/turned_photo.py`)."""
         seen = self._observe(Path(path), rgb)
         t0 = time.perf_counter()
         visual, focal = self._solve_alone(seen)
-        return self._analysis(seen, visual, focal, t0)
+        analysis = self._analysis(seen, visual, focal, t0)
+        if turn and analysis.orientation_doubt_deg > 0 and self.camera is None:
+            return self._turned(seen, analysis)
+        return analysis
+
+    def _turned(self, seen: "_Seen", analysis: ImageAnalysis) -> ImageAnalysis:
+        """`analysis` of a photo whose sky boundary contradicts its horizon: the answer of the photo turned so
+        that the boundary's sky is on top, carried back, when it is known and agrees with the boundary
+        (`TurnConfig`); else `analysis` (declined)."""
+        quarters = sky_quarters(seen.sky_boundary.line)
+        if quarters == 0 or seen.sky_boundary.separation < self.turn.min_separation:
+            return analysis
+        upright = self.analyse(seen.path, turned_photo(seen.rgb, quarters), turn=False)
+        if not upright.known:
+            return analysis
+        back = turned_back(upright, seen.rgb, seen.normal_map, seen.segments, quarters)
+        if sky_angle_deg(seen.sky_boundary.line, back.horizon) > self.turn.max_sky_angle_deg:
+            return analysis
+        return back
 
     def analyse_same_camera(self, paths: list[str | Path],
                             warn: Callable[[str], None] | None = None) -> Iterator[ImageAnalysis]:
@@ -321,6 +348,11 @@ class ImageAnalyser:
         boundary among the cues, the solve's axis nearest the sky's up; else the segments' Atlanta horizon
         when they show one, else the Manhattan axis nearest image up; `R_cm` turned onto that up. `t0`:
         when its solve began."""
+        # the network's normals on a black, blank or blurred image are a guess (`solver/evidence.py`); a sky
+        # boundary that took part is evidence of its own (it is found at 96 px: blur does not hide it)
+        reason = no_evidence_reason(seen.rgb) if self.estimator is not None and "sky" not in visual.cues else ""
+        if reason:
+            visual = without_evidence(visual, reason, self.solver.config.max_variance_rad2)
         segments = seen.segments
         sky = seen.sky if "sky" in visual.cues else None
         if sky is not None:

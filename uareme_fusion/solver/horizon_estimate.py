@@ -141,9 +141,14 @@ def sky_orientation_doubt_deg(boundary, line_px: np.ndarray, sky_config,
         return 0.0
     if set(boundary.failed_checks(sky_config)) & set(cfg.required_checks):
         return 0.0
-    a, b = np.asarray(boundary.line[:2], float), np.asarray(line_px[:2], float)
-    angle = float(np.degrees(np.arccos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))))
+    angle = sky_angle_deg(boundary.line, line_px)
     return angle if angle > cfg.min_angle_deg else 0.0
+
+
+def sky_angle_deg(line_a, line_b) -> float:
+    """The angle (deg, 0..180, image plane) between the sky sides (positive normals) of two image lines."""
+    a, b = np.asarray(line_a[:2], float), np.asarray(line_b[:2], float)
+    return float(np.degrees(np.arccos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))))
 
 
 SKY_START_STEPS = 18
