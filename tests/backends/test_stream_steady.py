@@ -98,6 +98,10 @@ def test_steady_part_keeps_the_larger_of_the_calibration_and_what_the_stream_sho
     for v in still_stream(cov_steady=0.5 * COV_RAD2).visuals:
         est = steady(Estimate(t_s=0.0, R_wc=v.R_cm.T, cov=v.cov), v)
     assert np.trace(est.cov_steady) > 0.99 * np.trace(COV_RAD2)  # the stream shows more shared than half
+    steady = SteadyPart(from_stream=False)  # gravity fused beside the frames: the calibration's alone
+    for v in still_stream(cov_steady=0.5 * COV_RAD2).visuals:
+        est = steady(Estimate(t_s=0.0, R_wc=v.R_cm.T, cov=v.cov), v)
+    np.testing.assert_allclose(est.cov_steady, 0.5 * COV_RAD2, atol=1e-12)
 
 
 def test_seeded_nees_of_a_still_camera_after_the_constant_alignment():
