@@ -283,9 +283,10 @@ class Estimate:
     gyro_bias_rad_s: np.ndarray | None = None
     tilt_shares: tuple[float, float] | None = None
     cov_steady: np.ndarray | None = None
-    """The steady part of `cov` (rad^2, the same perturbation): the camera's calibration error the visual
-    rotations carry (`VisualRotation.cov_steady`, `steady_within` the estimate's covariance), which no
-    fusion of frames averages away; None when there is none."""
+    """The steady part of `cov` (rad^2, the same perturbation): the error the stream's visual rotations
+    share, the calibration's (`VisualRotation.cov_steady`) or what the stream does not show varying
+    (`backends.base.SteadyPart`), `steady_within` the estimate's covariance, which no fusion of frames
+    averages away; None when there is none."""
 
     @property
     def up_c(self) -> np.ndarray:

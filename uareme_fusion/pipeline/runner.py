@@ -122,7 +122,8 @@ class Pipeline:
         self.cues = cues
         """A `cues.CueSolver` (normals and/or lines); None: the normals-only solver."""
         self._R_cm_prev = None
-        self._steady = SteadyPart()
+        self.steady = SteadyPart()
+        """The estimates' steady part (`backends.base.SteadyPart`)."""
         self.stats = RunStats(backend=backend.name)
         self.accelerometer = None
         """An `interleave.AccelerometerFeed` of an accelerometer without gyro, fed up to each frame; None: none."""
@@ -153,7 +154,7 @@ class Pipeline:
         t1 = time.perf_counter()
         visual = self.visual_rotation(normal_map, frame.t_s, frame)
         t2 = time.perf_counter()
-        estimate = self._steady(self.backend.process_frame(frame.t_s, visual), visual)
+        estimate = self.steady(self.backend.process_frame(frame.t_s, visual), visual)
         if normal_map is None and frame.depth is None and getattr(self.normals, "needs_depth", False):
             estimate = dataclasses.replace(estimate, status=estimate.status | Status.DEPTH_MISSING)
             self.stats.frames_without_depth += 1

@@ -21,6 +21,7 @@ from ..drivers.base import GroundTruth, Source
 from ..drivers.extrinsics import parse_imu_rotation, with_imu_geometry
 from ..drivers.interleave import AccelerometerFeed
 from ..errors import InputError, OutputError
+from ..backends.base import SteadyPart
 from ..backends.factory import backend_kind, knows_gravity
 from ..scoring.metrics import attitude_errors, error_summary
 from ..scoring.statistics import error_stats
@@ -110,6 +111,7 @@ def build_pipeline(source: Source, cfg: RunConfig, sinks: Iterable = ()) -> Pipe
     pipeline = Pipeline(normals, backend, sinks, cues)
     if accelerometer_used(source, cfg):
         pipeline.accelerometer = AccelerometerFeed(*source.accelerometer, source.info.imu_time_offset_s)
+        pipeline.steady = SteadyPart(from_stream=False)  # gravity fused beside the frames: the calibration's steady part
     return pipeline
 
 

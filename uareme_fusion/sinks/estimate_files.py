@@ -38,8 +38,9 @@ that estimate, each source's information per second on tilt as far as the filter
 (`backends/mekf/source_trust.py`: a camera whose vertical keeps disagreeing with a quiet accelerometer
 gets a small share); empty for a source the backend has not seen or a backend that does not weigh
 sources (single, smoother); the steady part of the covariance (`Estimate.cov_steady`, 3x3 row-major,
-rad^2: the camera calibration's error, shared by every frame; the rest, cov - cov_steady, is new in each
-frame), empty when there is none."""
+rad^2: the error shared by the stream's frames, the calibration's or what the stream does not show
+varying, `backends/stream_steady.py`; the rest, cov - cov_steady, is new in each frame), empty when there
+is none."""
 
 
 def status_names(status: Status) -> str:
