@@ -406,3 +406,24 @@ def test_rotation_alone_is_the_solves_rotation():
             solver = JointSolver()
             np.testing.assert_array_equal(solver.rotation(normal_map, moments, R_init),
                                           solver.solve(normal_map, moments, R_init).R_cm)
+
+
+def test_horizon_height_posterior_mean_leans_to_a_nearby_vp_only_with_a_window():
+    """A well supported VP and a weaker one 0.03 from it, equally precise: the height is the stronger one's
+    (the mode) by default; with `posterior_window_fraction` it is the posterior mean, drawn towards the
+    weaker VP but not onto it, and a weak VP outside the window (0.4 away) does not move it."""
+    from uareme_fusion.solver.atlanta import AtlantaConfig, _vp_height
+    from uareme_fusion.solver.horizontal_vps import VanishingPoint
+
+    n = np.array([0.0, -1.0])
+
+    def vp(y, support):
+        return VanishingPoint(np.array([0.0, y, 1.0]) / math.hypot(y, 1.0), support, 20, np.eye(2) * 0.006**2, 0.0)
+    flat = lambda t: np.ones_like(t)  # noqa: E731
+    vps = [vp(0.10, 3.0), vp(0.07, 1.0)]
+    mode = _vp_height(vps + [vp(-0.3, 0.3)], n, flat, None, 0.0, AtlantaConfig())
+    windowed = AtlantaConfig(posterior_window_fraction=0.05)
+    mean = _vp_height(vps + [vp(-0.3, 0.3)], n, flat, None, 0.0, windowed)
+    assert mode == pytest.approx(-0.10, abs=0.001)
+    assert -0.095 < mean < -0.085  # measured -0.0913
+    assert mean == pytest.approx(_vp_height(vps, n, flat, None, 0.0, windowed), abs=1e-6)
