@@ -137,12 +137,17 @@ def up_in_camera(R_wc: np.ndarray) -> np.ndarray:
     return np.swapaxes(np.asarray(R_wc, float), -1, -2) @ WORLD_UP
 
 
-def tilt_error_deg(up_est_c: np.ndarray, up_true_c: np.ndarray) -> np.ndarray:
-    """Angle in degrees between estimated and true up vectors in the camera frame, (..., 3)."""
-    a = np.asarray(up_est_c, float)
-    b = np.asarray(up_true_c, float)
+def vector_angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle in degrees (0..180) between the vectors `a` and `b` along their last axis (any length, not unit)."""
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
     cos = np.sum(a * b, axis=-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def tilt_error_deg(up_est_c: np.ndarray, up_true_c: np.ndarray) -> np.ndarray:
+    """Angle in degrees between estimated and true up vectors in the camera frame, (..., 3)."""
+    return vector_angle_deg(up_est_c, up_true_c)
 
 
 def nees(R_est: np.ndarray, R_true: np.ndarray, cov: np.ndarray, gauge_variance_rad2: float = 0.0) -> np.ndarray:

@@ -19,6 +19,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..overlay.horizon import horizon_line
+from ..rotations import vector_angle_deg
 
 
 @dataclass(frozen=True)
@@ -147,8 +148,7 @@ def sky_orientation_doubt_deg(boundary, line_px: np.ndarray, sky_config,
 
 def sky_angle_deg(line_a, line_b) -> float:
     """The angle (deg, 0..180, image plane) between the sky sides (positive normals) of two image lines."""
-    a, b = np.asarray(line_a[:2], float), np.asarray(line_b[:2], float)
-    return float(np.degrees(np.arccos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))))
+    return float(vector_angle_deg(np.asarray(line_a, float)[:2], np.asarray(line_b, float)[:2]))
 
 
 SKY_START_STEPS = 18
