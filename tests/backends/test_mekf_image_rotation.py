@@ -168,12 +168,12 @@ def test_a_prediction_asked_before_the_frame_leaves_the_filter_where_it_is():
     np.testing.assert_allclose(np.array([e.cov for e in a]), np.array([e.cov for e in c]), atol=1e-15)
 
 
-@pytest.mark.parametrize("correlation_s", [0.0, 0.5])
-def test_the_kernels_match_the_oracle_on_an_image_rotation_stream(correlation_s):
+@pytest.mark.parametrize("bias_std_rad", [0.0, 0.05])
+def test_the_kernels_match_the_oracle_on_an_image_rotation_stream(bias_std_rad):
     t, R_wc = handheld_truth(3.0)
     frames = image_stream(t, R_wc, np.radians(2.0), np.radians(0.3), 13, missing=(30,),
                           cp_error={60: exp_so3(np.radians([0, 25, 0]))})
-    cfg = MekfConfig(mode="visual_only", image_rotation_error_correlation_s=correlation_s)
+    cfg = MekfConfig(mode="visual_only", image_rotation_visual_bias_std_rad=bias_std_rad)
     a, b = run(Mekf(cfg), t, frames), run(OracleMekf(cfg), t, frames)
     np.testing.assert_allclose(np.array([e.R_wc for e in a]), np.array([e.R_wc for e in b]), atol=1e-9)
     np.testing.assert_allclose(np.array([e.cov for e in a]), np.array([e.cov for e in b]), rtol=1e-6, atol=1e-12)

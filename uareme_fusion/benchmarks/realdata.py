@@ -178,10 +178,10 @@ def cue_set_sequence(seq: RealSequence, normals: str, cues: str, max_frames: int
     return visual, info, bool(truth is not None and truth.gravity_aligned and seq.reference is None)
 
 
-def backend_errors(visual, info) -> dict:
+def backend_errors(visual, info, normals: str = "auto") -> dict:
     """Per-frame errors (`compare.errors_over_time`) of each of `BACKENDS` on one `VisualSequence`,
-    each made as `run` makes it for this source (`stages.backend_for_run`; the sequence's IMU is already in
-    camera axes and on the camera clock)."""
+    each made as `run` makes it for this source and `--normals normals` (`stages.backend_for_run`; the
+    sequence's IMU is already in camera axes and on the camera clock)."""
     from ..backends.factory import backend_kind, knows_gravity
     from ..evaluation.compare import errors_over_time, run_backend
     from ..pipeline import RunConfig
@@ -190,7 +190,7 @@ def backend_errors(visual, info) -> dict:
     camera_axes = dataclasses.replace(info, R_ci=np.eye(3), imu_time_offset_s=0.0, has_imu=visual.has_imu)
     out = {}
     for name in BACKENDS:
-        run = run_backend(backend_for_run(RunConfig(backend=name), camera_axes), visual)
+        run = run_backend(backend_for_run(RunConfig(backend=name, normals=normals), camera_axes), visual)
         kind = backend_kind(name, visual.has_imu).name
         gravity = knows_gravity(kind, visual.has_imu)
         err = errors_over_time(run, visual.R_wc_true, yaw_only_nees=gravity)
@@ -326,7 +326,7 @@ def sequence_figures(seq: RealSequence, steps: Steps, max_frames: int | None, tm
         visual, info, gravity_aligned = cue_set_sequence(
             seq, normals, cues, max_frames, steps.step(f"{seq.name}: {cue}", max_frames or None))
         has_imu = visual.has_imu
-        errors_by_cue[cue] = backend_errors(visual, info)
+        errors_by_cue[cue] = backend_errors(visual, info, normals)
         t_frames = visual.t_frame_s
     out = {"gravity_aligned_reference": gravity_aligned, "has_imu": has_imu,
            "cue_sets": cue_backend_figures(errors_by_cue, gravity_aligned)}

@@ -189,6 +189,22 @@ def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str |
     return requested or IMU_ONLY_PRESET, None
 
 
+LEARNED_NORMALS_VISUAL_BIAS = {"image_rotation_visual_bias_std_rad": 0.1, "image_rotation_visual_bias_correlation_s": 10.0,
+                               "image_rotation_visual_bias_max_share": 0.15}
+"""The visual-only EKF's visual bias (`MekfConfig.image_rotation_visual_bias_std_rad`) for normals from a
+network (`image_normals`): its errors are larger and last longer than depth's. Real, no IMU, mekf: TUM fr1
+rpy learned normals+lines train ARE 6.33 -> 5.01 deg (NEES 4.20 -> 1.64), eval 13.89 -> 11.20 (single 18.77;
+NEES 1.81 -> 3.94); ICL kt3 RGB normals 3.60 -> 1.71 (single 4.38; NEES 1.80 -> 2.58), normals+lines 0.23
+-> 0.20 (NEES 1.15 -> 1.19). Depth's 0.05 rad, 3 s, uncapped: TUM eval 11.47, NEES 10.4; a cap of 0.5:
+kt3 NEES 0.75."""
+
+
+def image_normals(spec: str) -> bool:
+    """Whether `RunConfig.normals` `spec` names a network's normals (learned, a model file), not depth's,
+    the source's or precomputed maps (auto: as depth's, which it takes where the source has them)."""
+    return spec == "learned" or Path(spec).suffix.lower() in MODEL_FILE_SUFFIXES
+
+
 def backend_for_run(cfg: RunConfig, info: SourceInfo) -> Backend:
     """The backend of `cfg`, made by the one factory (`backends.factory.make_backend`) with the source's
     IMU-to-camera rotation and time offset, the EKF preset for this source and `cfg`'s config keys.
@@ -204,6 +220,8 @@ def backend_for_run(cfg: RunConfig, info: SourceInfo) -> Backend:
     imu_geometry = {"R_ci": np.asarray(info.R_ci, float).tolist(), "imu_time_offset_s": info.imu_time_offset_s}
     kind = backend_kind(cfg.backend, info.has_imu)
     overrides = cfg.mekf if kind.name == "mekf" else cfg.smoother
+    if kind.name == "mekf" and image_normals(cfg.normals):
+        overrides = {**LEARNED_NORMALS_VISUAL_BIAS, **overrides}
     if kind.name == "smoother" and info.K is None:
         overrides = {**SCENE_K_IMAGE_ROTATION_BIAS, **overrides}
     preset = mekf_preset_for(cfg.mekf_preset, info)[0] if kind.name == "mekf" else None

@@ -43,6 +43,10 @@ class MekfConfig(GyroNoiseConfig):
         "manhattan_yaw_rw_rad_sqrt_s": "manhattan_yaw_rw_rad_per_sqrt_s",
         "manhattan_tilt_rw_rad_sqrt_s": "manhattan_tilt_rw_rad_per_sqrt_s",
         "visual_huber_sigma": "visual_huber_k",
+        "image_rotation_error_correlation_s": "image_rotation_visual_bias_correlation_s",
+        "image_rotation_error_persistence_lag_frames": "image_rotation_visual_bias_std_rad",
+        "image_rotation_error_persistence_frames": "image_rotation_visual_bias_correlation_s",
+        "image_rotation_error_persistence_max_s": "image_rotation_visual_bias_correlation_s",
     }
     """Old key -> new key: an old key in a configuration file is an error naming the new one."""
 
@@ -135,25 +139,21 @@ class MekfConfig(GyroNoiseConfig):
     """Visual only: a frame carrying the image rotation since the previous frame (`VisualRotation.R_cp`,
     `solver/frame_motion.py`) is predicted by it, its std the process noise (a visual gyro:
     `image_rotation_motion.py`); others by the constant-rate model. False: the constant-rate model always."""
-    image_rotation_error_correlation_s: float = Field(0.0, ge=0.0, le=600.0)
-    """Visual only, a frame predicted by its image rotation: how long the persistent share of its visual
-    error (`1 - lam`, `visual_noise_share_frames`) lasts, s; a frame `dt` s after the previous update
-    counts as `dt / this` of an independent look at it (`ImageRotationMotion.visual_noise_scale`; 0: every
-    frame independent)."""
-    image_rotation_error_persistence_lag_frames: int = Field(0, ge=0, le=1000)
-    """Visual only, a frame predicted by its image rotation: learn the stream's correlation time of its
-    visual errors online (`visual_error_persistence.py`) from their differences against the image
-    rotations chained over this lag `L` (frames) and over one frame, and fuse each frame's covariance
-    times `(1 + rho) / (1 - rho)`, `rho = exp(-dt / tau)` (a Gauss-Markov error's variance of the mean per
-    look), instead of `image_rotation_error_correlation_s` and the independent share (0: off). Real TUM
-    fr1 rpy, learned normals+lines, no IMU, L = 4: train ARE 6.33 -> 5.10 deg (single 10.83), eval
-    13.89 -> 9.98 (single 18.77); depth train 4.94 -> 4.18 (7.99), eval 3.78 -> 4.10 (3.71; paired
-    +0.39, 95 % -0.18 .. +0.87); ICL kt3 learned normals 3.60 -> 0.91 (4.38), NEES 1.80 -> 1.80; the
-    other kt3 rows unchanged (learned time 0). Off by default for the TUM depth eval row."""
-    image_rotation_error_persistence_frames: float = Field(100.0, gt=0.0, le=1e6)
-    """Frames over which the learned correlation time's lagged differences are averaged (exponentially)."""
-    image_rotation_error_persistence_max_s: float = Field(2.0, gt=0.0, le=600.0)
-    """The learned correlation time's cap, s (`image_rotation_error_persistence_lag_frames`)."""
+    image_rotation_visual_bias_std_rad: float = Field(0.05, ge=0.0, le=1.0)
+    """Visual only, a frame predicted by its image rotation: the frames' persistent error as a state, a
+    Gauss-Markov rotation of this steady std per axis (rad) in the Manhattan frame's error block, which the
+    visual residual sees (`image_rotation_motion.visual_bias_predict`); each frame is then fused with its
+    whole covariance (0: off, the Manhattan frame fixed and only the frame's independent share fused,
+    `visual_noise_share_frames`). Networks' normals err more and longer
+    (`pipeline.stages.LEARNED_NORMALS_VISUAL_BIAS`); not with an accelerometer (`ImageRotationMotion.has_bias`).
+    Real TUM fr1 rpy, depth normals+lines, no IMU: train ARE 4.94 -> 4.08 deg (NEES 2.73 -> 4.04), eval 3.78
+    -> 3.51 (single 3.71; NEES 1.42 -> 2.98); ICL kt3 depth 0.11 -> 0.12 (NEES 1.72 -> 1.53)."""
+    image_rotation_visual_bias_correlation_s: float = Field(3.0, gt=0.0, le=600.0)
+    """The visual bias's correlation time, s (`image_rotation_visual_bias_std_rad`)."""
+    image_rotation_visual_bias_max_share: float = Field(0.25, gt=0.0, le=1e6)
+    """The visual bias's variance is at most this share of each frame's own (`tr(cov) / 3`), dimensionless:
+    a frame as precise as ICL kt3's (0.1 deg) cannot err by a 3 deg bias. Real kt3, mekf NEES at 0.5 / 0.25
+    / 0.1: RGB normals+lines 0.75 / 1.02 / 1.30, depth 1.23 / 1.53 / 1.80; TUM train depth 2.91 / 4.04 / 6.11."""
     visual_error_correlation_s: float = Field(0.0, ge=0, le=600.0)
     """How long a visual rotation's error persists, s: a network (or a scene's lines) seen again
     errs the same way, so frames closer than this are not independent. An update `dt` s after the

@@ -18,6 +18,14 @@ the Huber weight, as with a gyro, and the filter re-initialises after `reinit_af
 such frames (`scene.py`, `measures_motion`): the motion is measured, not the model's, so a large
 innovation does not spin the estimate away. A frame predicted by the rate is treated as the
 constant-rate model's (a stream without image rotations runs as `ConstantRateMotion`).
+
+A frame's absolute rotation errs the same way for seconds (the same walls, the same network's view of
+them); against the precise image rotations that error is not averaged away but followed. It is a state,
+the visual bias (`MekfConfig.image_rotation_visual_bias_std_rad`): a Gauss-Markov rotation that the visual
+residual sees in the Manhattan frame's error block (`R_cm = R_wc^T R_wm`, `H = [.., I, ..]`; without an IMU
+the world is the first Manhattan frame, so `R_wm` holds only the bias, shrinking back to the identity),
+predicted with each image rotation (`visual_bias_predict`). The frames are then fused whole, and the
+attitude's covariance carries what the bias leaves unknown.
 """
 
 from __future__ import annotations
@@ -25,11 +33,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ...rotations import nearest_symmetric
 from ...types import VisualRotation
-from ..visual_error_persistence import VisualErrorPersistence
 from .compiled import image_rotation_predict
 from .config import MekfMode
 from .motion import ConstantRateMotion
+from .state import MF, TH
 
 
 _NO_COV = np.zeros((3, 3))
@@ -44,9 +53,6 @@ class ImageRotationMotion(ConstantRateMotion):
 
     def __init__(self, mode: MekfMode = MekfMode.VISUAL_ONLY):
         super().__init__(mode)
-        self.persistence: VisualErrorPersistence | None = None
-        """The stream's learned correlation time of its visual errors (`image_rotation_error_persistence_lag_frames`;
-        made at the first frame, from the filter's config)."""
         self.measures_motion = False
         """Whether the current frame was predicted by its image rotation (else by the rate, and `scene.py`
         treats it as the constant-rate model's)."""
@@ -61,8 +67,6 @@ class ImageRotationMotion(ConstantRateMotion):
             return
         if visual is None:
             if t_s > filt.t_state:
-                if self.persistence is not None:
-                    self.persistence.update(t_s, None)  # a frame without a rotation: the chain breaks
                 if self._before_gap is None:
                     self._before_gap = (filt.t_state, filt.R_wc.copy(), filt.R_wm.copy(), filt.P.copy(),
                                         filt.omega_c.copy())
@@ -78,58 +82,34 @@ class ImageRotationMotion(ConstantRateMotion):
         if before is not None:
             filt.t_state, filt.R_wc, filt.R_wm, filt.P, filt.omega_c = before
         self.measures_motion = t_s > filt.t_state
+        before_t = filt.t_state
         if self.measures_motion:
             self.predict_by_image(filt, t_s, visual.R_cp, float(visual.R_cp_std_rad) ** 2)
+            if self.has_bias(filt):
+                visual_bias_predict(filt, t_s - before_t, bias_std_rad(filt.config, visual),
+                                    filt.config.image_rotation_visual_bias_correlation_s)
 
     def predict_by_image(self, filt, t_s: float, R_cp: np.ndarray, var_rad2: float) -> None:
         """The prediction to `t_s` (s) by the image rotation `R_cp` of variance `var_rad2` (rad^2 per axis)
         (`kernel_image_rotation.image_rotation_predict`)."""
         image_rotation_predict(filt, t_s, R_cp, var_rad2, filt.config.rate_rw_rad_s2_sqrt_hz**2)
 
+    @staticmethod
+    def has_bias(filt) -> bool:
+        """Whether the frames' persistent error is a state (`image_rotation_visual_bias_std_rad`): not with an
+        accelerometer (`gravity_only.py`), whose up makes the Manhattan block the scene's real lean (real TUM
+        fr1 rpy eval with the Kinect's, the bias on: NEES 153 and 152 for depth and learned normals)."""
+        return filt.config.image_rotation_visual_bias_std_rad > 0 and not filt.gravity_only.active
+
     def visual_noise_scale(self, filt) -> float:
-        """Predicted by its image rotation, a frame's visual error has an independent share `lam`
-        (`VisualNoiseShare`) and a persistent one, `1 - lam`, that lasts `image_rotation_error_correlation_s`
-        (`tau`): a frame `dt` s after the previous visual update holds `dt / tau` of an independent look
-        at the persistent error, so the covariance fused is `(lam + (1 - lam) max(1, tau / dt)) C`. With the
-        time learned from the stream (`image_rotation_error_persistence_lag_frames`), the whole error is
-        Gauss-Markov of that time: `C (1 + rho) / (1 - rho)`, `rho = exp(-dt / tau)`, the variance of a
-        mean of such looks per look. Predicted by the rate: `ConstantRateMotion`'s."""
-        share = super().visual_noise_scale(filt)
-        tau_s = self.correlation_s(filt)
-        t_prev = filt.t_visual_s
-        if not self.measures_motion or tau_s <= 0 or t_prev is None or not filt.t_state > t_prev:
-            return share
-        if self.persistence is not None:
-            rho = np.exp(-(filt.t_state - t_prev) / tau_s)
-            return (1.0 + rho) / (1.0 - rho)
-        return share + (1.0 - share) * max(1.0, tau_s / (filt.t_state - t_prev))
+        """With the visual bias a state (`has_bias`), the filter carries the persistent error and each frame
+        is fused with its whole covariance (1); else `ConstantRateMotion`'s (its independent share)."""
+        return 1.0 if self.has_bias(filt) else super().visual_noise_scale(filt)
 
     def persistent_cov(self, filt) -> np.ndarray:
-        """Predicted by its image rotation with a correlation time, the filter averages the persistent error
-        over it (`visual_noise_scale`), and its own covariance says how well: nothing is added. Else
+        """With the visual bias a state, the attitude's covariance holds it: nothing is added. Else
         `ConstantRateMotion`'s (the frame's persistent share, which the filter carries)."""
-        if self.measures_motion and self.correlation_s(filt) > 0:
-            return _NO_COV
-        return super().persistent_cov(filt)
-
-    def correlation_s(self, filt) -> float:
-        """How long the persistent share of a frame's visual error lasts, s: learned from the stream
-        (`visual_error_persistence.py`) when `image_rotation_error_persistence_lag_frames` is set, else
-        `image_rotation_error_correlation_s`."""
-        if self.persistence is None:
-            return filt.config.image_rotation_error_correlation_s
-        return self.persistence.tau_s
-
-    def observe_visual(self, filt, t_s: float, visual: VisualRotation) -> None:
-        """The frame's labelled rotation and image rotation into the learned correlation time (after its
-        update: a frame's own error does not set its weight)."""
-        cfg = filt.config
-        if self.persistence is None and cfg.image_rotation_error_persistence_lag_frames > 1:
-            self.persistence = VisualErrorPersistence(cfg.image_rotation_error_persistence_lag_frames,
-                                                      cfg.image_rotation_error_persistence_frames,
-                                                      cfg.image_rotation_error_persistence_max_s)
-        if self.persistence is not None:
-            self.persistence.update(t_s, visual)
+        return _NO_COV if self.has_bias(filt) else super().persistent_cov(filt)
 
     def predicted_R_wc(self, filt, t_s: float) -> np.ndarray:
         """`R_wc` (3, 3) predicted to `t_s` (s) by the rate, the state left where it is: the frame's image
@@ -139,6 +119,34 @@ class ImageRotationMotion(ConstantRateMotion):
 
     def _restart(self, filt, visual: VisualRotation) -> None:
         super()._restart(filt, visual)
+        if self.has_bias(filt):  # the frame's bias is the Manhattan block's error and part of the attitude's
+            var, R_cw = bias_std_rad(filt.config, visual) ** 2, filt.R_wc.T
+            filt.P[MF, MF] = var * np.eye(3)
+            filt.P[TH, MF] = var * R_cw
+            filt.P[MF, TH] = var * R_cw.T
+            filt.P[TH, TH] += var * np.eye(3)  # R_cw (var I) R_cw^T
         self._before_gap = None
-        if self.persistence is not None:
-            self.persistence.update(filt.t_state, None)  # a new labelling: the chain restarts
+
+
+def bias_std_rad(cfg, visual: VisualRotation) -> float:
+    """The visual bias's steady std for a frame, rad per axis: `image_rotation_visual_bias_std_rad`, at most
+    `image_rotation_visual_bias_max_share` of the frame's own variance (a precise frame's error cannot
+    persist beyond it)."""
+    own_var = float(np.trace(visual.cov)) / 3.0
+    return float(np.sqrt(min(cfg.image_rotation_visual_bias_std_rad**2, cfg.image_rotation_visual_bias_max_share * own_var)))
+
+
+def visual_bias_predict(filt, dt_s: float, std_rad: float, correlation_s: float) -> None:
+    """The visual bias (the Manhattan frame's error block, visual only) predicted over `dt_s` (s) as a
+    Gauss-Markov rotation of steady std `std_rad` (rad per axis) and correlation time `correlation_s` (s):
+    `R_wm <- G Exp(rho Log(G^T R_wm))` for `G` the relabelling nearest `R_wm` (the identity unless the world
+    was relabelled), `P[MF, :] *= rho`, `P[:, MF] *= rho`, `P[MF, MF] +=
+    std^2 (1 - rho^2) I`, `rho = exp(-dt / tau)`."""
+    rho = float(np.exp(-dt_s / correlation_s))
+    G = nearest_symmetric(np.eye(3), filt.R_wm)[0]
+    filt.R_wm = G @ Rotation.from_rotvec(rho * Rotation.from_matrix(G.T @ filt.R_wm).as_rotvec()).as_matrix()
+    P = filt.P.copy()
+    P[MF, :] *= rho
+    P[:, MF] *= rho
+    P[MF, MF] += std_rad**2 * (1.0 - rho**2) * np.eye(3)
+    filt.P = P
