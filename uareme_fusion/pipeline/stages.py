@@ -199,6 +199,13 @@ NEES 1.81 -> 3.94); ICL kt3 RGB normals 3.60 -> 1.71 (single 4.38; NEES 1.80 -> 
 kt3 NEES 0.75."""
 
 
+SCENE_K_VISUAL_BIAS = {"image_rotation_visual_bias_std_rad": 0.0}
+"""The visual-only EKF's visual bias is off for a source whose K is estimated from the scene: its image
+rotations are scaled by the focal error (`FrameMotionConfig.scene_K_std_scale`), an error the bias state
+would take for the frames' own and follow. Real ICSL corridor (scene K), learned normals+lines, bias on:
+mekf NEES 19-76 and corridor_more mekf worse than single (the reverted merge c69debc)."""
+
+
 def image_normals(spec: str) -> bool:
     """Whether `RunConfig.normals` `spec` names a network's normals (learned, a model file), not depth's,
     the source's or precomputed maps (auto: as depth's, which it takes where the source has them)."""
@@ -213,14 +220,18 @@ def backend_for_run(cfg: RunConfig, info: SourceInfo) -> Backend:
     ICSL corridor_more 578.5 px against 537.6), and the image rotation between frames, measured at that K,
     is scaled by the error (7 % of a 90 deg corner): its std is widened for it
     (`FrameMotionConfig.scene_K_std_scale`), and the paper smoother gives the image rotations' rate bias
-    room to follow that scaling (`smoother.SCENE_K_IMAGE_ROTATION_BIAS`, for the keys `cfg` does not set)."""
+    room to follow that scaling (`smoother.SCENE_K_IMAGE_ROTATION_BIAS`, for the keys `cfg` does not set);
+    the visual-only EKF's visual bias is then off (`SCENE_K_VISUAL_BIAS`), else a network's normals get
+    their own (`LEARNED_NORMALS_VISUAL_BIAS`)."""
     from ..backends.factory import backend_kind, make_backend
     from ..backends.smoother import SCENE_K_IMAGE_ROTATION_BIAS
 
     imu_geometry = {"R_ci": np.asarray(info.R_ci, float).tolist(), "imu_time_offset_s": info.imu_time_offset_s}
     kind = backend_kind(cfg.backend, info.has_imu)
     overrides = cfg.mekf if kind.name == "mekf" else cfg.smoother
-    if kind.name == "mekf" and image_normals(cfg.normals):
+    if kind.name == "mekf" and info.K is None:
+        overrides = {**SCENE_K_VISUAL_BIAS, **overrides}
+    elif kind.name == "mekf" and image_normals(cfg.normals):
         overrides = {**LEARNED_NORMALS_VISUAL_BIAS, **overrides}
     if kind.name == "smoother" and info.K is None:
         overrides = {**SCENE_K_IMAGE_ROTATION_BIAS, **overrides}
