@@ -145,7 +145,7 @@ class MekfConfig(GyroNoiseConfig):
     visual residual sees (`image_rotation_motion.visual_bias_predict`); each frame is then fused with its
     whole covariance (0: off, the Manhattan frame fixed and only the frame's independent share fused,
     `visual_noise_share_frames`). Networks' normals err more and longer
-    (`pipeline.stages.LEARNED_NORMALS_VISUAL_BIAS`); not with an accelerometer (`ImageRotationMotion.has_bias`).
+    (`pipeline.stages.LEARNED_NORMALS_VISUAL_BIAS`); not with an accelerometer (`ImageRotationMotion.bias_on`).
     Real TUM fr1 rpy, depth normals+lines, no IMU: train ARE 4.94 -> 4.08 deg (NEES 2.73 -> 4.04), eval 3.78
     -> 3.51 (single 3.71; NEES 1.42 -> 2.98); ICL kt3 depth 0.11 -> 0.12 (NEES 1.72 -> 1.53)."""
     image_rotation_visual_bias_correlation_s: float = Field(3.0, gt=0.0, le=600.0)

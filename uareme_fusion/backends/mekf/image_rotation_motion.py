@@ -95,11 +95,18 @@ class ImageRotationMotion(ConstantRateMotion):
         image_rotation_predict(filt, t_s, R_cp, var_rad2, filt.config.rate_rw_rad_s2_sqrt_hz**2)
 
     @staticmethod
-    def has_bias(filt) -> bool:
+    def bias_on(filt) -> bool:
         """Whether the frames' persistent error is a state (`image_rotation_visual_bias_std_rad`): not with an
         accelerometer (`gravity_only.py`), whose up makes the Manhattan block the scene's real lean (real TUM
         fr1 rpy eval with the Kinect's, the bias on: NEES 153 and 152 for depth and learned normals)."""
         return filt.config.image_rotation_visual_bias_std_rad > 0 and not filt.gravity_only.active
+
+    def has_bias(self, filt) -> bool:
+        """Whether the current frame is fused against the visual bias state: the bias is on (`bias_on`) and the
+        frame was predicted by its image rotation (`measures_motion`). A frame without one is fused by the
+        constant-rate model's rule, its independent share (a stream without image rotations: SYNTHETIC
+        persistent errors, tests/backends/test_visual_noise_share.py)."""
+        return self.measures_motion and self.bias_on(filt)
 
     def visual_noise_scale(self, filt) -> float:
         """With the visual bias a state (`has_bias`), the filter carries the persistent error and each frame
@@ -119,7 +126,7 @@ class ImageRotationMotion(ConstantRateMotion):
 
     def _restart(self, filt, visual: VisualRotation) -> None:
         super()._restart(filt, visual)
-        if self.has_bias(filt):  # the frame's bias is the Manhattan block's error and part of the attitude's
+        if self.bias_on(filt):  # the frame's bias is the Manhattan block's error and part of the attitude's
             var, R_cw = bias_std_rad(filt.config, visual) ** 2, filt.R_wc.T
             filt.P[MF, MF] = var * np.eye(3)
             filt.P[TH, MF] = var * R_cw
