@@ -43,21 +43,6 @@ def build(data: Path, cache: Path, wanted) -> None:
                     pickle.dump(out, f)
 
 
-def backend_errors(visual, info, mekf: dict, smoother: dict, normals: str = "auto") -> dict:
-    """`realdata.backend_errors` with `RunConfig.mekf` / `.smoother` overrides (and `--normals normals`)."""
-    from uareme_fusion.benchmarks.realdata import BACKENDS
-    from uareme_fusion.evaluation.compare import errors_over_time, run_backend
-    from uareme_fusion.pipeline import RunConfig
-    from uareme_fusion.pipeline.stages import backend_for_run
-
-    camera_axes = dataclasses.replace(info, R_ci=np.eye(3), imu_time_offset_s=0.0, has_imu=False)
-    def config(name):
-        return RunConfig(backend=name, mekf=mekf, smoother=smoother, normals=normals)
-
-    return {name: errors_over_time(run_backend(backend_for_run(config(name), camera_axes), visual), visual.R_wc_true)
-            for name in BACKENDS}
-
-
 def replay(caches: list[Path], only: list[str] | None, mekf: dict | None = None, smoother: dict | None = None) -> dict:
     from uareme_fusion.benchmarks import realdata
     from uareme_fusion.evaluation.paired_difference import paired_difference
@@ -70,7 +55,7 @@ def replay(caches: list[Path], only: list[str] | None, mekf: dict | None = None,
     for (name, cue), (visual, info) in sequences.items():
         if only and not any(o.lower() in name.lower() for o in only):
             continue
-        errs = backend_errors(visual, info, mekf or {}, smoother or {}, realdata.CUE_SETS[cue][0])
+        errs = realdata.backend_errors(visual, info, realdata.CUE_SETS[cue][0], mekf, smoother)
         single = errs["single"]["are_deg"]
         line = f"{name:20s} {cue:18s} single {np.nanmean(single):6.2f}"
         for b in ("mekf", "smoother"):

@@ -178,10 +178,11 @@ def cue_set_sequence(seq: RealSequence, normals: str, cues: str, max_frames: int
     return visual, info, bool(truth is not None and truth.gravity_aligned and seq.reference is None)
 
 
-def backend_errors(visual, info, normals: str = "auto") -> dict:
+def backend_errors(visual, info, normals: str = "auto", mekf: dict | None = None, smoother: dict | None = None) -> dict:
     """Per-frame errors (`compare.errors_over_time`) of each of `BACKENDS` on one `VisualSequence`,
     each made as `run` makes it for this source and `--normals normals` (`stages.backend_for_run`; the
-    sequence's IMU is already in camera axes and on the camera clock)."""
+    sequence's IMU is already in camera axes and on the camera clock), with `RunConfig.mekf` / `.smoother`
+    keys `mekf` / `smoother` (tools/visual_only_replay.py)."""
     from ..backends.factory import backend_kind, knows_gravity
     from ..evaluation.compare import errors_over_time, run_backend
     from ..pipeline import RunConfig
@@ -190,7 +191,8 @@ def backend_errors(visual, info, normals: str = "auto") -> dict:
     camera_axes = dataclasses.replace(info, R_ci=np.eye(3), imu_time_offset_s=0.0, has_imu=visual.has_imu)
     out = {}
     for name in BACKENDS:
-        run = run_backend(backend_for_run(RunConfig(backend=name, normals=normals), camera_axes), visual)
+        cfg = RunConfig(backend=name, normals=normals, mekf=mekf or {}, smoother=smoother or {})
+        run = run_backend(backend_for_run(cfg, camera_axes), visual)
         kind = backend_kind(name, visual.has_imu).name
         gravity = knows_gravity(kind, visual.has_imu)
         err = errors_over_time(run, visual.R_wc_true, yaw_only_nees=gravity)

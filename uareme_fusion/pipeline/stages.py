@@ -190,13 +190,13 @@ def mekf_preset_for(requested: str | None, info: SourceInfo) -> tuple[str, str |
 
 
 LEARNED_NORMALS_VISUAL_BIAS = {"image_rotation_visual_bias_std_rad": 0.1, "image_rotation_visual_bias_correlation_s": 10.0,
-                               "image_rotation_visual_bias_max_share": 0.15}
+                               "image_rotation_visual_bias_max_share": 0.3}
 """The visual-only EKF's visual bias (`MekfConfig.image_rotation_visual_bias_std_rad`) for normals from a
-network (`image_normals`): its errors are larger and last longer than depth's. Real, no IMU, mekf: TUM fr1
-rpy learned normals+lines train ARE 6.33 -> 5.01 deg (NEES 4.20 -> 1.64), eval 13.89 -> 11.20 (single 18.77;
-NEES 1.81 -> 3.94); ICL kt3 RGB normals 3.60 -> 1.71 (single 4.38; NEES 1.80 -> 2.58), normals+lines 0.23
--> 0.20 (NEES 1.15 -> 1.19). Depth's 0.05 rad, 3 s, uncapped: TUM eval 11.47, NEES 10.4; a cap of 0.5:
-kt3 NEES 0.75."""
+network (`image_normals`): its errors are larger and last longer than depth's. Real, no IMU, mekf, tuned on TUM
+fr1 rpy train and ICL kt3 (tools/visual_only_replay.py): TUM train learned normals+lines ARE 6.33 -> 4.82 deg
+(single 10.83; NEES 1.43); kt3 RGB normals 3.60 -> 1.69 (single 4.38; NEES 4.02), normals+lines 0.23 -> 0.20
+(NEES 1.35). The cap 0.15 instead: TUM train 5.01 (NEES 1.78), kt3 normals NEES 7.44; 0.5: kt3 normals+lines
+NEES 0.97. Depth's 0.05 rad, 3 s, cap 0.25 (the config's) for a network: TUM eval 11.47, NEES 10.4."""
 
 
 SCENE_K_VISUAL_BIAS = {"image_rotation_visual_bias_std_rad": 0.0}
