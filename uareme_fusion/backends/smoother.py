@@ -188,8 +188,9 @@ the image rotations err by 0.3-0.7 deg per axis, persistently about the camera's
 costing the others (normals / lines rows: -0.031 / -1.168 now): rate-bias walk 0.3 / 1 / 3 (from 0.1):
 +0.03 (+0.01 .. +0.05) / +0.01 (+0.00 .. +0.03), lines -1.12 / +0.005 (-0.001 .. +0.011) but normals
 +0.005, lines -0.99; window 10 or 60 frames: unchanged; `image_motion_visual_huber_k` 100: unchanged;
-image-rotation std x2 / x4: +0.00 .. +0.02 / +0.00 .. +0.01, lines -0.98 at x4; the share of the whole covariance (as the mekf): +0.010 (+0.004 ..
-+0.017), lines -1.07; that with the walk 2: +0.003 (-0.000 .. +0.005), normals +0.003, lines -0.99.
+image-rotation std x2 / x4: +0.00 .. +0.02 / +0.00 .. +0.01, lines -0.98 at x4; the share of the whole
+covariance (as the mekf): +0.010 (+0.004 .. +0.017), lines -1.07; that with the walk 2: +0.003 (-0.000 ..
++0.005), normals +0.003, lines -0.99.
 Unbiased image rotations of the same rms (synthetic, from the reference): +0.001 (-0.015 .. +0.020)."""
 
 
