@@ -102,8 +102,8 @@ class MekfConfig(GyroNoiseConfig):
     errs 2.7 deg on the real TUM fr1 rpy training frames with the true rotation known (3.9 on the
     evaluation frames), not the 0.13 deg of a still sensor's 0.001 (pass that for one). Tuned on the
     training frames (mekf with the visual bias, tilt after the alignment; without the accelerometer depth
-    normals 1.91 deg, learned 3.73): 0.001 2.52 / 2.53 deg (NEES 93 / 91), 0.0075 1.63 / 1.71 (NEES 7.6 /
-    4.7), 0.01 1.53 / 1.68 (6.3 / 3.7), 0.015 1.48 / 1.82 (5.5 / 3.2), 0.02 1.50 / 2.05 (5.2 / 3.2)."""
+    normals 1.91 deg, learned 3.53): 0.001 2.52 / 2.53 deg (NEES 93 / 91), 0.0075 1.63 / 1.69 (NEES 7.6 /
+    4.5), 0.01 1.53 / 1.64 (6.3 / 3.4), 0.015 1.48 / 1.74 (5.5 / 2.8), 0.02 1.50 / 1.95 (5.2 / 2.8)."""
     accel_only_innovation_scale_rad: float = Field(0.3, ge=1e-4, le=10.0)
     """...angle between measured and predicted up at which its variance doubles, rad (without a gyro
     the prediction is the camera's, which errs more than a gyro-carried one)."""

@@ -104,8 +104,8 @@ class ImageRotationMotion(ConstantRateMotion):
         carried by the image rotations, and the frames' persistent error goes to the bias, not to the tilt.
         Real TUM fr1 rpy, mekf, the Kinect's accelerometer, tilt after the alignment, training / evaluation
         frames: bias off 2.10 / 2.60 deg (depth normals), 2.49 / 3.48 (learned); on, with the accelerometer
-        weighted as it errs (`accel_only_noise_rad_sqrt_s` 0.015), 1.48 / 1.33 and 1.82 / 2.33; without the
-        accelerometer 1.91 / 2.34 and 3.73 / 10.05. The bias on with the still sensor's 0.001 gave NEES 93-153."""
+        weighted as it errs (`accel_only_noise_rad_sqrt_s` 0.015), 1.48 / 1.33 and 1.74 / 2.32; without the
+        accelerometer 1.91 / 2.34 and 3.53 / 9.77. The bias on with the still sensor's 0.001 gave NEES 93-153."""
         return filt.config.image_rotation_visual_bias_std_rad > 0
 
     def has_bias(self, filt) -> bool:
