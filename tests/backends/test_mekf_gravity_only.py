@@ -95,11 +95,12 @@ def test_gravity_world_relabels_the_manhattan_axis_nearest_up():
 
 def test_noiseless_run_converges_to_gravity_through_a_tilted_manhattan_frame():
     """A scene whose Manhattan z leans 2.9 deg from gravity: without the accelerometer the tilt error is
-    that lean; with it the tilt converges and the Manhattan frame's lean is estimated."""
+    that lean; with it (noiseless, told a still sensor's noise density, not the handheld default) the tilt
+    converges and the Manhattan frame's lean is estimated."""
     R_wm = Rotation.from_rotvec([0.05, 0.0, 0.0]).as_matrix()
     t_f, visuals, R_true, t_a, accel = simulate(visual_std_rad=0.0, R_wm=R_wm)
     _, without = run(config(visual_noise_share_frames=0), t_f, visuals)
-    filt, with_acc = run(config(visual_noise_share_frames=0), t_f, visuals, t_a, accel)
+    filt, with_acc = run(config(visual_noise_share_frames=0, accel_only_noise_rad_sqrt_s=0.001), t_f, visuals, t_a, accel)
     assert tilt_deg(without, R_true)[-30:].mean() == pytest.approx(2.86, abs=0.1)
     assert tilt_deg(with_acc, R_true)[-30:].max() < 0.3
     lean = np.degrees(np.arccos(np.clip(filt.R_wm[2, 2], -1, 1)))
@@ -139,6 +140,39 @@ def test_seeded_tilt_nees_is_consistent(window_s, lookahead_s, nees_range):
         tilt_without.append(tilt_deg(est0, R_true)[30:].mean())
     assert nees_range[0] <= np.mean(nees) <= nees_range[1], nees
     assert np.mean(tilt_with) < 0.5 * np.mean(tilt_without), (tilt_with, tilt_without)
+
+
+def with_image_rotations(t_f, visuals, R_true, seed, persistent_rad=0.04, std_cp_rad=0.003):
+    """`visuals` with the image rotation between frames (`R_cp`, std `std_cp_rad`) and a persistent error
+    of `persistent_rad` swinging over seconds (the same walls seen wrong for a while), stated 0.02 rad."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k, v in enumerate(visuals):
+        swing = persistent_rad * np.array([np.sin(0.6 * t_f[k]), np.cos(0.45 * t_f[k]), 0.5 * np.sin(0.3 * t_f[k])])
+        R_cp = None if k == 0 else exp_so3(rng.normal(0.0, std_cp_rad, 3)) @ R_true[k].T @ R_true[k - 1]
+        out.append(VisualRotation(v.R_cm @ exp_so3(swing), 0.02**2 * np.eye(3), cost=0.0, iterations=1, n_valid=1000,
+                                  R_cp=R_cp, R_cp_std_rad=std_cp_rad))
+    return out
+
+
+def test_visual_bias_stays_on_beside_an_accelerometer():
+    """Frames with image rotations and a persistent error (2.3 deg swinging over seconds), a shaky
+    accelerometer (0.3 m/s^2 per sample), 3 seeds: with the visual bias state the accelerometer's up is
+    carried by the image rotations and the frames' persistent error goes to the bias (tilt 1.6 deg); with it
+    off that error goes to the tilt (2.2, the camera alone 2.3). Real TUM fr1 rpy, the Kinect's: the same
+    (`ImageRotationMotion.bias_on`)."""
+    tilt = {"on": [], "off": [], "alone": []}
+    for seed in range(3):
+        t_f, visuals, R_true, t_a, accel = simulate(seconds=10.0, visual_std_rad=0.005, accel_std_m_s2=0.3, seed=seed)
+        visuals = with_image_rotations(t_f, visuals, R_true, seed)
+        filt, est = run(config(), t_f, visuals, t_a, accel)
+        assert filt.motion.has_bias(filt)
+        tilt["on"].append(tilt_deg(est, R_true)[30:].mean())
+        tilt["off"].append(tilt_deg(run(config(image_rotation_visual_bias_std_rad=0.0), t_f, visuals, t_a, accel)[1],
+                                    R_true)[30:].mean())
+        tilt["alone"].append(tilt_deg(run(config(), t_f, visuals)[1], R_true)[30:].mean())
+    on, off, alone = (float(np.mean(v)) for v in tilt.values())
+    assert on < 0.8 * off and on < 0.8 * alone, tilt
 
 
 def test_accelerometer_that_stops_flags_a_gap_and_the_camera_goes_on():
@@ -212,10 +246,10 @@ def tum_eval_folder(tmp_path_factory):
 def test_real_tum_tilt_with_the_kinect_accelerometer_is_no_worse(tum_eval_folder, tmp_path):
     """The real TUM fr1 rpy evaluation frames (the first 60, depth normals, mekf): the world is
     gravity-aligned with the Kinect accelerometer (tilt against the mocap's z without any alignment
-    under 5 deg, against 90 without it), and the tilt after the constant alignment stays within 0.5 deg
-    of --no-accel's. Measured with the ground truth on the Kinect's clock (+27 ms): first 60 frames
-    2.14 against 1.89; all 207 frames 2.77 against 2.41 (the issue's "no worse" is not met there with
-    depth normals; with learned normals 3.71 against 20.43; the training frames 2.28 against 3.05)."""
+    under 5 deg, against 90 without it), and the tilt after the constant alignment is no worse than
+    --no-accel's. Measured (ground truth on the Kinect's clock, +27 ms): first 60 frames 1.14 against 1.37
+    (2.02 with the visual bias off beside the accelerometer and its still-sensor noise density); all 207
+    frames 1.33 against 2.34 (NEES 3.37), learned normals 2.32 against 9.77 (NEES 3.64)."""
     from uareme_fusion.pipeline import RunConfig
     from uareme_fusion.pipeline.session import run_to_folder
 
@@ -226,7 +260,7 @@ def test_real_tum_tilt_with_the_kinect_accelerometer_is_no_worse(tum_eval_folder
         assert summary["source_info"]["accelerometer_used"] is used
         assert not used or summary["accelerometer_counts"]["accel_only_updates"] >= 55
         tilt[used] = summary["tilt_deg"]["mean"], summary["tilt_unaligned_deg"]["mean"]
-    assert tilt[True][0] <= tilt[False][0] + 0.5, tilt
+    assert tilt[True][0] <= tilt[False][0], tilt
     assert tilt[True][1] < 5.0, tilt
 
 
