@@ -53,10 +53,10 @@ def sequences(data: Path, by_cue: bool) -> dict:
     """name -> `VisualSequence` with a reference, as `bench horizon` builds them (and ICSL-more by cue)."""
     reference = icsl_more_reference(data)
     real = real_sequences(data, CUES, reference)
-    out = {name: real[name] for name in ("ICSL more", "ICL kt3")}
+    out = {name: real[name][0] for name in ("ICSL more", "ICL kt3")}
     if by_cue:
         for cues in ("lines", "normals"):
-            out[f"ICSL more, {cues} only"] = rgb_sequence(data / "icsl_corridor_more" / "rgb", cues, reference)
+            out[f"ICSL more, {cues} only"] = rgb_sequence(data / "icsl_corridor_more" / "rgb", cues, reference)[0]
     return out
 
 

@@ -99,7 +99,7 @@ def test_real_icsl_stream_rgb_only_filters_no_worse_than_single(shared_data, tmp
     (tmp_path / "rgb").mkdir()
     for path in frames:
         shutil.copy(path, tmp_path / "rgb" / path.name)
-    seq = rgb_sequence(tmp_path / "rgb", "lines", chained_reference([icsl_depth_reference(p).R_cm for p in frames]))
+    seq, _ = rgb_sequence(tmp_path / "rgb", "lines", chained_reference([icsl_depth_reference(p).R_cm for p in frames]))
     single_are, single_nees = _are_nees("single", seq)
     for name in ("mekf", "smoother"):
         are, nees = _are_nees(name, seq)

@@ -260,14 +260,38 @@ def icl_scores(folder: Path, cues: str) -> dict:
 BACKENDS_COMPARED = ("single", "mekf", "smoother")
 
 
-def backend_errors(sequence) -> tuple[dict, dict]:
+def backend_errors(sequence, info=None) -> tuple[dict, dict]:
     """Each of `BACKENDS_COMPARED` run on one `VisualSequence` with a reference: its per-frame errors
-    (`errors_over_time`) by name, and a note for each backend that could not be made."""
+    (`errors_over_time`) by name, and a note for each backend that could not be made. With the source's
+    `info`, each backend is made as `run --normals learned` makes it for that source
+    (`stages.backend_for_run`: for ICSL, K from the scene, no visual bias state); without, with its
+    defaults (`compare.make_backends`)."""
     from ..evaluation.compare import errors_over_time, make_backends, run_backend
 
-    backends, notes = make_backends(BACKENDS_COMPARED)
+    if info is None:
+        backends, notes = make_backends(BACKENDS_COMPARED)
+    else:
+        backends, notes = run_backends(info)
     return {name: errors_over_time(run_backend(backend, sequence), sequence.R_wc_true)
             for name, backend in backends.items()}, notes
+
+
+def run_backends(info) -> tuple[dict, dict]:
+    """`BACKENDS_COMPARED` made as `run --normals learned` makes them for a camera-only source `info`, and a
+    note for each that could not be made."""
+    import dataclasses
+
+    from ..pipeline import RunConfig
+    from ..pipeline.stages import backend_for_run
+
+    camera_only = dataclasses.replace(info, R_ci=np.eye(3), imu_time_offset_s=0.0, has_imu=False)
+    backends, notes = {}, {}
+    for name in BACKENDS_COMPARED:
+        try:
+            backends[name] = backend_for_run(RunConfig(backend=name, normals="learned"), camera_only)
+        except ImportError as exc:
+            notes[name] = f"not available ({exc})"
+    return backends, notes
 
 
 def backend_rows(errors: dict, notes: dict) -> dict:
@@ -288,14 +312,15 @@ def backend_rows(errors: dict, notes: dict) -> dict:
     return rows
 
 
-def backend_scores(sequence) -> dict:
-    """`backend_rows` of `backend_errors` on one `VisualSequence` with a reference."""
-    return backend_rows(*backend_errors(sequence))
+def backend_scores(sequence, info=None) -> dict:
+    """`backend_rows` of `backend_errors` on one `VisualSequence` with a reference (and its source's `info`)."""
+    return backend_rows(*backend_errors(sequence, info))
 
 
 def rgb_sequence(spec: Path, cues: str, R_wc_reference: np.ndarray | None = None):
     """The RGB-only `VisualSequence` of a dataset folder (learned normals and/or segments, no depth, no
-    intrinsics unless the dataset gives them), with `R_wc_reference` replacing its ground truth when given."""
+    intrinsics unless the dataset gives them), with `R_wc_reference` replacing its ground truth when given,
+    and the source's `SourceInfo`."""
     import dataclasses
 
     from ..drivers.registry import open_source
@@ -304,7 +329,8 @@ def rgb_sequence(spec: Path, cues: str, R_wc_reference: np.ndarray | None = None
 
     with open_source(str(spec)) as source:
         seq = source_sequence(source, RunConfig(normals="learned", cues=cues))
-    return seq if R_wc_reference is None else dataclasses.replace(seq, R_wc_true=R_wc_reference)
+        info = source.info
+    return (seq if R_wc_reference is None else dataclasses.replace(seq, R_wc_true=R_wc_reference)), info
 
 
 def chained_reference(R_cm: list[np.ndarray]) -> np.ndarray:
@@ -324,7 +350,7 @@ def icsl_more_reference(data: Path) -> np.ndarray:
 
 def real_sequences(data: Path, cues: str, icsl_reference: np.ndarray | None = None) -> dict:
     """The RGB-only sequences the backends are scored on, by name: ICL kt3 (its ground truth) and
-    ICSL-more (against `icsl_reference`, by default `icsl_more_reference`)."""
+    ICSL-more (against `icsl_reference`, by default `icsl_more_reference`), each with its `SourceInfo`."""
     reference = icsl_more_reference(data) if icsl_reference is None else icsl_reference
     return {"ICL kt3": rgb_sequence(data / "icl_nuim_office_kt3", cues),
             "ICSL more": rgb_sequence(data / "icsl_corridor_more" / "rgb", cues, reference)}
@@ -363,7 +389,7 @@ def run(data: Path, cues: str = "normals,lines,sky", ecd_limit: int | None = Non
     icl_pooled = pooled_scores([data / "icl_nuim_office_kt3"], analyser, icsl_stride, reference=None, fx_true=ICL_FX,
                                centre_true=ICL_CENTRE)
     icl = icl_scores(data / "icl_nuim_office_kt3", cues)
-    backends = {name: backend_scores(seq) for name, seq in real_sequences(data, cues).items()}
+    backends = {name: backend_scores(seq, info) for name, (seq, info) in real_sequences(data, cues).items()}
     indoor = horizon_uav.indoor_known(data, analyser, icsl_stride)
     table = _table(f"bench horizon (cues {cues}; data under {data})")
     _ecd_rows(table, ecd)
