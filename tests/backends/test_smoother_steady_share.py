@@ -99,7 +99,7 @@ def test_share_of_the_whole_reports_the_steady_part_whole():
 def test_visual_only_mekf_nees_on_a_steady_calibration_error_is_not_overconfident():
     """A scene-K source (the mekf's visual bias off, `stages.SCENE_K_VISUAL_BIAS`): the mekf's share of the
     whole covariance reported (1 - lam) C, less than the steady part, and the scored per-frame part was what
-    little the fused share left. Measured (seeds 4 / 5 / 6): mekf NEES 10.05 / 12.56 / 11.35 -> 0.96 / 0.88
+    little the fused share left. Measured (seeds 4 / 5 / 6; 4 and 5 run here): mekf NEES 10.05 / 12.56 / 11.35 -> 0.96 / 0.88
     / 0.97, ARE unchanged (0.252 / 0.241 / 0.250; single 1.67 / 1.76 / 1.62, 0.236 / 0.237 / 0.230)."""
     info = SourceInfo(name="cam", K=None)
     for seed in (4, 5):

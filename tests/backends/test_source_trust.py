@@ -319,7 +319,7 @@ def test_real_euroc_micro_fused_attitude_is_no_worse_than_the_camera_alone():
     if not found:
         pytest.skip("euroc_v1_01_micro not found")
     visual, info, gravity_aligned = cue_set_sequence(found[0], "learned", "normals", None, None)
-    errors = backend_errors(visual, info)
+    errors = backend_errors(visual, info, "learned")
     fused, single = errors["mekf"], errors["single"]
     assert gravity_aligned and int(fused["initialised"].sum()) == 95
     assert paired_difference(fused["are_deg"], single["are_deg"])["low"] <= 0.0

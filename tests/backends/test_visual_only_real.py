@@ -20,7 +20,7 @@ def backend_are(seq, normals: str, cues: str) -> dict:
     """Per-frame ARE (deg) of `single`, `mekf`, `smoother` on `FRAMES` frames of one cue set."""
     visual, info, _ = realdata.cue_set_sequence(seq, normals, cues, FRAMES, lambda *a: None)
     assert not visual.has_imu
-    return {name: err["are_deg"] for name, err in realdata.backend_errors(visual, info).items()}
+    return {name: err["are_deg"] for name, err in realdata.backend_errors(visual, info, normals).items()}
 
 
 def assert_no_worse_than_single(are: dict) -> None:
@@ -63,7 +63,7 @@ def test_icsl_more_filters_with_a_scene_K_are_no_worse_than_single(shared_data):
         pytest.skip(skipped[0])
     for cues in ("normals,lines", "normals"):
         visual, info, _ = realdata.cue_set_sequence(found[0], "learned", cues, None, lambda *a: None)
-        are = {name: err["are_deg"] for name, err in realdata.backend_errors(visual, info).items()}
+        are = {name: err["are_deg"] for name, err in realdata.backend_errors(visual, info, "learned").items()}
         mekf, smoother = (paired_difference(are[name], are["single"]) for name in ("mekf", "smoother"))
         assert mekf["low"] <= 0.0 and mekf["mean"] < 0.02, (cues, mekf)
         assert smoother["mean"] < 0.05, (cues, smoother)  # normals + lines: +0.03 (before +0.12)
@@ -81,7 +81,7 @@ def test_icsl_corridor_mekf_nees_with_a_steady_calibration_part(shared_data):
         pytest.skip(skipped[0])
     for cues in ("normals,lines", "lines"):
         visual, info, _ = realdata.cue_set_sequence(found[0], "learned", cues, None, lambda *a: None)
-        errs = realdata.backend_errors(visual, info)
+        errs = realdata.backend_errors(visual, info, "learned")
         nees = float(np.nanmean(errs["mekf"]["nees"]))
         assert 1.0 <= nees <= 6.0, (cues, nees)
         d = paired_difference(errs["mekf"]["are_deg"], errs["single"]["are_deg"])

@@ -23,7 +23,7 @@ def test_icsl_corridor_segments_are_scored_against_their_per_frame_error():
     frame_std_deg = np.degrees(np.sqrt([np.trace(v.cov_frame()) / 3 for v in frames]))
     assert np.median(steady_std_deg) == pytest.approx(1.34, abs=0.05)  # 0.02 * 640 / f, f 547 px pooled
     assert np.median(frame_std_deg) < 0.3
-    nees = np.nanmean(backend_errors(visual, info)["single"]["nees"])
+    nees = np.nanmean(backend_errors(visual, info, "learned")["single"]["nees"])
     assert 1.0 <= nees <= 6.0  # 0.06 against the whole covariance
 
 
@@ -41,6 +41,6 @@ def test_euroc_still_drone_normals_are_scored_against_what_the_stream_shows_vary
     if not found:
         pytest.skip("euroc_v1_01_micro not found")
     visual, info, _ = cue_set_sequence(found[0], "learned", "normals", None, None)
-    single = backend_errors(visual, info)["single"]
+    single = backend_errors(visual, info, "learned")["single"]
     assert np.nanmean(single["are_deg"]) < 0.7
     assert 1.0 <= np.nanmean(single["nees"]) <= 6.0

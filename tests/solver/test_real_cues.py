@@ -20,7 +20,7 @@ def test_segments_near_chance_do_not_make_the_joint_worse_than_the_normals_on_eu
     are = {}
     for cues in ("normals,lines", "normals"):
         visual, info, _ = cue_set_sequence(found[0], "learned", cues, None, None)
-        are[cues] = backend_errors(visual, info)["single"]["are_deg"]
+        are[cues] = backend_errors(visual, info, "learned")["single"]["are_deg"]
         if cues == "normals,lines":
             shares = [v.cues["lines"]["share"] for v in visual.visuals if v is not None and "lines" in v.cues]
             assert np.median(shares) < 0.1  # 0.97 before

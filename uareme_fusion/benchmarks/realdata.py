@@ -178,7 +178,7 @@ def cue_set_sequence(seq: RealSequence, normals: str, cues: str, max_frames: int
     return visual, info, bool(truth is not None and truth.gravity_aligned and seq.reference is None)
 
 
-def backend_errors(visual, info, normals: str = "auto", mekf: dict | None = None, smoother: dict | None = None) -> dict:
+def backend_errors(visual, info, normals: str, mekf: dict | None = None, smoother: dict | None = None) -> dict:
     """Per-frame errors (`compare.errors_over_time`) of each of `BACKENDS` on one `VisualSequence`,
     each made as `run` makes it for this source and `--normals normals` (`stages.backend_for_run`; the
     sequence's IMU is already in camera axes and on the camera clock), with `RunConfig.mekf` / `.smoother`

@@ -206,9 +206,12 @@ would take for the frames' own and follow. Real ICSL corridor (scene K), learned
 mekf NEES 19-76 and corridor_more mekf worse than single (the reverted merge c69debc)."""
 
 
-def image_normals(spec: str) -> bool:
-    """Whether `RunConfig.normals` `spec` names a network's normals (learned, a model file), not depth's,
-    the source's or precomputed maps (auto: as depth's, which it takes where the source has them)."""
+def image_normals(spec: str, info: SourceInfo) -> bool:
+    """Whether `RunConfig.normals` `spec` gives a network's normals for the source `info`, not depth's, the
+    source's or precomputed maps: learned, a model file, or auto on a source without depth maps and
+    intrinsics (`AutoNormals` then takes the network; a simulator's own normals are counted with them)."""
+    if spec == "auto":
+        return not (info.has_depth and info.K is not None)
     return spec == "learned" or Path(spec).suffix.lower() in MODEL_FILE_SUFFIXES
 
 
@@ -231,7 +234,7 @@ def backend_for_run(cfg: RunConfig, info: SourceInfo) -> Backend:
     overrides = cfg.mekf if kind.name == "mekf" else cfg.smoother
     if kind.name == "mekf" and info.K is None:
         overrides = {**SCENE_K_VISUAL_BIAS, **overrides}
-    elif kind.name == "mekf" and image_normals(cfg.normals):
+    elif kind.name == "mekf" and image_normals(cfg.normals, info):
         overrides = {**LEARNED_NORMALS_VISUAL_BIAS, **overrides}
     if kind.name == "smoother" and info.K is None:
         overrides = {**SCENE_K_IMAGE_ROTATION_BIAS, **overrides}

@@ -154,8 +154,9 @@ class MekfConfig(GyroNoiseConfig):
     `visual_noise_share_frames`). Networks' normals err more and longer
     (`pipeline.stages.LEARNED_NORMALS_VISUAL_BIAS`); with an accelerometer without gyro too, its tilt then the
     accelerometer's and the image rotations' (`ImageRotationMotion.bias_on`).
-    Real TUM fr1 rpy, depth normals+lines, no IMU: train ARE 4.94 -> 4.08 deg (NEES 2.73 -> 4.04), eval 3.78
-    -> 3.51 (single 3.71; NEES 1.42 -> 2.98); ICL kt3 depth 0.11 -> 0.12 (NEES 1.72 -> 1.53)."""
+    Real TUM fr1 rpy, depth normals+lines, no IMU (replay of the branch, before the steady part of nees14):
+    train ARE 4.94 -> 4.08 deg (NEES 2.73 -> 4.04), eval 3.78 -> 3.51 (single 3.71; NEES 1.42 -> 2.98); ICL kt3
+    depth 0.11 -> 0.12 (NEES 1.72 -> 1.53). `bench realdata` on main since: TUM eval depth 3.51, NEES 4.46."""
     image_rotation_visual_bias_correlation_s: float = Field(3.0, gt=0.0, le=600.0)
     """The visual bias's correlation time, s (`image_rotation_visual_bias_std_rad`)."""
     image_rotation_visual_bias_max_share: float = Field(0.25, gt=0.0, le=1e6)

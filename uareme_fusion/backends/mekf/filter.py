@@ -396,7 +396,6 @@ class Mekf(Backend):
             rejected = visual_update(self, visual, self.motion.visual_noise_scale(self), rows)
             if not rejected and shared:
                 self.noise_share.take(self.t_state, visual)  # labelled by the track (`labelling_track.py`)
-            self.motion.observe_visual(self, self.t_state, visual)
         if rejected and not visual.is_finite():  # gated out, counted, and no sign of a new scene alignment
             self._count_nonfinite()
         if not rejected or self.rejections < self.config.reinit_after_rejections:

@@ -23,7 +23,7 @@ The noise density (`accel_only_noise_rad_sqrt_s`) is a handheld camera's, fitted
 training frames: the Kinect's accelerometer reads the camera's accelerations too (its 0.2 s mean direction
 errs 2.7 deg there with the true rotation known). Learning it per run from the data was tried and is not
 used (same frames, mekf, tilt after the alignment, depth / learned normals, measured with the learned
-normals' visual bias cap at 0.15 of the frame's variance, before it was 0.3; fixed 0.015 then: 1.48 / 1.82 deg):
+normals' visual bias cap then at 0.15 of the frame's variance (0.3 since); fixed 0.015 then: 1.48 / 1.82 deg):
 - from the gravity update's own innovations (Mehra's `mean |r|^2 - H P H^T`, over 30-240 frames): the error
   lasts longer than a window (the camera's swing) and the prediction follows it, so the innovations stay
   small and the accelerometer over-trusted (1.55-1.69 / 1.80-2.17 deg, NEES 11-50);

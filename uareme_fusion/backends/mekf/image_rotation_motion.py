@@ -85,11 +85,11 @@ class ImageRotationMotion(ConstantRateMotion):
         if before is not None:
             filt.t_state, filt.R_wc, filt.R_wm, filt.P, filt.omega_c = before
         self.measures_motion = t_s > filt.t_state
-        before_t = filt.t_state
+        t_before_s = filt.t_state
         if self.measures_motion:
             self.predict_by_image(filt, t_s, visual.R_cp, float(visual.R_cp_std_rad) ** 2)
             if self.has_bias(filt):
-                visual_bias_predict(filt, t_s - before_t, bias_std_rad(filt.config, visual),
+                visual_bias_predict(filt, t_s - t_before_s, bias_std_rad(filt.config, visual),
                                     filt.config.image_rotation_visual_bias_correlation_s)
 
     def predict_by_image(self, filt, t_s: float, R_cp: np.ndarray, var_rad2: float) -> None:

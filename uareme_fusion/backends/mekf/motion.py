@@ -60,9 +60,6 @@ class ConstantRateMotion:
         1 when that is off)."""
         return filt.noise_share.share if filt.noise_share.enabled else 1.0
 
-    def observe_visual(self, filt, t_s: float, visual: VisualRotation) -> None:
-        """A frame's visual rotation as fused at `t_s` (s), labelled (nothing here)."""
-
     def persistent_cov(self, filt) -> np.ndarray:
         """(3, 3) rad^2 added to the reported covariance: the current frame's persistent error, which the
         filter following the frames carries (`VisualNoiseShare.persistent_cov`)."""
