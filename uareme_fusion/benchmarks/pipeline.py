@@ -89,8 +89,9 @@ class MemoryProbe:
         pass
 
 
-FPS_GOAL = 20.0
-"""640x480, both cues, learned normals, EKF and file sinks (issue 12)."""
+FPS_GOAL = 40.0
+"""640x480, both cues, learned normals, EKF and file sinks (issue 29's ">= 40 fps on this 2-core machine"; issue 12
+asked 20)."""
 
 
 class CpuClock:
@@ -173,7 +174,7 @@ def memory(minutes: float = 10.0, normals: str = "learned", fps: float = 30.0) -
 
 def run(seconds: float = 10.0, memory_minutes: float = 10.0, normals: str = "learned",
         threads: int | None = None) -> dict:
-    """Print and return the figures against the goals (>= 20 fps, >= 0.5x of it beside a busy
+    """Print and return the figures against the goals (>= 40 fps, >= 0.5x of it beside a busy
     process, < 20 MB growth)."""
     source = ReplaySource("room", seconds)
     result = {"throughput": throughput(seconds, normals, threads, source)}
