@@ -65,6 +65,7 @@ from ..formats.images import natural_key
 from ..pinhole import focal_from_hfov
 from ..rotations import log_so3, nearest_symmetric
 from ..scoring.horizon import horizon_error
+from .realdata import BACKENDS
 
 AUC_CUTOFF = 0.25
 CPU_TIME_NOTE = "CPU: what a photo costs on an idle core (process time); wall grows with the machine's load"
@@ -257,41 +258,24 @@ def icl_scores(folder: Path, cues: str) -> dict:
             "hfov_error_percent": 100.0 * abs(np.median(est) - true_hfov) / true_hfov if est else float("nan")}
 
 
-BACKENDS_COMPARED = ("single", "mekf", "smoother")
+BACKENDS_COMPARED = BACKENDS
+"""The backends scored on the RGB-only sequences: `bench realdata`'s."""
 
 
 def backend_errors(sequence, info=None) -> tuple[dict, dict]:
     """Each of `BACKENDS_COMPARED` run on one `VisualSequence` with a reference: its per-frame errors
     (`errors_over_time`) by name, and a note for each backend that could not be made. With the source's
     `info`, each backend is made as `run --normals learned` makes it for that source
-    (`stages.backend_for_run`: for ICSL, K from the scene, no visual bias state); without, with its
-    defaults (`compare.make_backends`)."""
+    (`realdata.backend_errors`, through `stages.backend_for_run`: for ICSL, K from the scene, no visual bias
+    state); without, with its defaults (`compare.make_backends`)."""
     from ..evaluation.compare import errors_over_time, make_backends, run_backend
+    from .realdata import backend_errors as backend_errors_for_run
 
-    if info is None:
-        backends, notes = make_backends(BACKENDS_COMPARED)
-    else:
-        backends, notes = run_backends(info)
+    if info is not None:
+        return backend_errors_for_run(sequence, info, "learned"), {}
+    backends, notes = make_backends(BACKENDS_COMPARED)
     return {name: errors_over_time(run_backend(backend, sequence), sequence.R_wc_true)
             for name, backend in backends.items()}, notes
-
-
-def run_backends(info) -> tuple[dict, dict]:
-    """`BACKENDS_COMPARED` made as `run --normals learned` makes them for a camera-only source `info`, and a
-    note for each that could not be made."""
-    import dataclasses
-
-    from ..pipeline import RunConfig
-    from ..pipeline.stages import backend_for_run
-
-    camera_only = dataclasses.replace(info, R_ci=np.eye(3), imu_time_offset_s=0.0, has_imu=False)
-    backends, notes = {}, {}
-    for name in BACKENDS_COMPARED:
-        try:
-            backends[name] = backend_for_run(RunConfig(backend=name, normals="learned"), camera_only)
-        except ImportError as exc:
-            notes[name] = f"not available ({exc})"
-    return backends, notes
 
 
 def backend_rows(errors: dict, notes: dict) -> dict:
