@@ -126,14 +126,19 @@ class DepthWhereAvailable:
         return None if frame.depth is None else self.estimator.estimate_frame(frame)
 
 
+def auto_takes_depth(info: SourceInfo) -> bool:
+    """Whether `--normals auto` takes depth's normals for the source `info`: it has depth maps and intrinsics."""
+    return info.has_depth and info.K is not None
+
+
 def make_normal_estimator(spec: str, info: SourceInfo, threads: int | None = None):
     """The normal estimator named by `spec` (see `RunConfig.normals`); checks that the source can feed it.
     `threads`: torch CPU threads of a learned network (None: `LearnedNormalsConfig`'s default)."""
     from ..normals.depth import depth_normals_for
 
     if spec == "auto":
-        with_depth = info.has_depth and info.K is not None
-        return AutoNormals(info.name, threads, DepthWhereAvailable(depth_normals_for(info)) if with_depth else None)
+        depth = DepthWhereAvailable(depth_normals_for(info)) if auto_takes_depth(info) else None
+        return AutoNormals(info.name, threads, depth)
     if spec == "source":
         return SourceNormals(info.name)
     if spec == "depth":
@@ -211,7 +216,7 @@ def image_normals(spec: str, info: SourceInfo) -> bool:
     source's or precomputed maps: learned, a model file, or auto on a source without depth maps and
     intrinsics (`AutoNormals` then takes the network; a simulator's own normals are counted with them)."""
     if spec == "auto":
-        return not (info.has_depth and info.K is not None)
+        return not auto_takes_depth(info)
     return spec == "learned" or Path(spec).suffix.lower() in MODEL_FILE_SUFFIXES
 
 
