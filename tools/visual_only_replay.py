@@ -6,7 +6,7 @@ backends without an IMU (EuRoC's IMU is dropped: the camera alone) in seconds, p
 cue set each backend's ARE beside `single`'s and the paired 95 % interval (`bench realdata`'s figures).
 
 Usage:
-  python tools/visual_only_replay.py --build --cache /tmp/visual_only.pkl [--data ../shared/data]
+  python tools/visual_only_replay.py --build --cache /tmp/visual_only.pkl [--data ../shared/data] [--tum-split train]
   python tools/visual_only_replay.py --cache /tmp/visual_only.pkl [MORE.pkl ...] [--only tum,icsl_more]
 """
 
@@ -21,14 +21,14 @@ from pathlib import Path
 import numpy as np
 
 
-def build(data: Path, cache: Path, wanted) -> None:
+def build(data: Path, cache: Path, wanted, tum_split: str = "eval") -> None:
     from uareme_fusion.benchmarks import realdata
     from uareme_fusion.formats.fetched import tum_rpy_root, tum_rpy_split
 
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         root = tum_rpy_root()
-        tum_dir = tum_rpy_split(root, "eval", Path(tmp)) if root is not None else None
+        tum_dir = tum_rpy_split(root, tum_split, Path(tmp)) if root is not None else None
         found, skipped = realdata.sequences(data, tum_dir, wanted)
         print("\n".join(skipped))
         for seq in found:
@@ -37,8 +37,9 @@ def build(data: Path, cache: Path, wanted) -> None:
                     continue
                 visual, info, _ = realdata.cue_set_sequence(seq, normals, cues, None, lambda *a: None)
                 visual = dataclasses.replace(visual, imu_t_s=None, imu_gyro_rad_s=None, imu_accel_m_s2=None)
-                out[(seq.name, cue)] = (visual, info)
-                print(f"{seq.name}: {cue}: {len(visual.t_frame_s)} frames", flush=True)
+                name = seq.name if tum_split == "eval" or seq.key != "tum" else seq.name.replace("eval", tum_split)
+                out[(name, cue)] = (visual, info)
+                print(f"{name}: {cue}: {len(visual.t_frame_s)} frames", flush=True)
                 with open(cache, "wb") as f:
                     pickle.dump(out, f)
 
@@ -72,6 +73,8 @@ def main() -> None:
     p.add_argument("--cache", type=Path, nargs="+", required=True)
     p.add_argument("--build", action="store_true")
     p.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[1] / ".." / "shared" / "data")
+    p.add_argument("--tum-split", choices=("eval", "train"), default="eval",
+                   help="--build: the TUM fr1 rpy frames to solve (train: for tuning; eval: never tuned on)")
     p.add_argument("--only", default=None, help="comma-separated sequence keys")
     p.add_argument("--mekf", nargs="*", default=[], help="MekfConfig overrides KEY=VALUE")
     p.add_argument("--smoother", nargs="*", default=[], help="SmootherConfig overrides KEY=VALUE")
@@ -79,7 +82,7 @@ def main() -> None:
     only = a.only.split(",") if a.only else None
     if a.build:
         from uareme_fusion.benchmarks.realdata import SEQUENCES
-        build(a.data, a.cache[0], SEQUENCES if only is None else only)
+        build(a.data, a.cache[0], SEQUENCES if only is None else only, a.tum_split)
     else:
         replay(a.cache, only, dict(kv.split("=", 1) for kv in a.mekf), dict(kv.split("=", 1) for kv in a.smoother))
 
