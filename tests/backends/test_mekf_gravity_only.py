@@ -298,3 +298,34 @@ def test_non_finite_and_backward_samples_are_dropped_and_counted():
     filt.process_accel(np.array([0.00, 0.01, 0.02, 0.015, 0.03]), accel)  # NaN at 0.01, 0.015 steps back
     np.testing.assert_allclose(filt.gravity_only.t_s, [0.00, 0.02, 0.03])
     assert filt.counters["accel_only_dropped"] == 2
+
+
+def test_tilt_shares_of_an_accelerometer_without_gyro():
+    """Each estimate reports the accelerometer's and the camera's share of the tilt information
+    (`Estimate.tilt_shares`, written to estimates.csv): they sum to 1; a precise camera's share exceeds a
+    shaky accelerometer's and a noisy camera's falls below it; the accelerometer's share is 0 while its
+    stream stopped, and 0 stays 0 for the camera on frames it gave nothing; without samples at all, the
+    camera alone (NaN, 1)."""
+    def shares(visual_std_rad, accel_std_m_s2, **kw):
+        t_f, visuals, R_true, t_a, accel = simulate(visual_std_rad=visual_std_rad, accel_std_m_s2=accel_std_m_s2, **kw)
+        est = run(config(), t_f, visuals, t_a, accel)[1]
+        return t_f, np.array([e.tilt_shares for e in est])
+
+    t_f, precise = shares(0.002, 0.5)
+    _, noisy = shares(0.1, 0.05)
+    steady = slice(30, None)
+    for s in (precise, noisy):
+        assert np.all(np.isfinite(s[steady])) and np.allclose(s[steady].sum(axis=1), 1.0)
+    assert np.median(precise[steady, 1]) > 0.5 > np.median(noisy[steady, 1]), (precise[steady].mean(0), noisy[steady].mean(0))
+
+    t_f, stopped = shares(0.01, 0.05, accel_stop_s=3.0)
+    assert np.all(stopped[t_f > 3.0, 0] == 0.0) and np.all(stopped[t_f > 3.0, 1] == 1.0)
+    assert np.all(stopped[(t_f > 1.0) & (t_f < 2.9), 0] > 0.0)
+
+    t_f, visuals, _, t_a, accel = simulate(visual_std_rad=0.01, accel_std_m_s2=0.05)
+    visuals = [None if 60 <= k < 70 else v for k, v in enumerate(visuals)]
+    est = run(config(), t_f, visuals, t_a, accel)[1]
+    assert all(e.tilt_shares == (1.0, 0.0) for e in est[60:70])
+
+    est = run(config(), *simulate(visual_std_rad=0.01)[:2])[1]
+    assert all(np.isnan(e.tilt_shares[0]) and e.tilt_shares[1] == 1.0 for e in est)

@@ -46,6 +46,7 @@ from scipy.spatial.transform import Rotation
 from ...rotations import manhattan_symmetries, skew
 from . import status_bits
 from .measurements import correlated_noise_scale, gravity_model
+from .source_trust import note_accel_information
 from .state import I3, MF, N_STATE, RATE, TH
 
 KEEP_S = 1.0
@@ -125,6 +126,9 @@ class GravityOnly:
         shake_factor = 1.0 + shake2 / cfg.accel_only_shake_m_s2**2
         dt = np.inf if self._t_update_s is None else t_s - self._t_update_s
         var *= shake_factor * correlated_noise_scale(dt, cfg.accel_only_window_s)
+        # Its tilt information per second (`Estimate.tilt_shares`): one update of `var` per `dt` (the first,
+        # per window); overlapping windows are counted once by the scale above.
+        note_accel_information(filt.views["s"], var, dt if np.isfinite(dt) else cfg.accel_only_window_s)
         self._t_update_s = t_s
         self.counts["accel_only_updates"] += 1
         if downweighted or shake_factor > cfg.accel_downweight_flag_ratio**2:
