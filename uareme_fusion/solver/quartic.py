@@ -27,14 +27,17 @@ _TWICE_CROSS = np.array([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
 def normalised_cost(G: np.ndarray, W: float, R_cm: np.ndarray) -> np.ndarray:
     """Paper eq. 1 summed over axes and pixels, divided by sum w: 1 - sum_k sum_i w_i (n_i.r_k)^4 / W.
 
-    `R_cm` may be a stack (..., 3, 3); the result has shape (...). One rotation (a solver iteration)
-    runs compiled (`_fourth_moment_sum`; numpy's small products cost 13 us a call, the kernel 1).
+    `R_cm` may be a stack (..., 3, 3); the result has shape (...). Compiled when numba is there
+    (`_fourth_moment_sums`; numpy's small products cost 13 us for one rotation, the kernel 1).
     """
     global _fourth_kernel
     R = np.asarray(R_cm, dtype=float)
-    if R.shape == (3, 3) and _fourth_kernel is not None:
+    if _fourth_kernel is not None and R.ndim >= 2 and R.shape[-2:] == (3, 3):
+        stack, fourth = np.ascontiguousarray(R.reshape(-1, 3, 3)), np.empty(int(np.prod(R.shape[:-2])))
         try:
-            return np.float64(1.0 - _fourth_kernel(G, R) / W)
+            _fourth_kernel(G, stack, fourth)
+            cost = 1.0 - fourth / W
+            return cost[0] if R.ndim == 2 else cost.reshape(R.shape[:-2])
         except Exception as exc:  # noqa: BLE001 -- a compiler failure falls back to numpy
             jit.disable(exc)
             _fourth_kernel = None
@@ -43,22 +46,23 @@ def normalised_cost(G: np.ndarray, W: float, R_cm: np.ndarray) -> np.ndarray:
     return 1.0 - fourth / W
 
 
-def _fourth_moment_sum(G, R):
-    """sum_k a_k^T G a_k with a_k = `axis_monomials` of the column r_k of one rotation R (3, 3)."""
+def _fourth_moment_sums(G, Rs, out):
+    """out[i] = sum_k a_k^T G a_k for each rotation Rs[i] (n, 3, 3), a_k = `axis_monomials` of its column r_k."""
     a = np.empty(6)
-    total = 0.0
-    for k in range(3):
-        x, y, z = R[0, k], R[1, k], R[2, k]
-        a[0], a[1], a[2], a[3], a[4], a[5] = x * x, y * y, z * z, 2.0 * x * y, 2.0 * x * z, 2.0 * y * z
-        for j in range(6):
-            row = 0.0
-            for i in range(6):
-                row += a[i] * G[i, j]
-            total += row * a[j]
-    return total
+    for s in range(Rs.shape[0]):
+        total = 0.0
+        for k in range(3):
+            x, y, z = Rs[s, 0, k], Rs[s, 1, k], Rs[s, 2, k]
+            a[0], a[1], a[2], a[3], a[4], a[5] = x * x, y * y, z * z, 2.0 * x * y, 2.0 * x * z, 2.0 * y * z
+            for j in range(6):
+                row = 0.0
+                for i in range(6):
+                    row += a[i] * G[i, j]
+                total += row * a[j]
+        out[s] = total
 
 
-_fourth_kernel = jit.compiled(_fourth_moment_sum, cache=True, nogil=False)
+_fourth_kernel = jit.compiled(_fourth_moment_sums, cache=True, nogil=False)
 
 
 def gradient_hessian(T: np.ndarray, W: float, R_cm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
