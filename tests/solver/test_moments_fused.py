@@ -106,3 +106,36 @@ def test_compiled_line_moments_match_the_cube_product(n_segments):
     ref = sextic_tensor_reference(m.planes, m.weights)
     np.testing.assert_allclose(m.T, ref, rtol=0, atol=1e-12 * max(np.abs(ref).max(), 1e-300))
     np.testing.assert_array_equal(m.T, m.T.T)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compiled_costs_and_normal_derivatives_of_one_rotation_match_numpy(seed, monkeypatch):
+    """The compiled forms against the numpy paths: the quartic's cost (one rotation and a stack), gradient and
+    Hessian (`quartic._fourth_kernel`, `_derivatives_kernel`) and equation (L) (`lines._form_kernel`)."""
+    from uareme_fusion.rotations import exp_so3
+    from uareme_fusion.solver import lines, quartic
+    from uareme_fusion.solver.moments import normal_moments
+
+    rng = np.random.default_rng(seed)
+    n = rng.normal(size=(30, 40, 3))
+    moments = normal_moments(n / np.linalg.norm(n, axis=-1, keepdims=True), rng.uniform(0.5, 20.0, size=(30, 40)))
+    p = rng.normal(size=(60, 3))
+    segments = line_moments(p / np.linalg.norm(p, axis=1, keepdims=True), rng.uniform(0.1, 1.0, size=60))
+    R = exp_so3(rng.normal(size=3))
+    G, T, W = moments.G, moments.tensor(), moments.total_weight
+    cost, line_cost = quartic.normalised_cost(G, W, R), lines.normalised_line_cost(segments, R)
+    grad, hess = quartic.gradient_hessian(T, W, R)
+    stack = exp_so3(rng.normal(size=(4, 5, 3)))
+    costs, line_costs = quartic.normalised_cost(G, W, stack), lines.normalised_line_cost(segments, stack)
+    assert np.ndim(cost) == 0 and np.ndim(line_cost) == 0 and costs.shape == line_costs.shape == (4, 5)
+    for name in ("_fourth_kernel", "_derivatives_kernel"):
+        monkeypatch.setattr(quartic, name, None)
+    monkeypatch.setattr(lines, "_form_kernel", None)
+    assert cost == pytest.approx(quartic.normalised_cost(G, W, R), rel=0, abs=1e-14)
+    assert line_cost == pytest.approx(lines.normalised_line_cost(segments, R), rel=1e-12, abs=1e-300)
+    assert line_cost == pytest.approx(lines.normalised_line_cost(segments, R[None])[0], rel=1e-12, abs=1e-300)
+    np.testing.assert_allclose(costs, quartic.normalised_cost(G, W, stack), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(line_costs, lines.normalised_line_cost(segments, stack), rtol=1e-12, atol=0)
+    grad_ref, hess_ref = quartic.gradient_hessian(T, W, R)
+    np.testing.assert_allclose(grad, grad_ref, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(hess, hess_ref, rtol=0, atol=1e-13)

@@ -245,7 +245,7 @@ class JointSolver:
         return R, cues, iterations, converged
 
     def joint_cost(self, cues: list[_Cue], R) -> float:
-        return float(sum(w * c.cost(R) for w, c in zip(_steering_weights(cues), cues)))
+        return _weighted_cost(cues, _steering_weights(cues), R)
 
     def _refine(self, cues: list[_Cue], R0: np.ndarray) -> tuple[np.ndarray, int, float, bool]:
         """Levenberg-Marquardt on SO(3) over J (Hessian scaled by the sum of the weights); O(1) per iteration."""
@@ -255,12 +255,12 @@ class JointSolver:
         def gradient_hessian(R):
             grad, hess = np.zeros(3), np.zeros((3, 3))
             for w, c in zip(weights, cues):
-                _, g, h = c.derivatives(R)
+                g, h = c.gradient_hessian(R)
                 grad += w * g
                 hess += w * h
             return grad / scale, hess / scale
 
-        return levenberg_marquardt_so3(lambda R: self.joint_cost(cues, R) / scale, gradient_hessian, R0,
+        return levenberg_marquardt_so3(lambda R: _weighted_cost(cues, weights, R) / scale, gradient_hessian, R0,
                                        self.config.max_iterations, self.config.step_tolerance_rad)
 
     # --- covariance -------------------------------------------------------------------------------
@@ -297,6 +297,11 @@ def _labelled(cues: list[_Cue], R_cm: np.ndarray) -> np.ndarray:
     for c in cues:
         R_cm = c.labelled(R_cm)
     return R_cm
+
+
+def _weighted_cost(cues: list[_Cue], weights: list[float], R) -> float:
+    """J at R: sum_c w_c E_c(R) with the weights given (`_steering_weights` of the cues, set once per refinement)."""
+    return float(sum(w * c.cost(R) for w, c in zip(weights, cues)))
 
 
 def _steering_weights(cues: list[_Cue]) -> list[float]:

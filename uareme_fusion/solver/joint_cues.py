@@ -96,6 +96,11 @@ class _Cue:
     def derivatives(self, R) -> tuple[float, np.ndarray, np.ndarray]:
         raise NotImplementedError
 
+    def gradient_hessian(self, R) -> tuple[np.ndarray, np.ndarray]:
+        """`derivatives` without the cost, for the solver's iterations (a cue whose cost is a separate
+        evaluation skips it there)."""
+        return self.derivatives(R)[1:]
+
     def information_hessian(self, R) -> np.ndarray:
         """The H_c of the covariance (the cost's Hessian unless a cue says otherwise)."""
         return self.derivatives(R)[2]
@@ -127,6 +132,7 @@ class _NormalCue(_Cue):
     random_cost = RANDOM_NORMALS_COST
     regions_cost = None
     """`NormalMap.regions_cost` of the map (`manhattan.surface_regions`)."""
+    _tensor = None
 
     def set_alpha(self, R, discounted: bool = True) -> None:
         """a_c of any cue, its n_c shrunk by `surface_regions` at the cost there (as the normals-only solver)."""
@@ -134,11 +140,16 @@ class _NormalCue(_Cue):
         self.alpha = surface_regions(self.n_effective, cost, self.regions_cost) / (self.scale * max(cost, self.min_cost))
 
     def cost(self, R):
-        return np.clip(normalised_cost(self.moments.G, self.moments.total_weight, R), 0.0, 1.0)
+        cost = normalised_cost(self.moments.G, self.moments.total_weight, R)
+        return np.clip(cost, 0.0, 1.0) if np.ndim(cost) else min(max(cost, 0.0), 1.0)  # (np.clip: 4 us a scalar)
 
     def derivatives(self, R):
-        g, h = gradient_hessian(self.moments.tensor(), self.moments.total_weight, R)
-        return float(self.cost(R)), g, h
+        return (float(self.cost(R)),) + self.gradient_hessian(R)
+
+    def gradient_hessian(self, R):
+        if self._tensor is None:  # the moments' (3, 3, 3, 3) form, once per cue (copies share it)
+            self._tensor = self.moments.tensor()
+        return gradient_hessian(self._tensor, self.moments.total_weight, R)
 
     def summary(self) -> dict:
         return {"valid_pixels": self.moments.n_valid}

@@ -16,6 +16,8 @@ from ..rotations import exp_so3
 DAMPING_START = 1e-6
 DAMPING_MIN = 1e-9
 DAMPING_GIVE_UP = 1e8
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
 
 
 def levenberg_marquardt_so3(cost: Callable[[np.ndarray], float],
@@ -34,7 +36,7 @@ def levenberg_marquardt_so3(cost: Callable[[np.ndarray], float],
         eig_min = np.linalg.eigvalsh(hess)[0]
         # Levenberg-Marquardt: a shift that makes the model convex, grown while steps fail.
         mu = max(damping, DAMPING_MIN - eig_min)
-        step = np.linalg.solve(hess + mu * np.eye(3), -grad)
+        step = np.linalg.solve(hess + mu * _EYE3, -grad)
         R_new = R @ exp_so3(step)
         if np.linalg.norm(step) < step_tolerance_rad:
             # Converged: below this the cost change is under double precision anyway.
