@@ -26,12 +26,12 @@ from .compiled import (STAGE_ROWS, accel_update, harvest_kernel_counters, integr
                        visual_distance, visual_update)
 from .config import GyroSampling, MekfConfig, MekfMode
 from .gravity_only import GravityOnly
-from .image_rotation_motion import ImageRotationMotion, bias_std_rad
+from .image_rotation_motion import ImageRotationMotion
 from .motion import ConstantRateMotion, GyroMotion
 from .parameters import KernelParameters
 from .scene import ignored_too_long, initialise_manhattan
 from .segments import process_imu_segments
-from .source_trust import note_visual_information, tilt_shares
+from .source_trust import tilt_shares
 from .status_bits import status_of
 from .state import I3
 from .state_buffer import ESTIMATE_INDEX, BufferArray, BufferScalar, field_views, new_state_buffer
@@ -222,8 +222,6 @@ class Mekf(Backend):
             return None
         rows, bits = self.gravity_only.update_rows(self)
         self.flags |= bits
-        if rows is None:
-            self.accel_info_rate = 0.0  # no share while the accelerometer gives nothing
         return rows
 
     def _gravity_update(self) -> None:
@@ -385,42 +383,26 @@ class Mekf(Backend):
         accel_update(self)
 
     def _fuse_visual(self, visual: VisualRotation) -> bool:
-        """A frame's visual update in one kernel call (`compiled.visual_update`): with an IMU, a due
-        accelerometer update stacked in; visual only, the gravity rows of an accelerometer without gyro
-        (`_gravity_rows`) stacked in and the covariance cut to its independent share
-        (`VisualNoiseShare`). Re-initialises after `reinit_after_rejections` frames gated out. True
-        when the kernel's estimate (`estimate_out`) is the frame's (with an IMU)."""
+        """A frame's visual update in one kernel call (`compiled.visual_update`): with an IMU, a due accelerometer
+        update stacked in; visual only, the gravity rows of an accelerometer without gyro (`_gravity_rows`) stacked
+        in and the covariance cut to its independent share (`VisualNoiseShare`). Re-initialises after
+        `reinit_after_rejections` frames gated out. True when the kernel's estimate (`estimate_out`) is the frame's."""
         if self.motion.uses_imu:
             rejected = visual_update(self, visual)
         else:
-            rows = self._gravity_rows()
-            shared = self.noise_share.enabled
-            scale = self.motion.visual_noise_scale(self)
-            t_previous_s = self.t_visual_s
+            rows, shared = self._gravity_rows(), self.noise_share.enabled
+            scale, t_previous_s = self.motion.visual_noise_scale(self), self.t_visual_s
             rejected = visual_update(self, visual, scale, rows)
             if not rejected and shared:
                 self.noise_share.take(self.t_state, visual)  # labelled by the track (`labelling_track.py`)
             if not rejected and self.gravity_only.active:
-                self._note_visual_tilt_information(visual, scale, t_previous_s)
+                self.gravity_only.note_visual_information(self, visual, scale, t_previous_s)
         if rejected and not visual.is_finite():  # gated out, counted, and no sign of a new scene alignment
             self._count_nonfinite()
         if not rejected or self.rejections < self.config.reinit_after_rejections:
             return self.motion.uses_imu
         self._reinitialise(visual)
         return False
-
-    def _note_visual_tilt_information(self, visual: VisualRotation, scale: float, t_previous_s) -> None:
-        """Visual only, beside an accelerometer without gyro: the camera's tilt information per second
-        (`Estimate.tilt_shares`), as with an IMU (`source_trust.note_visual_information`): the frame's tilt
-        variance as fused (`scale` times its own, on the Manhattan frame's x and y axes) plus what the
-        Manhattan frame's lean from gravity may be, the visual bias's variance when it is a state
-        (`ImageRotationMotion.has_bias`), else the walls-vertical prior's (`manhattan_vertical_std_rad`),
-        for one frame per the time since the previous visual update (`t_previous_s`, s; None: the first)."""
-        cfg = self.config
-        has_bias = getattr(self.motion, "has_bias", lambda filt: False)(self)
-        lean_std_rad = bias_std_rad(cfg, visual) if has_bias else cfg.manhattan_vertical_std_rad
-        dt_s = self.t_state - t_previous_s if t_previous_s is not None else 0.0
-        note_visual_information(self.views["s"], np.asarray(visual.cov) * scale, 1.0, lean_std_rad**2, dt_s)
 
     def _ignored_too_long(self, t_s: float, visual: VisualRotation) -> bool | None:
         """`scene.ignored_too_long`: whether to re-initialise from `visual` (True), fuse it (None) or,
@@ -485,10 +467,9 @@ class Mekf(Backend):
         cov *= 0.5
         if not self.motion.uses_imu:
             cov += self.motion.persistent_cov(self)
-            shares = tilt_shares(self.accel_info_rate, self.visual_info_rate) if self.gravity_only.active else _CAMERA_ONLY
-            bias_i = None
-        else:
-            bias_i, shares = self._bias_in_imu(b_c[0]), tilt_shares(self.accel_info_rate, self.visual_info_rate)
+        bias_i = self._bias_in_imu(b_c[0]) if self.motion.uses_imu else None
+        shares = (tilt_shares(self.accel_info_rate, self.visual_info_rate)
+                  if self.motion.uses_imu or self.gravity_only.active else _CAMERA_ONLY)
         return Estimate(t_s, R_wc, cov, status_of(bits), R_wm if self.manhattan_initialised else None, bias_i, shares)
 
 

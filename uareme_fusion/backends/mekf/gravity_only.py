@@ -45,8 +45,9 @@ from scipy.spatial.transform import Rotation
 
 from ...rotations import manhattan_symmetries, skew
 from . import status_bits
+from .image_rotation_motion import bias_std_rad
 from .measurements import correlated_noise_scale, gravity_model
-from .source_trust import note_accel_information
+from .source_trust import note_accel_information, note_visual_information
 from .state import I3, MF, N_STATE, RATE, TH
 
 KEEP_S = 1.0
@@ -99,6 +100,13 @@ class GravityOnly:
         self.accel_c = np.concatenate([self.accel_c, a[keep] @ self.R_ci.T])
 
     def update_rows(self, filt):
+        """`gravity_rows`, and no tilt share for the accelerometer while it gives nothing (`Estimate.tilt_shares`)."""
+        rows, bits = self.gravity_rows(filt)
+        if rows is None:
+            filt.views["s"].accel_info_rate = 0.0
+        return rows, bits
+
+    def gravity_rows(self, filt):
         """The gravity measurement of filter `filt` (a visual-only `Mekf`) at its state time from the
         samples of the trailing window: `((residual (3,), R (3, 3), H (3, 12)) or None, status bits)`.
         The first one relabels the world so that its z is the Manhattan axis nearest the measured up
@@ -134,6 +142,20 @@ class GravityOnly:
         if downweighted or shake_factor > cfg.accel_downweight_flag_ratio**2:
             bits |= status_bits.ACCEL_DOWNWEIGHTED
         return (r, var * I3, H), bits
+
+    @staticmethod
+    def note_visual_information(filt, visual, scale: float, t_previous_s) -> None:
+        """The camera's tilt information per second beside this accelerometer (`Estimate.tilt_shares`), as
+        with an IMU (`source_trust.note_visual_information`): the frame's tilt variance as fused (`scale`
+        times its own, on the Manhattan frame's x and y axes) plus what the Manhattan frame's lean from
+        gravity may be, the visual bias's variance when it is a state (`ImageRotationMotion.has_bias`), else
+        the walls-vertical prior's (`manhattan_vertical_std_rad`), one frame per the time since the previous
+        visual update (`t_previous_s`, s; None: the first) of the visual-only filter `filt`."""
+        cfg = filt.config
+        has_bias = getattr(filt.motion, "has_bias", lambda f: False)(filt)
+        lean_std_rad = bias_std_rad(cfg, visual) if has_bias else cfg.manhattan_vertical_std_rad
+        dt_s = filt.t_state - t_previous_s if t_previous_s is not None else 0.0
+        note_visual_information(filt.views["s"], np.asarray(visual.cov) * scale, 1.0, lean_std_rad**2, dt_s)
 
     def window_mean(self, t_s: float, omega_c: np.ndarray, cfg):
         """`(mean specific force (3,) m/s^2 or None, its derivative by the rate (3, 3) s*m/s^2, time it

@@ -30,7 +30,7 @@ Shares (reported per estimate): information per second on tilt of each source, t
 (v_vis the visual tilt variance of one frame, dt the time between visual updates);
 `share_visual = I_vis / (I_vis + I_acc)`. Visual only beside an accelerometer without gyro (`gravity_only.py`)
 the same, with the gravity update's variance per update interval and, in place of the vertical variance, what
-the Manhattan frame's lean may be (`Mekf._note_visual_tilt_information`).
+the Manhattan frame's lean may be (`GravityOnly.note_visual_information`).
 
 Functions on the filter's state record `s` (`state_buffer.py`: scalar fields by name): the compiled
 kernels call the very same ones.
