@@ -49,14 +49,12 @@ def image_rotations_are_deg(visual) -> float:
     """Mean ARE (deg, after the constant alignment) of the image rotations between frames alone
     (`VisualRotation.R_cp`, chained from the first frame; a frame without one keeps the previous attitude):
     what the frames' absolute rotations add to, or take from, the visual odometry."""
-    from uareme_fusion.scoring.metrics import attitude_errors
+    from uareme_fusion.rotations import are_deg
 
     R_wc = [np.eye(3)]
     for v in visual.visuals[1:]:
         R_wc.append(R_wc[-1] if v is None or v.R_cp is None else R_wc[-1] @ v.R_cp.T)  # R_wc = R_wc_p R_cp^T
-    n = len(R_wc)
-    err = attitude_errors(np.array(R_wc), np.tile(np.eye(3), (n, 1, 1)), np.ones(n, bool), visual.R_wc_true, False, None)
-    return float(np.nanmean(err["are_deg"]))
+    return float(np.mean(are_deg(np.array(R_wc), visual.R_wc_true)))
 
 
 def replay(caches: list[Path], only: list[str] | None, mekf: dict | None = None, smoother: dict | None = None) -> dict:

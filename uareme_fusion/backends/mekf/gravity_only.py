@@ -152,8 +152,7 @@ class GravityOnly:
         the walls-vertical prior's (`manhattan_vertical_std_rad`), one frame per the time since the previous
         visual update (`t_previous_s`, s; None: the first) of the visual-only filter `filt`."""
         cfg = filt.config
-        has_bias = getattr(filt.motion, "has_bias", lambda f: False)(filt)
-        lean_std_rad = bias_std_rad(cfg, visual) if has_bias else cfg.manhattan_vertical_std_rad
+        lean_std_rad = bias_std_rad(cfg, visual) if filt.motion.has_bias(filt) else cfg.manhattan_vertical_std_rad
         dt_s = filt.t_state - t_previous_s if t_previous_s is not None else 0.0
         note_visual_information(filt.views["s"], np.asarray(visual.cov) * scale, 1.0, lean_std_rad**2, dt_s)
 

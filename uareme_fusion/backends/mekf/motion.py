@@ -55,6 +55,11 @@ class ConstantRateMotion:
         (`kernel_visual.constant_rate_predict`)."""
         constant_rate_predict(filt, t_s, filt.config.rate_rw_rad_s2_sqrt_hz**2)
 
+    def has_bias(self, filt) -> bool:
+        """Whether the current frame is fused against the visual bias state: never with the rate alone
+        (`ImageRotationMotion.has_bias`)."""
+        return False
+
     def visual_noise_scale(self, filt) -> float:
         """The factor on a frame's visual covariance as fused: its independent share (`VisualNoiseShare`;
         1 when that is off)."""
