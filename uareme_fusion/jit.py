@@ -4,7 +4,10 @@
 imports (lazily, at its first call), and returns None otherwise, after one warning line. Callers then
 run the same function as plain Python (the EKF's kernels, `backends/mekf/kernels.py`) or a numpy
 reference beside it (the solver's moments), also when a kernel fails to compile (`disable`).
-`UAREME_NO_JIT=1` in the environment forces the plain paths (tests compare the two).
+`Kernel(fn, ...)` holds such a compiled function with its fallback state: calling it runs the kernel, or
+answers `FALLBACK` when there is none or it has failed once (then never again; one warning), and the
+caller takes its reference path. `UAREME_NO_JIT=1` in the environment forces the plain paths (tests
+compare the two).
 """
 
 from __future__ import annotations
@@ -99,3 +102,29 @@ def key_cache_by_sources(kernel, sources) -> None:
 def disable(exc: BaseException) -> None:
     """Report a kernel that failed to compile or run (one warning); the caller falls back."""
     _warn_once(f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
+
+
+FALLBACK = object()
+"""What a `Kernel` call answers when the caller must take its own reference path."""
+
+
+class Kernel:
+    """`compiled(fn, **options)` and its fallback state: `kernel(*args)` is the kernel's result, or
+    `FALLBACK` without numba or once the kernel has failed to compile or run (`disable`: one warning, and
+    it is not tried again). `bool(kernel)`: whether it may run (before building its output arrays)."""
+
+    def __init__(self, fn, **options):
+        self.dispatcher = compiled(fn, **options)
+
+    def __bool__(self) -> bool:
+        return self.dispatcher is not None
+
+    def __call__(self, *args):
+        if self.dispatcher is None:
+            return FALLBACK
+        try:
+            return self.dispatcher(*args)
+        except Exception as exc:  # noqa: BLE001 -- a compiler or loader failure falls back to the reference
+            disable(exc)
+            self.dispatcher = None
+            return FALLBACK

@@ -299,7 +299,7 @@ def test_kernels_that_fail_to_compile_run_as_plain_python_after_one_warning(monk
     a, ea = run(lambda: Mekf(cfg), t, gyro, accel, 7, frames)  # compiled, for the figures
     for name in kernels.DRIVERS:
         monkeypatch.setattr(kernels, name, _broken_kernel)  # restored after the test
-    monkeypatch.setattr(imu_stream, "_ROWS_IF_CLEAN", _broken_kernel)
+    monkeypatch.setattr(imu_stream._ROWS_IF_CLEAN, "dispatcher", _broken_kernel)
     monkeypatch.setattr(jit, "_warned", False)
     monkeypatch.delenv("UAREME_NO_JIT", raising=False)
     try:
@@ -385,6 +385,6 @@ def test_warm_up_loads_every_kernel_a_filter_with_an_imu_calls():
             "loaded = lambda: ''.join(str(len(getattr(kernels, n).signatures)) for n in names)\n"
             "Mekf('handheld').warm_up(False, True); Mekf(MekfConfig(mode='visual_only')).warm_up(True, True)\n"
             "print(loaded()); Mekf('imu_only').warm_up(True, False); print(loaded())\n"
-            "Mekf('handheld').warm_up(True, True); print(loaded(), len(imu_stream._ROWS_IF_CLEAN.signatures))\n")
+            "Mekf('handheld').warm_up(True, True); print(loaded(), len(imu_stream._ROWS_IF_CLEAN.dispatcher.signatures))\n")
     # IMU-only: integrate, segments
     assert fresh_python(code, timeout_s=300).stdout.split() == ["0000000", "1010000", "1111111", "1"]

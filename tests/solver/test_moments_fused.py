@@ -128,9 +128,8 @@ def test_compiled_costs_and_normal_derivatives_of_one_rotation_match_numpy(seed,
     stack = exp_so3(rng.normal(size=(4, 5, 3)))
     costs, line_costs = quartic.normalised_cost(G, W, stack), lines.normalised_line_cost(segments, stack)
     assert np.ndim(cost) == 0 and np.ndim(line_cost) == 0 and costs.shape == line_costs.shape == (4, 5)
-    for name in ("_fourth_kernel", "_derivatives_kernel"):
-        monkeypatch.setattr(quartic, name, None)
-    monkeypatch.setattr(lines, "_form_kernel", None)
+    for kernel in (quartic._fourth_kernel, quartic._derivatives_kernel, lines._form_kernel):
+        monkeypatch.setattr(kernel, "dispatcher", None)
     assert cost == pytest.approx(quartic.normalised_cost(G, W, R), rel=0, abs=1e-14)
     assert line_cost == pytest.approx(lines.normalised_line_cost(segments, R), rel=1e-12, abs=1e-300)
     assert line_cost == pytest.approx(lines.normalised_line_cost(segments, R[None])[0], rel=1e-12, abs=1e-300)
@@ -139,3 +138,30 @@ def test_compiled_costs_and_normal_derivatives_of_one_rotation_match_numpy(seed,
     grad_ref, hess_ref = quartic.gradient_hessian(T, W, R)
     np.testing.assert_allclose(grad, grad_ref, rtol=0, atol=1e-14)
     np.testing.assert_allclose(hess, hess_ref, rtol=0, atol=1e-13)
+
+
+def test_a_kernel_that_fails_falls_back_once_with_one_warning(monkeypatch):
+    """`jit.Kernel`: a kernel that raises (as a failed compilation does) answers FALLBACK with one warning,
+    and is not tried again; its callers' reference paths then give the same figures."""
+    from uareme_fusion.solver import quartic
+
+    calls = []
+
+    def broken(*args):
+        calls.append(1)
+        raise RuntimeError("Failed in nopython mode pipeline")
+
+    kernel = jit.Kernel(lambda out: out.fill(2.0))
+    out = np.zeros(3)
+    assert kernel and kernel(out) is None and out.tolist() == [2.0, 2.0, 2.0]
+    monkeypatch.setattr(kernel, "dispatcher", broken)
+    monkeypatch.setattr(jit, "_warned", False)
+    monkeypatch.delenv("UAREME_NO_JIT", raising=False)
+    with pytest.warns(RuntimeWarning, match="compiled kernels unavailable.*nopython"):
+        assert kernel(out) is jit.FALLBACK
+    assert kernel(out) is jit.FALLBACK and not kernel and len(calls) == 1
+    G, W, R = np.eye(6), 3.0, np.eye(3)
+    expected = quartic.normalised_cost(G, W, R)
+    monkeypatch.setattr(quartic._fourth_kernel, "dispatcher", broken)
+    monkeypatch.setattr(jit, "_warned", True)
+    assert quartic.normalised_cost(G, W, R) == pytest.approx(expected, abs=1e-14) and len(calls) == 2

@@ -64,7 +64,7 @@ def rows_if_clean(t, gyro, accel, newest_s, gyro_range_rad_s, rows) -> bool:
     return True
 
 
-_ROWS_IF_CLEAN = jit.compiled(rows_if_clean, cache=True) if jit.available() else None
+_ROWS_IF_CLEAN = jit.Kernel(rows_if_clean, cache=True)
 
 
 _FLOAT64 = np.dtype(np.float64)
@@ -136,7 +136,7 @@ class ImuStream:
         if not n:
             return
         held = self._held
-        if _ROWS_IF_CLEAN is not None and self._rows_if_clean(t, gyro, accel, held):
+        if _ROWS_IF_CLEAN and self._rows_if_clean(t, gyro, accel, held):
             return
         rows = np.concatenate((t[:, None], gyro, accel, np.zeros((t.shape[0], 1))), axis=1)
         # One pass for both checks: the largest |value| per column (NaN propagates, inf is not finite).
@@ -180,14 +180,10 @@ class ImuStream:
         """The common case of `add` in one compiled pass: samples clean and in order are appended
         (True). False leaves them to the checks of `add`; so does a kernel that fails to compile
         (one warning, and the checks of `add` from then on)."""
-        global _ROWS_IF_CLEAN
         rows = np.empty((t.shape[0], COLUMNS))
-        try:
-            clean = _ROWS_IF_CLEAN(t, gyro, accel, held[-1, 0] if held.shape[0] else self.watermark_s,
-                                   self.gyro_range_rad_s, rows)
-        except Exception as exc:  # noqa: BLE001 -- numba failed to compile or load it
-            jit.disable(exc)
-            _ROWS_IF_CLEAN = None
+        clean = _ROWS_IF_CLEAN(t, gyro, accel, held[-1, 0] if held.shape[0] else self.watermark_s,
+                               self.gyro_range_rad_s, rows)
+        if clean is jit.FALLBACK:
             return False
         if clean:
             self._append(rows)

@@ -139,38 +139,28 @@ def _sextic_sums(p, w, exponents, out):
         out[m] = s
 
 
-_sextic_kernel = jit.compiled(_sextic_sums, cache=True, fastmath={"reassoc", "contract"})
+_sextic_kernel = jit.Kernel(_sextic_sums, cache=True, fastmath={"reassoc", "contract"})
 
 
 def _sextic_tensor(p: np.ndarray, w: np.ndarray) -> np.ndarray:
     """`sextic_tensor_reference` from its 28 distinct sums, in one compiled pass (the reference
     without numba). `p` (N, 3) float64 C-contiguous, `w` (N,)."""
-    global _sextic_kernel
-    if _sextic_kernel is not None:
+    if _sextic_kernel:
         sums = np.empty(len(_SEXTIC_EXPONENTS))
-        try:
-            _sextic_kernel(p, w, _SEXTIC_EXPONENTS, sums)
+        if _sextic_kernel(p, w, _SEXTIC_EXPONENTS, sums) is not jit.FALLBACK:
             return sums[_SEXTIC_INDEX]
-        except Exception as exc:  # noqa: BLE001 -- a compiler failure falls back to the reference
-            jit.disable(exc)
-            _sextic_kernel = None
     return sextic_tensor_reference(p, w)
 
 
 def normalised_line_cost(moments: LineMoments, R_cm: np.ndarray) -> np.ndarray:
     """Equation (L) for one rotation (3, 3) or a stack (..., 3, 3): T6(r1, r1, r2, r2, r3, r3) / W.
     Compiled when numba is there (`_sextic_forms`; numpy's einsums cost 11 us for one rotation, the kernel 1)."""
-    global _form_kernel
     R = np.asarray(R_cm, float)
-    if _form_kernel is not None and R.ndim >= 2 and R.shape[-2:] == (3, 3):
+    if _form_kernel and R.ndim >= 2 and R.shape[-2:] == (3, 3):
         stack, out = np.ascontiguousarray(R.reshape(-1, 3, 3)), np.empty(int(np.prod(R.shape[:-2])))
-        try:
-            _form_kernel(moments.T, stack, out)
+        if _form_kernel(moments.T, stack, out) is not jit.FALLBACK:
             out /= moments.total_weight
             return out[0] if R.ndim == 2 else out.reshape(R.shape[:-2])
-        except Exception as exc:  # noqa: BLE001 -- a compiler failure falls back to numpy
-            jit.disable(exc)
-            _form_kernel = None
     r1, r2, r3 = R[..., :, 0], R[..., :, 1], R[..., :, 2]
     a = np.einsum("...a,...b,...c->...abc", r1, r1, r2).reshape(R.shape[:-2] + (27,))
     b = np.einsum("...a,...b,...c->...abc", r2, r3, r3).reshape(R.shape[:-2] + (27,))
@@ -197,7 +187,7 @@ def _sextic_forms(T, Rs, out):
         out[s] = total
 
 
-_form_kernel = jit.compiled(_sextic_forms, cache=True, nogil=False)
+_form_kernel = jit.Kernel(_sextic_forms, cache=True, nogil=False)
 
 
 def segment_derivatives(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

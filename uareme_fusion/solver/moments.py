@@ -284,7 +284,7 @@ if jit.available():  # the kernel calls these as compiled functions
     _add_to = jit.compiled(_add_to, cache=True, inline="always")
     _clean_block_sums = jit.compiled(_clean_block_sums, cache=True, fastmath=_FASTMATH, error_model="numpy")
     _selected_block_sums = jit.compiled(_selected_block_sums, cache=True, fastmath=_FASTMATH, error_model="numpy")
-_fused_kernel = jit.compiled(_fused_sums, cache=True, fastmath=_FASTMATH, error_model="numpy")
+_fused_kernel = jit.Kernel(_fused_sums, cache=True, fastmath=_FASTMATH, error_model="numpy")
 
 
 _LARGEST = {np.dtype(t): float(np.finfo(t).max) for t in (np.float32, np.float64)}
@@ -295,17 +295,12 @@ def fused_moments(vectors: np.ndarray, weights: np.ndarray | None) -> NormalMome
     """`NormalMoments` of checked arrays (`vectors` (N, 3) float32/float64, `weights` (N,) of the
     same dtype or None for unit weights) in one compiled pass; None when numba is unavailable.
     Any unit-vector field whose cost is a fourth-order form (normals here) can use it."""
-    global _fused_kernel
-    if _fused_kernel is None:
+    if not _fused_kernel:
         return None
     out = np.empty(17)
     n = np.ascontiguousarray(vectors).reshape(-1)
     unit = weights is None
     k = _NO_WEIGHTS[n.dtype] if unit else np.ascontiguousarray(weights, dtype=n.dtype)
-    try:
-        _fused_kernel(n, k, unit, _LARGEST[n.dtype], _MIN_SQUARED_NORM, out)
-    except Exception as exc:  # noqa: BLE001 -- a compiler failure falls back to the reference
-        jit.disable(exc)
-        _fused_kernel = None
+    if _fused_kernel(n, k, unit, _LARGEST[n.dtype], _MIN_SQUARED_NORM, out) is jit.FALLBACK:
         return None
     return _from_distinct(out[:15], int(out[15]), int(out[16]))

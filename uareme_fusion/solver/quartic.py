@@ -30,17 +30,12 @@ def normalised_cost(G: np.ndarray, W: float, R_cm: np.ndarray) -> np.ndarray:
     `R_cm` may be a stack (..., 3, 3); the result has shape (...). Compiled when numba is there
     (`_fourth_moment_sums`; numpy's small products cost 13 us for one rotation, the kernel 1).
     """
-    global _fourth_kernel
     R = np.asarray(R_cm, dtype=float)
-    if _fourth_kernel is not None and R.ndim >= 2 and R.shape[-2:] == (3, 3):
+    if _fourth_kernel and R.ndim >= 2 and R.shape[-2:] == (3, 3):
         stack, fourth = np.ascontiguousarray(R.reshape(-1, 3, 3)), np.empty(int(np.prod(R.shape[:-2])))
-        try:
-            _fourth_kernel(G, stack, fourth)
+        if _fourth_kernel(G, stack, fourth) is not jit.FALLBACK:
             cost = 1.0 - fourth / W
             return cost[0] if R.ndim == 2 else cost.reshape(R.shape[:-2])
-        except Exception as exc:  # noqa: BLE001 -- a compiler failure falls back to numpy
-            jit.disable(exc)
-            _fourth_kernel = None
     a = axis_monomials(np.swapaxes(R, -1, -2))  # rows of R^T are the axes r_k: (..., 3, 6)
     fourth = np.sum((a @ G) * a, axis=(-2, -1))  # sum_k a_k^T G a_k
     return 1.0 - fourth / W
@@ -62,7 +57,7 @@ def _fourth_moment_sums(G, Rs, out):
         out[s] = total
 
 
-_fourth_kernel = jit.compiled(_fourth_moment_sums, cache=True, nogil=False)
+_fourth_kernel = jit.Kernel(_fourth_moment_sums, cache=True, nogil=False)
 
 
 def gradient_hessian(T: np.ndarray, W: float, R_cm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -75,16 +70,11 @@ def gradient_hessian(T: np.ndarray, W: float, R_cm: np.ndarray) -> tuple[np.ndar
     and the normalised cost is 1 - F / W. (Small matrix products, not einsum: this runs in every
     solver iteration; compiled, `_quartic_derivatives`, when numba is there.)
     """
-    global _derivatives_kernel
     R = np.asarray(R_cm, dtype=float)
-    if _derivatives_kernel is not None:
+    if _derivatives_kernel:
         grad, hess = np.empty(3), np.empty((3, 3))
-        try:
-            _derivatives_kernel(T, R, _E_SKEW, grad, hess)
+        if _derivatives_kernel(T, R, _E_SKEW, grad, hess) is not jit.FALLBACK:
             return grad / W, hess / W
-        except Exception as exc:  # noqa: BLE001 -- a compiler failure falls back to numpy
-            jit.disable(exc)
-            _derivatives_kernel = None
     rr = (R[:, None, :] * R[None, :, :]).reshape(9, 3)  # column k: r_k (x) r_k
     A = (rr.T @ T.reshape(9, 9)).reshape(3, 3, 3)  # A[k] = T(r_k, r_k, ., .)
     M = R.T @ A @ R  # M[k] = R^T A_k R
@@ -139,4 +129,4 @@ def _quartic_derivatives(T, R, e_skew, grad, hess):
             hess[a, d] = -(12.0 * sandwich + 2.0 * (v[a, d] + v[d, a]) - (4.0 * trace if a == d else 0.0))
 
 
-_derivatives_kernel = jit.compiled(_quartic_derivatives, cache=True, nogil=False)
+_derivatives_kernel = jit.Kernel(_quartic_derivatives, cache=True, nogil=False)
