@@ -157,7 +157,7 @@ def main(argv=None) -> None:
         if args.json:
             Path(args.json).write_text(json.dumps(figures, indent=1))
         return
-    est = LearnedNormals(model=args.model, config=LearnedNormalsConfig(threads=args.threads))
+    est = LearnedNormals(model=args.model, config=LearnedNormalsConfig(threads=args.threads, mirror_average=True))
     print(f"model: {est.model_path}")
     tum, tum_folder = None, Path(args.tum) if args.tum else tum_eval_folder()
     if tum_folder is not None:

@@ -72,7 +72,7 @@ def replay(caches: list[Path], only: list[str] | None, mekf: dict | None = None,
         errs = realdata.backend_errors(visual, info, realdata.CUE_SETS[cue][0], mekf, smoother)
         single = errs["single"]["are_deg"]
         line = (f"{name:20s} {cue:18s} image rotations alone {image_rotations_are_deg(visual):6.2f} | "
-                f"single {np.nanmean(single):6.2f}")
+                f"single {np.nanmean(single):6.2f} NEES {np.nanmean(errs['single']['nees']):6.2f}")
         for b in ("mekf", "smoother"):
             d = paired_difference(errs[b]["are_deg"], single)
             table[(name, cue, b)] = (float(np.nanmean(errs[b]["are_deg"])), d)

@@ -159,6 +159,33 @@ def test_drop_in_torchscript(tmp_path):
 
 
 @pytest.mark.slow
+def test_the_shipped_estimator_is_exactly_mirror_symmetric(shipped):
+    """Averaged with its mirror image's output, the map of a mirrored image is the mirrored map (x negated)."""
+    rgb = np.random.default_rng(3).integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    out, mirrored = shipped.infer(rgb), shipped.infer(np.ascontiguousarray(rgb[:, ::-1]))
+    np.testing.assert_array_equal(out, mirrored[:, :, ::-1] * np.array([-1, 1, 1, 1], np.float32)[:, None, None])
+    single = LearnedNormals(config=LearnedNormalsConfig(mirror_average=False)).infer(rgb)
+    assert np.abs(out - single).max() > 1e-3  # the average is not the plain forward pass
+
+
+class TiltedModel(nn.Module):
+    """Every pixel's normal leans to +x: (0.6, 0, -0.8), kappa 5; not mirror-symmetric."""
+
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        b, _, h, w = rgb.shape
+        return torch.tensor([0.6, 0.0, -0.8, 5.0]).view(1, 4, 1, 1).expand(b, 4, h, w) + 0.0 * rgb.mean()
+
+
+def test_a_drop_in_model_runs_as_given_unless_mirror_average_is_asked(tmp_path):
+    path = tmp_path / "tilted.pt"
+    torch.jit.save(torch.jit.script(TiltedModel()), str(path))
+    rgb = np.full((30, 40, 3), 100, np.uint8)
+    np.testing.assert_allclose(LearnedNormals(model=path).estimate(rgb).normals[5, 5], [0.6, 0.0, -0.8], atol=1e-6)
+    averaged = LearnedNormals(model=path, config=LearnedNormalsConfig(mirror_average=True)).estimate(rgb)
+    np.testing.assert_allclose(averaged.normals[5, 5], [0.0, 0.0, -1.0], atol=1e-6)  # the x components cancel
+    np.testing.assert_allclose(averaged.kappa[5, 5], 5.0, atol=1e-5)
+
+
 def test_drop_in_state_dict_matches_the_network(tmp_path):
     torch.manual_seed(0)
     net = NormalNet().eval()
