@@ -1,9 +1,10 @@
 """`bench normals`: the shipped network on torch and on ONNX Runtime, on real development images.
 
-Per engine: the median and p90 ms of one forward pass (`LearnedNormals.infer`: resize to the network's
-160x120 and the pass, one thread), over the ICL-NUIM kt3, ICSL corridor and ECD images; and the largest
-difference of the two engines' normals and kappa (the ONNX path must match torch within 1e-4). The
-faster engine on this CPU is what `engine: auto` should pick (`LearnedNormalsConfig.engine`).
+Per engine: the median and p90 ms of one map (`LearnedNormals.infer`: resize to the network's 160x120 and
+the two passes of the mirror average, `LearnedNormalsConfig.mirror_average`, one thread), over the ICL-NUIM
+kt3, ICSL corridor and ECD images; and the largest difference of the two engines' normals and kappa (the
+ONNX path must match torch within 1e-4). The faster engine on this CPU is what `engine: auto` should pick
+(`LearnedNormalsConfig.engine`).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ def dev_images(data_dir: Path) -> list[Path]:
 
 
 def run(data_dir: Path, threads: int | None = None) -> dict:
-    """Print and return each engine's ms per pass and the engines' largest differences."""
+    """Print and return each engine's ms per map and the engines' largest differences."""
     if not onnxruntime_available():
         raise InputError("bench normals compares torch with ONNX Runtime: pip install 'uareme-fusion[onnx]'")
     images = [read_rgb(p) for p in dev_images(Path(data_dir))]

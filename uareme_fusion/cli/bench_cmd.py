@@ -10,7 +10,8 @@
 - `smoother`: the GTSAM smoother (paper and gyro-aided) against `single` on walk and shake (issue 6);
 - `realdata`: every real development sequence, each cue set and backend beside its goal and its best
   single input, with paired 95 % intervals (issues 29, 30);
-- `normals`: the shipped network on torch and on ONNX Runtime, ms per pass and their difference (issue 28);
+- `normals`: the shipped network on torch and on ONNX Runtime, ms per map (two passes: the mirror average) and
+  their difference (issue 28);
 - `batch`: `batch` throughput on real IMU-only recordings with 1, 2 and N workers, and the scaling (issue 28).
 """
 

@@ -49,9 +49,9 @@ DEFAULT_THREADS = 1
 """torch CPU threads unless configured (`LearnedNormalsConfig.threads`, `--threads`)."""
 ENGINES = ("auto", "torch", "onnx")
 PROBE_SIZE_PX = (64, 48)
+"""(width, height) of the image every loaded model is checked on."""
 _MIRROR_X = np.array([-1.0, 1.0, 1.0, 1.0], np.float32)
 """A left-right mirror of the image flips the normals' x (OpenCV camera frame); y, z and kappa stay."""
-"""(width, height) of the image every loaded model is checked on."""
 
 
 @dataclass(frozen=True)
@@ -72,9 +72,9 @@ class LearnedNormalsConfig:
     """Average the network's output on the image and on its left-right mirror image (mirrored back); None:
     for the shipped network only (a drop-in model file runs as given). Twice the network's time (about 4 ms
     more a frame at 160x120 on ONNX), an estimator that is exactly mirror-symmetric, and errors that partly
-    cancel (REAL, round-4 network, `tools/visual_only_replay.py`:
-    TUM fr1 rpy eval RGB single 8.23 -> 7.32 deg, mekf 4.17 -> 3.80; EuRoC cam0 0.86 -> 0.81; ICSL
-    corridor_more normals+lines 1.68 -> 1.63; ICL kt3 normals alone 2.79 -> 2.06)."""
+    cancel (REAL, round-4 network, with `independent_regions` fitted again, `tools/visual_only_replay.py`:
+    TUM fr1 rpy eval RGB single 8.23 -> 7.32 deg, mekf 4.17 -> 3.91; EuRoC cam0 0.86 -> 0.81; ICSL normals
+    alone 1.48 / 3.51 -> 1.41 / 3.24; ICL kt3 (rendered) normals alone 2.79 -> 2.06; docs/normals_training.md)."""
     kappa_cap: float = 75.0
     """kappa is capped here before the solver (paper: 100; its released config: 75)."""
     independent_regions: float = 5.0
