@@ -158,13 +158,16 @@ def test_drop_in_torchscript(tmp_path):
     assert LearnedNormals(model=path).model is not LearnedNormals(model=path).model  # read afresh each time
 
 
-@pytest.mark.slow
-def test_the_shipped_estimator_is_exactly_mirror_symmetric(shipped):
+@pytest.mark.parametrize("engine", ["torch", "onnx"])
+def test_the_shipped_estimator_is_exactly_mirror_symmetric(engine):
     """Averaged with its mirror image's output, the map of a mirrored image is the mirrored map (x negated)."""
+    if engine == "onnx":
+        pytest.importorskip("onnxruntime", reason="the onnx extra is not installed")
+    shipped = LearnedNormals(config=LearnedNormalsConfig(engine=engine))
     rgb = np.random.default_rng(3).integers(0, 256, (120, 160, 3), dtype=np.uint8)
     out, mirrored = shipped.infer(rgb), shipped.infer(np.ascontiguousarray(rgb[:, ::-1]))
     np.testing.assert_array_equal(out, mirrored[:, :, ::-1] * np.array([-1, 1, 1, 1], np.float32)[:, None, None])
-    single = LearnedNormals(config=LearnedNormalsConfig(mirror_average=False)).infer(rgb)
+    single = LearnedNormals(config=LearnedNormalsConfig(engine=engine, mirror_average=False)).infer(rgb)
     assert np.abs(out - single).max() > 1e-3  # the average is not the plain forward pass
 
 
@@ -186,6 +189,7 @@ def test_a_drop_in_model_runs_as_given_unless_mirror_average_is_asked(tmp_path):
     np.testing.assert_allclose(averaged.kappa[5, 5], 5.0, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_drop_in_state_dict_matches_the_network(tmp_path):
     torch.manual_seed(0)
     net = NormalNet().eval()
