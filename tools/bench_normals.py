@@ -145,10 +145,8 @@ def main(argv=None) -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--independent-regions", type=float, default=None)
     args = parser.parse_args(argv)
-    cfg = LearnedNormalsConfig(threads=args.threads, mirror_average=True)
-    if args.independent_regions is not None:
-        cfg = LearnedNormalsConfig(threads=args.threads, independent_regions=args.independent_regions,
-                                  mirror_average=True)
+    regions = {} if args.independent_regions is None else {"independent_regions": args.independent_regions}
+    cfg = LearnedNormalsConfig(threads=args.threads, mirror_average=True, **regions)
     est = LearnedNormals(model=args.model, config=cfg)
     size = f"{cfg.width_px}x{cfg.height_px}"
     print(f"model: {est.model_path}, internal size {size}")

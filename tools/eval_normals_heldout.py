@@ -112,8 +112,10 @@ def tum_eval_errors(est: LearnedNormals, root: Path, stride: int = 1) -> dict:
                 pixel_median_deg=float(np.median(errs)), frame_mean_deg=float(np.mean(frame_means)))
 
 
-def horizon_figures(model: Path, cues: str = "normals,lines") -> dict:
-    """ICSL mean rotation error and ICL kt3 ARE mean of `bench horizon` with the network `model`."""
+def horizon_figures(model: Path | None, cues: str = "normals,lines") -> dict:
+    """ICSL mean rotation error and ICL kt3 ARE mean of `bench horizon` with the network `model` (None: the
+    shipped one, as `bench horizon` runs it; a file runs there as a drop-in does, without the mirror average:
+    copy it over the shipped weights to judge it as it would ship)."""
     import tempfile
 
     from uareme_fusion.benchmarks.horizon import icsl_scores, pooled_scores
@@ -121,12 +123,13 @@ def horizon_figures(model: Path, cues: str = "normals,lines") -> dict:
     from uareme_fusion.pipeline.session import run_to_folder
 
     folders = [DATA / "icsl_corridor", DATA / "icsl_corridor_more"]
-    analyser = ImageAnalyser(normals=str(model), cues=cues)
+    normals = "learned" if model is None else str(model)
+    analyser = ImageAnalyser(normals=normals, cues=cues)
     icsl = icsl_scores(folders, analyser, stride=2)
     pooled = pooled_scores(folders, analyser, stride=2)
     with tempfile.TemporaryDirectory() as out:
         kt3 = run_to_folder(str(DATA / "icl_nuim_office_kt3"), out,
-                            RunConfig(backend="single", normals=str(model), cues=cues), evaluate=True,
+                            RunConfig(backend="single", normals=normals, cues=cues), evaluate=True,
                             command="eval_normals_heldout")
     return dict(icsl_mean_deg=icsl["mean_angle_deg"], icsl_median_deg=icsl["median_angle_deg"],
                 icsl_nees_mean=icsl["nees_mean"], icsl_frames=icsl["frames"],
@@ -145,9 +148,7 @@ def main(argv=None) -> None:
                         "horizon for this model")
     args = parser.parse_args(argv)
     if args.horizon_figures:
-        from uareme_fusion.normals.learned import DEFAULT_WEIGHTS
-
-        figures = horizon_figures(Path(args.model) if args.model else DEFAULT_WEIGHTS)
+        figures = horizon_figures(Path(args.model) if args.model else None)
         print(f"bench horizon figures: ICSL RGB vs depth rotation, no intrinsics, mean ({figures['icsl_frames']} "
               f"frames) {figures['icsl_mean_deg']:.3f} deg, median {figures['icsl_median_deg']:.3f}, NEES mean "
               f"{figures['icsl_nees_mean']:.2f}; K pooled over each sequence: mean "
