@@ -122,13 +122,15 @@ def test_fused_with_frames_same_estimates(preset):
 
 
 @needs_numba
-@pytest.mark.parametrize("update", [{}, {"visual_error_correlation_s": 0.3, "manhattan_vertical_max_rad": 0.002}])
+@pytest.mark.parametrize("update", [{}, {"visual_error_correlation_s": 0.3, "manhattan_vertical_max_rad": 0.002},
+                                    {"gyro_bias_visual_correlation_s": 0.3}])
 def test_compiled_visual_update_gates_weighs_and_reinitialises_as_the_reference(update):
     """The frame's compiled visual update (`kernels.visual_update`) against the reference
     (`Mekf._visual_update`, numpy/scipy/filterpy): rotations relabelled by random cube symmetries,
     frames with twice the noise their covariance claims (Huber-weighted), lone outliers (gated out),
     a run of 10 outliers (re-initialisation), a NaN covariance (gated out); with and without
-    correlated-error scaling and the vertical pseudo-measurement. Same estimates, counts and flags."""
+    correlated-error scaling, the gyro bias's partial update and the vertical pseudo-measurement. Same
+    estimates, counts and flags."""
     from uareme_fusion.rotations import manhattan_symmetries
 
     traj, t, gyro, accel = stream(7, duration_s=12.0)

@@ -39,6 +39,9 @@ def test_no_worse_passes_while_the_paired_interval_reaches_zero():
     assert d_worse["low"] == pytest.approx(0.5, abs=0.02) and not no_worse(d_worse)
     assert d_better["mean"] == pytest.approx(-0.5) and no_worse(d_better)
     assert no_worse(paired_difference([np.nan], [1.0])) is None
+    noise = paired_difference(base + 1e-6, base)  # float noise, printed +0.00 (+0.00 .. +0.00)
+    assert noise["low"] > 0.0 and no_worse(noise)
+    assert not no_worse(paired_difference(base + 0.01, base))  # a difference the tables print
 
 
 def test_total_std_and_nearest_times():

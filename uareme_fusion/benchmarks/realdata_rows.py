@@ -11,10 +11,16 @@ NEES_RANGE = (1.0, 6.0)
 STD_SEPARATION_GOAL = 0.5
 
 
+NO_WORSE_TOLERANCE_DEG = 0.005
+"""A paired interval lying above 0 by less than this (deg, half the tables' 0.01) is float noise, not worse:
+real TUM eval, the joint solve against normals alone (the lines took no share), 7.32 against 7.32 deg,
++0.00 (+0.00 .. +0.00) read FAIL."""
+
+
 def no_worse(interval: dict) -> bool | None:
-    """A paired difference (A - B) whose 95 % interval does not lie wholly above 0: A is no worse than B
-    beyond the interval. None without frames."""
-    return None if not interval.get("frames") else bool(interval["low"] <= 0.0)
+    """A paired difference (A - B, deg) whose 95 % interval does not lie wholly above 0 (beyond
+    `NO_WORSE_TOLERANCE_DEG`): A is no worse than B beyond the interval. None without frames."""
+    return None if not interval.get("frames") else bool(interval["low"] <= NO_WORSE_TOLERANCE_DEG)
 
 
 def _interval(d: dict | None) -> str:

@@ -22,7 +22,7 @@ from uareme_fusion.backends.mekf.source_trust import (note_accel_information, no
                                                       share_tilt_covariance, squared_rate,
                                                       update_visual_trust, vertical_variance,
                                                       visual_vertical_innovation)
-from uareme_fusion.backends.mekf.state import BG, ORTHONORMALISE_EVERY, ZERO_STATE, orthonormal, reset_jacobian
+from uareme_fusion.backends.mekf.state import BG, N_STATE, ORTHONORMALISE_EVERY, ZERO_STATE, orthonormal, reset_jacobian
 from uareme_fusion.types import VisualRotation
 
 from .accel import AccelPeriod
@@ -171,7 +171,10 @@ class Mekf(production.Mekf):
         if self.motion.uses_imu and var_v < np.inf:
             ok, *rows = vertical_model(self.R_wm, np.sqrt(var_v), cfg.manhattan_vertical_max_rad)
             vertical = rows if ok else None
-        self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]))
+        bias_gain = 1.0  # the frames' persistent error, as the gyro bias sees it: a partial update of BG
+        if self.motion.uses_imu and t_prev_s is not None:
+            bias_gain = 1.0 / correlated_noise_scale(t_s - t_prev_s, cfg.gyro_bias_visual_correlation_s)
+        self._kalman_update(*stack([(r, R_vis, H), vertical, accel_rows]), bias_gain=bias_gain)
         self.counters["visual_updates"] += 1
 
     def _visual_model(self, visual: VisualRotation):
@@ -208,10 +211,18 @@ class Mekf(production.Mekf):
             d2 = np.inf
         return float(np.linalg.norm(r)), d2
 
-    def _kalman_update(self, residual: np.ndarray, R: np.ndarray, H: np.ndarray) -> None:
-        """filterpy update (Joseph form) of the zero-mean error state, then inject and reset. A
-        non-finite result changes nothing; it is counted and flagged."""
-        dx, P = kf_update(ZERO_STATE, self.P, residual, R, H)
+    def _kalman_update(self, residual: np.ndarray, R: np.ndarray, H: np.ndarray, bias_gain: float = 1.0) -> None:
+        """filterpy update (Joseph form) of the zero-mean error state, then inject and reset; with
+        `bias_gain` != 1 the bias's gain on the first three rows scaled by it and the Joseph form written out (filterpy takes
+        the optimal gain only). A non-finite result changes nothing; it is counted and flagged."""
+        if bias_gain == 1.0:
+            dx, P = kf_update(ZERO_STATE, self.P, residual, R, H)
+        else:
+            with np.errstate(all="ignore"):
+                K = self.P @ H.T @ np.linalg.inv(H @ self.P @ H.T + R)  # as filterpy
+                K[BG, :3] *= bias_gain  # the frame's rotation rows, stacked first
+                A = np.eye(N_STATE) - K @ H
+                dx, P = K @ residual, A @ self.P @ A.T + K @ R @ K.T
         if not (np.isfinite(dx).all() and np.isfinite(P).all()):
             self.counters["nonfinite_updates"] += 1
             self.flags |= status_bits.UPDATE_NONFINITE

@@ -75,15 +75,17 @@ def solve_into(A, B, X):
     return X
 
 
-def kalman_update(x, residual, R, H, p):
+def kalman_update(x, residual, R, H, p, bias_gain):
     """Joseph-form update with the measurement `residual` (m,), noise `R` (its leading (m, m) block: a
     stacked update passes its whole work array, so that every caller passes a C-contiguous `R` and
-    numba compiles this function once) and `H` (m, 12), then
+    numba compiles this function once) and `H` (m, 12), the gyro bias's gain on the first three rows (a
+    frame's rotation, stacked first) scaled by `bias_gain` (1: the Kalman gain; below, a partial update of
+    the bias from those rows, which the Joseph form allows; the rows stacked after keep theirs), then
     injection into the nominal state and the reset of the error , all in
     place; nothing changes but `s.nonfinite_updates` when the result is not finite.
     Scalar loops that use the structure (a BLAS call per small product costs more than the product,
     and more still out of the caches, after a solver call): the Joseph form expanded,
-    `(I - K H) P (I - K H)^T + K R K^T = P - K (P H^T)^T - (P H^T) K^T + K S K^T` with `S` the
+    `(I - K H) P (I - K H)^T + K R K^T = P - K (P H^T)^T - (P H^T) K^T + K S K^T` (any gain K) with `S` the
     innovation covariance, and the reset `G P G^T` on the rotation blocks only."""
     s = x[0]
     P = s.P
@@ -94,6 +96,10 @@ def kalman_update(x, residual, R, H, p):
         for j in range(m):
             S[i, j] += R[i, j]
     K = solve_into(S, PHt.T, np.empty((m, 12))).T  # S symmetric: K^T = S^-1 (P H^T)^T
+    if bias_gain != 1.0:
+        for i in range(3, 6):  # BG
+            for k in range(3):
+                K[i, k] *= bias_gain
     KS = matmul_into(K, S, np.empty((12, m)))
     dx = np.zeros(12)
     for i in range(12):
@@ -187,7 +193,7 @@ def accel_rows(x, p, update):
                 if math.isnan(s.rest_since_s):
                     s.rest_since_s = s.t_state_s - T
                 if s.t_state_s - s.rest_since_s >= p.rest_min_duration_s:
-                    kalman_update(x, rest.residual, rest.covariance, rest.jacobian, p)
+                    kalman_update(x, rest.residual, rest.covariance, rest.jacobian, p, 1.0)
                     s.rest_updates += 1
         rest_sums[:] = 0.0
         s.rest_n = 0
@@ -215,7 +221,7 @@ def accel_rows(x, p, update):
         s.accel_downweighted += 1
     s.accel_updates += 1
     if update > 0:
-        kalman_update(x, gravity.residual, gravity.covariance, gravity.jacobian, p)
+        kalman_update(x, gravity.residual, gravity.covariance, gravity.jacobian, p, 1.0)
     return gravity, downweighted
 
 
@@ -233,5 +239,5 @@ def update_in_place(x, residual, R, H, params):
     buffer `x`, for the rows the filter builds in Python (the gravity of an accelerometer without
     gyro): the `NONFINITE` bit when its result was dropped."""
     nonfinite_before = x[0].nonfinite_updates
-    kalman_update(x, residual, R, H, params[0])
+    kalman_update(x, residual, R, H, params[0], 1.0)
     return NONFINITE if x[0].nonfinite_updates > nonfinite_before else 0

@@ -82,7 +82,8 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
     """A frame's rotation `R_cm` (3, 3) with covariance `cov` (3, 3) rad^2, fused into the state
     buffer `x` in place: gated on its Mahalanobis distance (`p.visual_gate_chi2`; past it the other
     rows alone, the frame counted in `s.rejections` and `s.visual_rejected`), its covariance
-    scaled for correlated errors (`p.visual_correlation_s`), by the Huber weight (`p.visual_huber_k`)
+    scaled for correlated errors (`p.visual_correlation_s`; with an IMU the gyro bias's gain too,
+    `p.bias_visual_correlation_s`), by the Huber weight (`p.visual_huber_k`)
     and by the independent share (`share_scale` given, visual only: `VisualNoiseShare`), stacked into
     one update with:
     - with an IMU (`p.uses_imu`): the camera-vertical trust (`source_trust.py`, its share of the
@@ -140,9 +141,9 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
         s.rejections += 1
         s.visual_info_rate = 0.0  # no share while the camera is gated out
         if with_accel:
-            kalman_update(x, gravity.residual, gravity.covariance, gravity.jacobian, p)
+            kalman_update(x, gravity.residual, gravity.covariance, gravity.jacobian, p, 1.0)
         if k:
-            kalman_update(x, extra_r, extra_R, extra_H, p)
+            kalman_update(x, extra_r, extra_R, extra_H, p, 1.0)
     else:
         s.rejections = 0
         if share_scale != 1.0:  # the independent share, as estimated over the previous frames (visual only)
@@ -171,7 +172,10 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
             H[m:m + k] = extra_H
             R_all[m:m + k, m:m + k] = extra_R
             m += k
-        kalman_update(x, r[:m], R_all, H[:m], p)  # R_all's leading m x m block
+        bias_gain = 1.0
+        if with_imu and t_prev == t_prev:  # the frames' persistent error, as the bias sees it
+            bias_gain = 1.0 / correlated_noise_scale(s.t_state_s - t_prev, p.bias_visual_correlation_s)
+        kalman_update(x, r[:m], R_all, H[:m], p, bias_gain)  # R_all's leading m x m block
         s.visual_updates += 1
     for i in range(3):
         for j in range(3):

@@ -44,6 +44,7 @@ FIELDS = (
     "vertical_std_rad",
     "vertical_max_rad",
     "visual_correlation_s",
+    "bias_visual_correlation_s",
     "visual_trust_frames",
     "visual_trust_min_share",
     "uses_imu",  # 1: gyro-driven (relabel nearest the prediction, trust, vertical, accelerometer rows)
@@ -71,7 +72,8 @@ def kernel_parameters(filt, defer: bool, manhattan_initialised: bool) -> np.ndar
         gap_limit_s=cfg.imu_gap_limit_s, unknown_rate_std_rad_s=cfg.unknown_rate_std_rad_s,
         visual_gate_chi2=cfg.visual_gate_chi2, visual_huber_k=cfg.visual_huber_k,
         vertical_std_rad=cfg.manhattan_vertical_std_rad, vertical_max_rad=cfg.manhattan_vertical_max_rad,
-        visual_correlation_s=cfg.visual_error_correlation_s, visual_trust_frames=cfg.visual_trust_frames,
+        visual_correlation_s=cfg.visual_error_correlation_s,
+        bias_visual_correlation_s=cfg.gyro_bias_visual_correlation_s, visual_trust_frames=cfg.visual_trust_frames,
         visual_trust_min_share=cfg.visual_trust_min_share, uses_imu=float(filt.motion.uses_imu),
         estimates_rate=float(filt.motion.estimates_rate))
     record = np.zeros(1, DTYPE)
