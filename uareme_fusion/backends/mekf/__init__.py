@@ -28,7 +28,8 @@ See docs/design.md "Backends". Conventions:
   at a frame is stacked into that frame's visual update (one Kalman update, same state time). With
   `accel_lowpass_tau_s` the update measures the low-passed direction, whose sensitivity to the gyro
   bias (it was carried along by the gyro) enters H; with `rest_gyro_max_rad_s` the mean gyro reading
-  at rest measures the bias (zero-rate update).
+  at rest measures the bias (zero-rate update); with `gyro_bias_visual_correlation_s` a frame's rotation
+  rows move the gyro bias by a partial gain (`kernel_update.kalman_update`'s `bias_gain`).
 """
 
 
