@@ -21,20 +21,9 @@ import numpy as np
 
 
 def build(scene: str, cache: Path) -> None:
-    from uareme_fusion.demo import DEMO_FPS, DEMO_SCENES, DEMO_SIZE, _Collector, _TeeImu
-    from uareme_fusion.drivers.simulated import SimulatedSource
-    from uareme_fusion.evaluation.sequence import VisualSequence
-    from uareme_fusion.pipeline import RunConfig
-    from uareme_fusion.pipeline.session import build_pipeline
+    from uareme_fusion.demo import scene_sequence
 
-    preset, seconds = DEMO_SCENES[scene]
-    source = _TeeImu(SimulatedSource(scene, seconds=seconds, fps=DEMO_FPS, width=DEMO_SIZE[0], height=DEMO_SIZE[1],
-                                     seed=0))
-    collector = _Collector()
-    build_pipeline(source, RunConfig(normals="learned", mekf_preset=preset), [collector]).run(source)
-    t = np.array([r.t_s for r in collector.results])
-    R_true, _ = source.ground_truth().at(t)
-    seq = VisualSequence(scene, t, [r.visual for r in collector.results], *source.imu_arrays(), R_true)
+    seq, _, _ = scene_sequence(scene)  # as `uareme-fusion demo` renders and solves it
     with open(cache, "wb") as f:
         pickle.dump(seq, f)
 

@@ -122,6 +122,33 @@ DEMO_SIZE = (320, 240)
 DEMO_FPS = 15.0
 
 
+def scene_sequence(scene: str, seed: int = 0, normals: str = "learned", scale_seconds: float = 1.0,
+                   size: tuple[int, int] = DEMO_SIZE, fps: float = DEMO_FPS, sinks=(), threads: int | None = None,
+                   progress=None):
+    """The rendered `scene` (a key of `DEMO_SCENES`, with its EKF preset) through the whole pipeline, into
+    `sinks` too: `(VisualSequence, results, stats)`, the sequence holding each frame's visual rotation, the IMU
+    and the ground truth (for other estimators on the same data, `tools/demo_replay.py`), `results` the
+    pipeline's per-frame results and `stats` its run statistics. `progress(scene, n_frames)` gives the run's
+    `on_result`."""
+    from .drivers.simulated import SimulatedSource
+    from .evaluation.sequence import VisualSequence
+    from .pipeline import RunConfig
+    from .pipeline.session import build_pipeline
+
+    preset, seconds = DEMO_SCENES[scene]
+    source = _TeeImu(SimulatedSource(scene, seconds=seconds * scale_seconds, fps=fps, width=size[0],
+                                      height=size[1], seed=seed))
+    collector = _Collector()
+    pipeline = build_pipeline(source, RunConfig(normals=normals, mekf_preset=preset,
+                                                 **({} if threads is None else {"threads": threads})),
+                              [collector, *sinks])
+    stats = pipeline.run(source, on_result=None if progress is None else progress(scene, source.info.n_frames))
+    t = np.array([r.t_s for r in collector.results])
+    R_true, _ = source.ground_truth().at(t)
+    seq = VisualSequence(scene, t, [r.visual for r in collector.results], *source.imu_arrays(), R_true)
+    return seq, collector.results, stats
+
+
 def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: str = "learned",
                 scale_seconds: float = 1.0, progress=None, threads: int | None = None,
                 size: tuple[int, int] = DEMO_SIZE, fps: float = DEMO_FPS) -> dict:
@@ -132,33 +159,21 @@ def fusion_demo(console: Console, out_dir: Path | None, seed: int = 0, normals: 
     from .backends.mekf import MekfMode
     from .backends.factory import make_backend
     from .evaluation.compare import BackendRun, errors_over_time, run_backend
-    from .evaluation.sequence import VisualSequence
-    from .drivers.simulated import SimulatedSource
-    from .pipeline import RunConfig
     from .sinks.drawing import HorizonVideoSink
-    from .pipeline.session import build_pipeline
 
     figures, tilts = {}, {}
     table = Table(title=f"Tilt error (deg), rendered scenes, {normals} normals, {fps:g} fps")
     for col in ("scene", "estimator", "mean", "p95", "max", "ARE mean"):
         table.add_column(col)
-    for scene, (preset, seconds) in DEMO_SCENES.items():
-        source = _TeeImu(SimulatedSource(scene, seconds=seconds * scale_seconds, fps=fps, width=size[0],
-                                          height=size[1], seed=seed))
-        collector = _Collector()
-        sinks = [collector]
-        if out_dir is not None and scene == "bus":
-            sinks.append(HorizonVideoSink(out_dir / "demo_bus_horizon.mp4", fps, panes=True))
-        pipeline = build_pipeline(source, RunConfig(normals=normals, mekf_preset=preset,
-                                                     **({} if threads is None else {"threads": threads})), sinks)
-        stats = pipeline.run(source, on_result=None if progress is None else progress(scene, source.info.n_frames))
-        t = np.array([r.t_s for r in collector.results])
-        R_true, _ = source.ground_truth().at(t)
-        seq = VisualSequence(scene, t, [r.visual for r in collector.results], *source.imu_arrays(), R_true)
+    for scene, (preset, _) in DEMO_SCENES.items():
+        video = ([HorizonVideoSink(out_dir / "demo_bus_horizon.mp4", fps, panes=True)]
+                 if out_dir is not None and scene == "bus" else [])
+        seq, results, stats = scene_sequence(scene, seed, normals, scale_seconds, size, fps, video, threads, progress)
+        t, R_true = seq.t_frame_s, seq.R_wc_true
         imu_only = make_backend("mekf", mekf_preset=preset, overrides={"mode": MekfMode.IMU_ONLY})
         runs = {"vision only (single frame)": run_backend(make_backend("single"), seq),
                 "IMU only (our filter)": run_backend(imu_only, seq),
-                f"fused (mekf, {preset})": BackendRun("mekf", [r.estimate for r in collector.results])}
+                f"fused (mekf, {preset})": BackendRun("mekf", [r.estimate for r in results])}
         rows = {}
         for name, run in runs.items():
             err = errors_over_time(run, R_true)

@@ -172,8 +172,8 @@ def visual_update(x, params, R_cm, cov, share_scale, extra_r, extra_R, extra_H, 
             H[m:m + k] = extra_H
             R_all[m:m + k, m:m + k] = extra_R
             m += k
-        bias_gain = 1.0
-        if with_imu and t_prev == t_prev:  # the frames' persistent error, as the bias sees it
+        bias_gain = 1.0  # the frames' persistent error, as the bias sees it (1 after no previous frame: dt NaN)
+        if with_imu:
             bias_gain = 1.0 / correlated_noise_scale(s.t_state_s - t_prev, p.bias_visual_correlation_s)
         kalman_update(x, r[:m], R_all, H[:m], p, bias_gain)  # R_all's leading m x m block
         s.visual_updates += 1
