@@ -111,7 +111,8 @@ def test_compiled_line_moments_match_the_cube_product(n_segments):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_compiled_costs_and_normal_derivatives_of_one_rotation_match_numpy(seed, monkeypatch):
     """The compiled forms against the numpy paths: the quartic's cost (one rotation and a stack), gradient and
-    Hessian (`quartic._fourth_kernel`, `_derivatives_kernel`) and equation (L) (`lines._form_kernel`)."""
+    Hessian (`quartic._fourth_kernel`, `_derivatives_kernel`) and equation (L) with its derivatives
+    (`lines._form_kernel`, `_functionals_kernel`)."""
     from uareme_fusion.rotations import exp_so3
     from uareme_fusion.solver import lines, quartic
     from uareme_fusion.solver.moments import normal_moments
@@ -125,10 +126,11 @@ def test_compiled_costs_and_normal_derivatives_of_one_rotation_match_numpy(seed,
     G, T, W = moments.G, moments.tensor(), moments.total_weight
     cost, line_cost = quartic.normalised_cost(G, W, R), lines.normalised_line_cost(segments, R)
     grad, hess = quartic.gradient_hessian(T, W, R)
+    line_derivatives = lines.line_cost_gradient_hessian(segments, R)
     stack = exp_so3(rng.normal(size=(4, 5, 3)))
     costs, line_costs = quartic.normalised_cost(G, W, stack), lines.normalised_line_cost(segments, stack)
     assert np.ndim(cost) == 0 and np.ndim(line_cost) == 0 and costs.shape == line_costs.shape == (4, 5)
-    for kernel in (quartic._fourth_kernel, quartic._derivatives_kernel, lines._form_kernel):
+    for kernel in (quartic._fourth_kernel, quartic._derivatives_kernel, lines._form_kernel, lines._functionals_kernel):
         monkeypatch.setattr(kernel, "dispatcher", None)
     assert cost == pytest.approx(quartic.normalised_cost(G, W, R), rel=0, abs=1e-14)
     assert line_cost == pytest.approx(lines.normalised_line_cost(segments, R), rel=1e-12, abs=1e-300)
@@ -138,6 +140,8 @@ def test_compiled_costs_and_normal_derivatives_of_one_rotation_match_numpy(seed,
     grad_ref, hess_ref = quartic.gradient_hessian(T, W, R)
     np.testing.assert_allclose(grad, grad_ref, rtol=0, atol=1e-14)
     np.testing.assert_allclose(hess, hess_ref, rtol=0, atol=1e-13)
+    for compiled, reference in zip(line_derivatives, lines.line_cost_gradient_hessian(segments, R)):
+        np.testing.assert_allclose(compiled, reference, rtol=0, atol=1e-14)
 
 
 def test_a_kernel_that_fails_falls_back_once_with_one_warning(monkeypatch):

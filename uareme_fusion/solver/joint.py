@@ -238,7 +238,7 @@ class JointSolver:
                 c.set_alpha(R, discounted=not (coarse and i == 0))
             R_new, its, _, converged = self._refine(cues, R)
             iterations += its
-            moved = np.linalg.norm(log_so3(R.T @ R_new))
+            moved = np.linalg.norm(log_so3(R.T @ R_new, assume_valid=True))
             R = R_new
             if i >= coarse and moved < _IRLS_SETTLED_RAD:
                 break
@@ -317,7 +317,7 @@ def _steering_weights(cues: list[_Cue]) -> list[float]:
 def _symmetric_offset(R: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
     """Rotation vector (3,) rad from `R_ref` to the labelling of Manhattan frame `R` nearest it (right
     perturbation at `R_ref`)."""
-    return log_so3(R_ref.T @ nearest_symmetric(R, R_ref)[0])
+    return log_so3(R_ref.T @ nearest_symmetric(R, R_ref)[0], assume_valid=True)
 
 
 def _angle_rad(R_a: np.ndarray, R_b: np.ndarray) -> float:
