@@ -23,6 +23,7 @@ segments whose plane also nearly contains a second axis (e.g. on the horizon lin
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -157,7 +158,7 @@ def normalised_line_cost(moments: LineMoments, R_cm: np.ndarray) -> np.ndarray:
     Compiled when numba is there (`_sextic_forms`; numpy's einsums cost 11 us for one rotation, the kernel 1)."""
     R = np.asarray(R_cm, float)
     if _form_kernel and R.ndim >= 2 and R.shape[-2:] == (3, 3):
-        stack, out = np.ascontiguousarray(R.reshape(-1, 3, 3)), np.empty(int(np.prod(R.shape[:-2])))
+        stack, out = np.ascontiguousarray(R.reshape(-1, 3, 3)), np.empty(math.prod(R.shape[:-2]))
         if _form_kernel(moments.T, stack, out) is not jit.FALLBACK:
             out /= moments.total_weight
             return out[0] if R.ndim == 2 else out.reshape(R.shape[:-2])

@@ -7,6 +7,7 @@ All functions take the 6x6 moment Gram matrix `G` (see `moments.py`) and the tot
 
 from __future__ import annotations
 
+import math
 import numpy as np
 
 from .. import jit
@@ -32,7 +33,7 @@ def normalised_cost(G: np.ndarray, W: float, R_cm: np.ndarray) -> np.ndarray:
     """
     R = np.asarray(R_cm, dtype=float)
     if _fourth_kernel and R.ndim >= 2 and R.shape[-2:] == (3, 3):
-        stack, fourth = np.ascontiguousarray(R.reshape(-1, 3, 3)), np.empty(int(np.prod(R.shape[:-2])))
+        stack, fourth = np.ascontiguousarray(R.reshape(-1, 3, 3)), np.empty(math.prod(R.shape[:-2]))
         if _fourth_kernel(G, stack, fourth) is not jit.FALLBACK:
             cost = 1.0 - fourth / W
             return cost[0] if R.ndim == 2 else cost.reshape(R.shape[:-2])
