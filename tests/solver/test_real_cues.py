@@ -12,6 +12,7 @@ def test_segments_near_chance_do_not_make_the_joint_worse_than_the_normals_on_eu
     from helpers import shared_data_or_skip
 
     from uareme_fusion.benchmarks.realdata import backend_errors, cue_set_sequence, sequences
+    from uareme_fusion.benchmarks.realdata_rows import NO_WORSE_TOLERANCE_DEG
     from uareme_fusion.evaluation.paired_difference import paired_difference
 
     found, _ = sequences(shared_data_or_skip(), None, ("euroc",))
@@ -25,5 +26,5 @@ def test_segments_near_chance_do_not_make_the_joint_worse_than_the_normals_on_eu
             shares = [v.cues["lines"]["share"] for v in visual.visuals if v is not None and "lines" in v.cues]
             assert np.median(shares) < 0.1  # 0.97 before
     d = paired_difference(are["normals,lines"], are["normals"])
-    assert d["low"] <= 0.0  # +0.14 before
+    assert d["low"] <= NO_WORSE_TOLERANCE_DEG  # +0.14 before; the same frames to 1e-13 deg now (the bench's float noise)
     assert np.nanmean(are["normals,lines"]) <= np.nanmean(are["normals"]) + 0.1  # 0.65 vs 0.65 (1.16 before)
