@@ -8,6 +8,7 @@ All functions take the 6x6 moment Gram matrix `G` (see `moments.py`) and the tot
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from .. import jit
