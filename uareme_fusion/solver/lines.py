@@ -257,14 +257,10 @@ def line_cost_gradient_hessian(moments: LineMoments, R_cm: np.ndarray) -> tuple[
 def _rotated_functionals(T, R, F, out):
     """out = F @ vec(K3^T T K3) with K3 = R (x) R (x) R (27, 27): the functionals F (13, 729) of the
     tensor T (27, 27) seen in Manhattan coordinates."""
-    K = np.empty((27, 27))
-    for i in range(3):
-        for j in range(3):
-            for k in range(3):
-                for a in range(3):
-                    for b in range(3):
-                        for c in range(3):
-                            K[9 * i + 3 * j + k, 9 * a + 3 * b + c] = R[i, a] * R[j, b] * R[k, c]
+    K = np.empty((27, 27))  # `_kron(_kron(R, R), R)`: entry (9i + 3j + k, 9a + 3b + c) is R_ia R_jb R_kc
+    for p in range(27):
+        for q in range(27):
+            K[p, q] = R[p // 9, q // 9] * R[p // 3 % 3, q // 3 % 3] * R[p % 3, q % 3]
     out[:] = F @ (K.T @ (T @ K)).reshape(729)
 
 

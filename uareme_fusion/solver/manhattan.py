@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
-from ..rotations import R_CM_UPRIGHT, nearest_symmetric, project_to_so3, rotation_problem
+from ..rotations import R_CM_UPRIGHT, is_rotation, nearest_symmetric, project_to_so3, rotation_problem
 from ..types import NormalMap, VisualRotation
 from .levenberg import levenberg_marquardt_so3
 from .moments import NormalMoments, normal_moments
@@ -187,7 +187,7 @@ def _check_rotation(R) -> np.ndarray:
         raise InputError(f"Expected R_init as a rotation matrix: {problem}")
     R = np.asarray(R, dtype=float)
     # A prior accepted up to 1e-5 is made a rotation to rounding, which the solver's logs assume.
-    return R if np.abs(R.T @ R - np.eye(3)).max() < 1e-12 else project_to_so3(R)
+    return R if is_rotation(R, atol=1e-12) else project_to_so3(R)
 
 
 _DEFAULT_SOLVER = ManhattanSolver()
