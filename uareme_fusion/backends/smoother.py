@@ -118,6 +118,10 @@ class SmootherConfig(GyroNoiseConfig):
     the reported covariance (0 = off). Real ICSL corridor, RGB only: ARE 2.178 -> 2.143 deg against
     `single`'s 2.141 (NEES 2.90 -> 3.13); ICL kt3 0.289 unchanged; simulated walks without IMU
     1.966 / 1.920 -> 1.959 / 1.913."""
+    visual_persistence_lag_frames: int = Field(10, ge=0, le=1000)
+    """Paper mode: the lag (frames) at which the persistent visual error's correlation is read from the image
+    rotations, to report only what of it the window's estimate still carries (`persistent_error_left.py`);
+    0: all of it."""
     image_motion_visual_huber_k: float | None = Field(1.345, ge=1e-3, le=1e6)
     """Paper mode: `visual_huber_k` of a frame whose between factor comes from its image rotation
     (`smoother_image_motion.py`). Tied that tightly to its neighbours, a frame weighed as by the paper's
@@ -260,7 +264,8 @@ class Smoother(Backend):
         self._bias = np.zeros(3)
         self._dropped_imu = 0
         self._noise_share = VisualNoiseShare(self.config.visual_noise_share_frames
-                                             if self.config.mode is SmootherMode.PAPER else 0.0, of_frame_part=True)
+                                             if self.config.mode is SmootherMode.PAPER else 0.0, of_frame_part=True,
+                                             persistence_lag_frames=self.config.visual_persistence_lag_frames)
         self.track = LabellingTrack()
         """Paper mode: the stream's labelling (`labelling_track.py`, as `single`'s), turned by the image
         rotations; gyro mode labels nearest the gyro-propagated estimate instead."""
@@ -335,10 +340,11 @@ class Smoother(Backend):
         28.7 against `single`'s 3.05 (the reported covariance under the steady part), 3.44 now."""
         R_wc_cov = visual_R_wc_covariance(visual)
         fused = _frame_part(R_wc_cov, visual_R_wc_steady(visual)) if self._noise_share.enabled else R_wc_cov
-        noise = gtsam.noiseModel.Gaussian.Covariance(self._noise_share.share * fused)
+        fused = self._noise_share.share * fused
+        noise = gtsam.noiseModel.Gaussian.Covariance(fused)
         graph.add(self._visual_factor(k, visual, _robust(self._visual_huber_k(visual), noise)))
         if self._noise_share.enabled:
-            self._noise_share.take(t_s, visual, R_wc_cov)
+            self._noise_share.take(t_s, visual, R_wc_cov, float(np.trace(fused)))
 
     def _visual_huber_k(self, visual: VisualRotation) -> float | None:
         """The Huber threshold of `visual`'s factor (paper: `image_motion_visual_huber_k` when its between
@@ -457,7 +463,8 @@ class Smoother(Backend):
         self._R_wm = R_wm
         if bias is not None:
             self._bias = bias
-        return Estimate(t_s, R_wc, 0.5 * (cov + cov.T) + self._noise_share.persistent_cov, status, R_wm=R_wm.copy(),
+        cov = 0.5 * (cov + cov.T)
+        return Estimate(t_s, R_wc, cov + self._noise_share.settle(cov), status, R_wm=R_wm.copy(),
                         gyro_bias_rad_s=None if bias is None else self._R_ci.T @ bias)
 
 

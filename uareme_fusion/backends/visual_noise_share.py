@@ -35,6 +35,7 @@ import numpy as np
 
 from ..rotations import log_so3
 from ..types import VisualRotation, steady_within, visual_R_wc_covariance, visual_R_wc_steady
+from .persistent_error_left import PersistentErrorLeft
 
 
 MAX_SAMPLE = 10.0
@@ -53,13 +54,20 @@ others'."""
 class VisualNoiseShare:
     """The running independent share `lam` of the frames' visual covariances (module docstring)."""
 
-    def __init__(self, frames: float, min_share: float = 0.05, of_frame_part: bool = False):
+    def __init__(self, frames: float, min_share: float = 0.05, of_frame_part: bool = False,
+                 persistence_lag_frames: int = 0):
         """`frames`: the averaging horizon (0: off, `share` stays 1); `min_share` the floor of lam;
         `of_frame_part`: lam is the share of each frame's per-frame part (`VisualRotation.cov_frame()`,
         the covariance less its steady calibration part), and the steady part is persistent as a whole
-        (`take`); else of the whole covariance."""
+        (`take`); else of the whole covariance. `persistence_lag_frames` > 0 (with `of_frame_part`): the
+        persistent per-frame part is reported as far as the estimate still carries it, its correlation read
+        at that lag (`persistent_error_left.py`, `settle`); 0: whole."""
         self.frames, self.min_share = float(frames), float(min_share)
         self.of_frame_part = bool(of_frame_part)
+        self.left = (PersistentErrorLeft(persistence_lag_frames, self.frames)
+                     if persistence_lag_frames > 0 and of_frame_part and self.enabled else None)
+        """The estimate's share of the persistent per-frame part (None: all of it)."""
+        self._persistent_parts = (np.zeros((3, 3)), np.zeros((3, 3)))  # ((1 - lam) frame part, steady part)
         self.share = 1.0
         self.persistent_cov = np.zeros((3, 3))
         """(1 - lam) times the last finite frame's covariance as one of `R_wc` (rad^2, right
@@ -86,25 +94,50 @@ class VisualNoiseShare:
         self._take_frame(t_s, visual)
         return self.share
 
-    def take(self, t_s: float, visual: VisualRotation | None, R_wc_cov: np.ndarray | None = None) -> None:
+    def take(self, t_s: float, visual: VisualRotation | None, R_wc_cov: np.ndarray | None = None,
+             fused_trace_rad2: float | None = None) -> None:
         """`update` with the frame, then `persistent_cov` from it (kept as it was when the frame has no
         rotation or no finite covariance). `R_wc_cov`: `visual_R_wc_covariance(visual)` when the caller
-        has it already."""
+        has it already; `fused_trace_rad2`: the trace of the covariance the frame was fused with (for
+        `left`; None: the share before the frame times its per-frame part)."""
+        share = self.share
         if self._take_frame(t_s, visual):
             R_wc_cov = visual_R_wc_covariance(visual) if R_wc_cov is None else R_wc_cov
             steady = visual_R_wc_steady(visual)
-            if steady is None:
+            if steady is None and not self.of_frame_part:
                 self.persistent_cov = (1.0 - self.share) * R_wc_cov
             elif self.of_frame_part:
-                self.persistent_cov = (1.0 - self.share) * (R_wc_cov - steady) + steady
+                steady = np.zeros((3, 3)) if steady is None else steady
+                frame_part = R_wc_cov - steady
+                self._persistent_parts = ((1.0 - self.share) * frame_part, steady)
+                if self.left is not None:
+                    fused = share * np.trace(frame_part) if fused_trace_rad2 is None else fused_trace_rad2
+                    self.left.observe(visual, frame_part, float(fused), self.share)
+                self.persistent_cov = self.left_fraction * self._persistent_parts[0] + steady
             else:
                 persistent = (1.0 - self.share) * R_wc_cov
                 self.persistent_cov = persistent + steady - steady_within(persistent, steady)
+
+    @property
+    def left_fraction(self) -> float:
+        """The estimate's share of the persistent per-frame part (`persistent_error_left.py`; 1 without `left`)."""
+        return 1.0 if self.left is None else self.left.fraction
+
+    def settle(self, P_rad2: np.ndarray) -> np.ndarray:
+        """`persistent_cov` once the frame `take` took is fused and the estimate's marginal is `P_rad2`
+        (rad^2): its persistent per-frame part scaled by what the estimate still carries (`left`)."""
+        if self.left is not None:
+            self.left.settle(P_rad2)
+            frame_part, steady = self._persistent_parts
+            self.persistent_cov = self.left.fraction * frame_part + steady
+        return self.persistent_cov
 
     def _take_frame(self, t_s: float, visual: VisualRotation | None) -> bool:
         """`update`'s work; whether `visual` is a rotation with a finite covariance."""
         if visual is None:
             self._history.clear()
+            if self.left is not None:
+                self.left.restart()
             return False
         if not np.all(np.isfinite(visual.cov)):  # not a covariance: the frame says nothing here
             return False
