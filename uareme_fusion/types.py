@@ -209,7 +209,8 @@ class Status(enum.IntFlag):
     VISUAL_JUMP = enum.auto()
     """The frame's own evidence overrode the prior its solve started from (`VisualRotation.jump_deg`)."""
     VISUAL_NO_EVIDENCE = enum.auto()
-    """The frame had no usable evidence (black, blank, blurred): its visual covariance is the cap
+    """The frame had no usable evidence (black, blank, blurred, or segments that fit no better than
+    chance): its visual covariance is the cap
     (`VisualRotation.reason` says why)."""
     VISUAL_IGNORED = enum.auto()
     """The frame's visual rotation disagreed with the filter's prediction beyond what both

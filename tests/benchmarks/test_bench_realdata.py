@@ -114,3 +114,27 @@ def test_accelerometer_rows_pair_the_tilt_with_and_without():
     assert [r["verdict"] for r in rows] == ["", "ok", "", "", ""]
     assert rows[1]["measured"] == "2.06 / 3.61 / 2.50" and rows[1]["paired_95"] == "-1.45 (-1.80 .. -1.10)"
     assert rows[0]["versus"] == "tilt after the alignment" and rows[4]["measured"] == "n/a: --no-accel"
+
+
+def test_a_cue_set_that_claims_no_information_has_its_nees_printed_not_judged():
+    """Real TUM and EuRoC, lines alone: the segments fit no better than chance on every frame, the covariance
+    is the cap (57 deg per axis) and the NEES below 1 is what it should be: printed, not judged; a backend's
+    ARE is still judged against `single`'s. The same figures with informative frames are judged."""
+    from uareme_fusion.benchmarks.realdata import figure_rows
+
+    interval = {"mean": -14.4, "low": -18.9, "high": -10.7, "frames": 207}
+    separation = {"low_std_median": 22.0, "high_std_median": 21.5, "ratio": 1.02, "oracle_ratio": 0.61}
+
+    def fig(no_information: float) -> dict:
+        single = {"are_mean_deg": 23.43, "nees_mean": 0.28, "frames": 207, "nees_kind": "aligned",
+                  "no_information_fraction": no_information, "std_separation": separation}
+        smoother = {"are_mean_deg": 8.98, "nees_mean": 0.06, "frames": 207, "nees_kind": "aligned",
+                    "are_vs_single_deg": interval}
+        return {"cue_sets": {"RGB lines": {"single": single, "smoother": smoother}}}
+
+    rows = figure_rows("TUM fr1 rpy eval", fig(1.0))
+    assert [r["verdict"] for r in rows] == ["", "ok", ""]
+    assert "not judged: 100 % of the frames claim no information" in rows[0]["goal"]
+    assert rows[1]["goal"].startswith("ARE no worse than single") and rows[1]["paired_95"]
+    assert rows[2]["goal"].startswith("not judged")
+    assert [r["verdict"] for r in figure_rows("TUM fr1 rpy eval", fig(0.5))] == ["FAIL", "FAIL", "FAIL"]

@@ -89,6 +89,24 @@ def test_degenerate_and_cluttered_views_report_large_covariance(per_axis, clutte
         assert nees < 30.0 or err < 3.0  # never confidently wrong
 
 
+def test_segments_that_fit_no_better_than_chance_give_the_cap_and_say_why():
+    """Clutter alone (80 random segments): the clutter discount leaves the lines no information, so the
+    covariance is the cap on every axis and the frame says why (issue 29: a frame without usable evidence
+    says why); a Manhattan view keeps its information and gives no reason."""
+    K = assumed_K(H, W, 70.0)
+    rng = np.random.default_rng(3)
+    clutter = manhattan_segments(exp_so3([0.3, 0.2, 0.1]), K, W, H, per_axis=(0, 0, 0), clutter=80, rng=rng)
+    visual = JointSolver().solve(None, segment_moments(clutter, K))
+    cap = JointSolver().config.max_variance_rad2
+    assert np.allclose(np.linalg.eigvalsh(visual.cov), cap)
+    assert visual.reason.startswith("no information: the segments fit a Manhattan frame no better than chance")
+    lines = visual.cues["lines"]
+    assert lines["share"] == 0.0 and lines["inlier_fraction"] < lines["chance_inlier_fraction"]
+    room = manhattan_segments(exp_so3([0.3, 0.2, 0.1]), K, W, H, noise_px=1.0, rng=rng)
+    visual = JointSolver().solve(None, segment_moments(room, K))
+    assert visual.reason == "" and np.linalg.eigvalsh(visual.cov).max() < 0.01 * cap
+
+
 @pytest.mark.parametrize("hfov_deg", [45.0, 75.0, 90.0])
 def test_focal_length_from_segments_along_three_axes(hfov_deg):
     K = assumed_K(H, W, hfov_deg)

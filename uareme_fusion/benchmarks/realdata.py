@@ -199,7 +199,17 @@ def backend_errors(visual, info, normals: str, mekf: dict | None = None, smoothe
         err["nees_kind"] = NEES_YAW if gravity else NEES_ALIGNED
         err["std_deg"] = total_std_deg(np.array([e.cov for e in run.estimates]))
         out[name] = err
+    out["single"]["no_information"] = np.array([claims_no_information(v) for v in visual.visuals])
     return out
+
+
+def claims_no_information(visual) -> bool:
+    """Whether a frame's visual rotation says it knows nothing: none, a reason given
+    (`VisualRotation.reason`), or the solver's cap on every axis."""
+    from ..solver.manhattan import SolverConfig
+
+    return visual is None or bool(visual.reason) or bool(
+        np.linalg.eigvalsh(visual.cov)[0] >= 0.99 * SolverConfig().max_variance_rad2)
 
 
 def eval_run(spec: str, cfg, progress=None, gt: Path | None = None) -> dict:
@@ -256,6 +266,8 @@ def cue_backend_figures(errors_by_cue: dict, gravity_aligned: bool) -> dict:
             if name != "single":
                 row["are_vs_single_deg"] = paired_difference(err["are_deg"], errs["single"]["are_deg"])
             rows[name] = row
+        if "no_information" in errs["single"]:
+            rows["single"]["no_information_fraction"] = _mean(errs["single"]["no_information"][errs["single"]["initialised"]])
         rows["single"]["std_separation"] = std_separation(errs["single"]["std_deg"], errs["single"]["are_deg"])
         rows["single"]["std_separation"]["oracle_ratio"] = std_separation(  # the best any std can do
             errs["single"]["are_deg"], errs["single"]["are_deg"])["ratio"]

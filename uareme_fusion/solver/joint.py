@@ -281,6 +281,7 @@ class JointSolver:
         for c in cues:
             summary[c.name] = {"share": float(np.trace(c.info)) / total if total > 0 else 0.0,
                                "cost": float(c.cost(R_cm)), **c.summary()}
+        reasons = [r for r in (c.no_information_reason() for c in cues) if r] if total <= 0 else []
         main = cues[0]
         cost = float(main.cost(R_cm))
         normals = next((c for c in cues if isinstance(c, _NormalCue)), None)
@@ -289,7 +290,7 @@ class JointSolver:
             n_valid=normals.moments.n_valid if normals else 0,
             n_invalid=normals.moments.n_invalid if normals else 0,
             quality=float(np.clip(1.0 - cost / main.random_cost, 0.0, 1.0)), converged=converged, t_s=t_s,
-            timing_ms=timing_ms, cues=summary)
+            timing_ms=timing_ms, cues=summary, reason="no information: " + "; ".join(reasons) if reasons else "")
 
 
 def _labelled(cues: list[_Cue], R_cm: np.ndarray) -> np.ndarray:

@@ -112,6 +112,10 @@ class _Cue:
     def summary(self) -> dict:
         raise NotImplementedError
 
+    def no_information_reason(self) -> str:
+        """Why the cue gives no information at the solution ("" when it gives some, or cannot tell)."""
+        return ""
+
     def robust_cost(self, R, coarse: bool = False):
         """E_c~ of the module docstring, for choosing among minima (one rotation or a stack); `coarse`:
         as seen at the spacing of the global candidates."""
@@ -165,6 +169,8 @@ class _LineCue(_Cue):
                          config.min_cost)
         self.config = config
         self.beside_normals = beside_normals
+        self.fit_fractions: tuple[float, float] | None = None
+        """(f, f0) of the last discount: the inlier fraction at the rotation, and what chance reaches."""
         self.min_robust_segments = (config.min_robust_segments_beside_normals if beside_normals
                                     else config.min_robust_segments)
         self.base = moments if base is None else base
@@ -198,8 +204,20 @@ class _LineCue(_Cue):
         f0 = self.config.random_inlier_fraction
         n = max(min(self.base.n_effective, self.config.independent_segments), 1.0)
         f0 = min(f0 + self.config.chance_sigmas * np.sqrt(f0 * (1.0 - f0) / n), 0.99)
-        q = float(np.clip((inlier_fraction(self.base, R) - f0) / (1.0 - f0), 0.0, 1.0))
+        f = inlier_fraction(self.base, R)
+        self.fit_fractions = (f, f0)
+        q = float(np.clip((f - f0) / (1.0 - f0), 0.0, 1.0))
         self.discount = q**self.config.clutter_power
 
     def summary(self) -> dict:
-        return {"segments": self.base.n_segments, "effective_segments": self.base.n_effective}
+        out = {"segments": self.base.n_segments, "effective_segments": self.base.n_effective}
+        if self.fit_fractions is not None:
+            out["inlier_fraction"], out["chance_inlier_fraction"] = self.fit_fractions
+        return out
+
+    def no_information_reason(self) -> str:
+        if self.discount > 0 or self.fit_fractions is None:
+            return ""
+        f, f0 = self.fit_fractions
+        return (f"the segments fit a Manhattan frame no better than chance ({100 * f:.0f} % of them on an axis, "
+                f"chance reaches {100 * f0:.0f} %)")
