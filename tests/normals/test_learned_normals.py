@@ -90,7 +90,7 @@ def test_output_shapes_for_any_input_size(shipped, height, width):
     assert nm.kappa.shape == (height, width) and nm.kappa.dtype == np.float32
     np.testing.assert_allclose(np.linalg.norm(nm.normals, axis=-1), 1.0, atol=1e-4)
     assert nm.kappa.min() >= 0.0 and nm.kappa.max() <= 75.0
-    assert nm.independent_regions == LearnedNormalsConfig().independent_regions
+    assert nm.independent_regions == shipped.texture_regions(rgb)
 
 
 def test_map_at_network_size_solves_to_the_same_rotation(shipped, rendered_views):
@@ -115,6 +115,34 @@ def test_kappa_is_capped_and_non_negative(rendered_views):
     nm = est.estimate(rendered_views[0][0])
     assert nm.kappa.max() == pytest.approx(2.0)  # rendered walls are confident well beyond 2
     assert nm.kappa.min() >= 0.0
+
+
+def test_the_maps_independent_errors_grow_with_the_images_textured_area(shipped, rendered_views):
+    """`LearnedNormalsConfig.texture_power`: the map's `independent_regions` is the fitted count times the
+    textured fraction over `texture_reference`; half the image made blank halves it; a flat-shaded render
+    (t about 0.02) keeps `MIN_TEXTURE_FACTOR` of it (its shading carries normals)."""
+    from uareme_fusion.normals.learned import MIN_TEXTURE_FACTOR
+    from uareme_fusion.solver.evidence import textured_fraction
+
+    cfg = shipped.config
+    rng = np.random.default_rng(4)
+    textured = cv2.GaussianBlur(rng.integers(0, 256, (240, 320, 3), dtype=np.uint8), (0, 0), 1.0)
+    t = textured_fraction(textured)
+    assert 0.2 < t < 1.0
+    assert shipped.estimate(textured).independent_regions == pytest.approx(
+        cfg.independent_regions * t / cfg.texture_reference)
+    half = textured.copy()
+    half[:, :160] = 128
+    assert textured_fraction(half) == pytest.approx(t / 2, rel=0.1)
+    assert shipped.texture_regions(half) == pytest.approx(
+        shipped.texture_regions(textured) * textured_fraction(half) / t, rel=1e-12)
+    render = rendered_views[0][0]
+    assert textured_fraction(render) < 0.1
+    assert shipped.estimate(render).independent_regions == pytest.approx(cfg.independent_regions * MIN_TEXTURE_FACTOR)
+    off = LearnedNormals(config=LearnedNormalsConfig(texture_power=0.0))
+    assert off.estimate(textured).independent_regions == cfg.independent_regions
+    with pytest.raises(ConfigError, match="texture_power"):
+        LearnedNormalsConfig(texture_power=-1.0)
 
 
 def test_estimate_frame_keeps_time_and_names_missing_rgb(shipped, rendered_views):
