@@ -51,7 +51,8 @@ def _row(seq: str, figure: str, measured: str, goal: str = "", versus: str = "",
 def figure_rows(name: str, fig: dict) -> list[dict]:
     """The printed rows of one sequence's figures."""
     rows, cues = [], fig["cue_sets"]
-    depth_are = cues.get("depth", {}).get("single", {}).get("are_mean_deg")
+    depth = cues.get("depth", {})
+    depth_are = depth.get("single", {}).get("are_mean_deg")
     tum = name.startswith("TUM")
     for cue, backends in cues.items():
         single = backends["single"]
@@ -74,6 +75,10 @@ def figure_rows(name: str, fig: dict) -> list[dict]:
             if backend == "single" and tum and cue == "depth":
                 goal = "ARE <= 4, NEES <= 6; NEES >= 1"
                 ok = row["are_mean_deg"] <= 4.0 and ok
+            if backend != "single" and tum and cue == JOINT and backend in depth:
+                limit = min(8.0, 1.5 * depth[backend]["are_mean_deg"])  # the same backend on depth normals
+                goal = f"ARE <= 8 and <= 1.5x depth's {backend} ({limit:.2f}); " + goal
+                ok = ok and row["are_mean_deg"] <= limit
             if backend != "single":
                 goal = f"ARE no worse than single ({single['are_mean_deg']:.2f}); " + goal
                 interval = _interval(row["are_vs_single_deg"])
