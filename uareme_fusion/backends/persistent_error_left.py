@@ -24,6 +24,9 @@ c the frames' per-frame covariance traces (mean of the two), drift the chain's v
 rotation's per-axis variance); averaged over the stream (ratio of exponential averages over `frames`). Where the
 image rotations drift more than the frames err, D reads more decorrelation than there is (real ICSL
 corridor_more at lag 10: 1.32 against 0.73 from the truth); the drift term takes their stated variance out.
+Each sample is whitened by the two frames' per-frame covariances (|D|^2 against their traces read next to no
+decorrelation on TUM: phi 0.99, NEES 0.84). Measured (REAL, the paper smoother, `tools/visual_only_replay.py`):
+TUM fr1 rpy eval NEES 0.78 -> 1.11 (learned normals), 1.49 -> 1.59 (depth); every other sequence within 0.1.
 """
 
 from __future__ import annotations

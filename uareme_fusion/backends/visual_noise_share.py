@@ -104,9 +104,7 @@ class VisualNoiseShare:
         if self._take_frame(t_s, visual):
             R_wc_cov = visual_R_wc_covariance(visual) if R_wc_cov is None else R_wc_cov
             steady = visual_R_wc_steady(visual)
-            if steady is None and not self.of_frame_part:
-                self.persistent_cov = (1.0 - self.share) * R_wc_cov
-            elif self.of_frame_part:
+            if self.of_frame_part:
                 steady = np.zeros((3, 3)) if steady is None else steady
                 frame_part = R_wc_cov - steady
                 self._persistent_parts = ((1.0 - self.share) * frame_part, steady)
@@ -114,6 +112,8 @@ class VisualNoiseShare:
                     fused = share * np.trace(frame_part) if fused_trace_rad2 is None else fused_trace_rad2
                     self.left.observe(visual, frame_part, float(fused), self.share)
                 self.persistent_cov = self.left_fraction * self._persistent_parts[0] + steady
+            elif steady is None:
+                self.persistent_cov = (1.0 - self.share) * R_wc_cov
             else:
                 persistent = (1.0 - self.share) * R_wc_cov
                 self.persistent_cov = persistent + steady - steady_within(persistent, steady)
