@@ -111,6 +111,9 @@ class NormalMap:
     """For a network's normals: the solver's residual cost E (its normalised quartic) up to which
     `independent_regions` holds; above it, a map explained that badly is wrong by whole surfaces, and its
     independent errors shrink as regions_cost / E (`manhattan.surface_regions`). None: they do not."""
+    textured_fraction: float | None = None
+    """The image's textured fraction (`solver.evidence.textured_fraction`, at its default width) where the
+    source measured it (learned normals), for the evidence check to reuse; None: not measured."""
 
 
 @dataclass(frozen=True)

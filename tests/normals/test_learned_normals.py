@@ -129,8 +129,9 @@ def test_the_maps_independent_errors_grow_with_the_images_textured_area(shipped,
     textured = cv2.GaussianBlur(rng.integers(0, 256, (240, 320, 3), dtype=np.uint8), (0, 0), 1.0)
     t = textured_fraction(textured)
     assert 0.2 < t < 1.0
-    assert shipped.estimate(textured).independent_regions == pytest.approx(
-        cfg.independent_regions * t / cfg.texture_reference)
+    nm = shipped.estimate(textured)
+    assert nm.independent_regions == pytest.approx(cfg.independent_regions * t / cfg.texture_reference)
+    assert nm.textured_fraction == t  # carried for the evidence check (`solver.evidence.no_evidence_reason`)
     half = textured.copy()
     half[:, :160] = 128
     assert textured_fraction(half) == pytest.approx(t / 2, rel=0.1)

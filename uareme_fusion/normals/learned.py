@@ -313,15 +313,19 @@ class LearnedNormals:
         width_px) instead of (H, W) when `config.at_input_size` is False."""
         rgb = _check_rgb(rgb_uint8, source)
         out = self.infer(rgb)
-        return self.to_normal_map(out, rgb.shape[:2] if self.config.at_input_size else out.shape[1:],
-                                  self.texture_regions(rgb))
+        fraction = textured_fraction(rgb)
+        return dataclasses.replace(
+            self.to_normal_map(out, rgb.shape[:2] if self.config.at_input_size else out.shape[1:],
+                               self.texture_regions(rgb, fraction)), textured_fraction=fraction)
 
-    def texture_regions(self, rgb: np.ndarray) -> float:
-        """`independent_regions` scaled by the image's texture (`LearnedNormalsConfig.texture_power`)."""
+    def texture_regions(self, rgb: np.ndarray, fraction: float | None = None) -> float:
+        """`independent_regions` scaled by the image's texture (`LearnedNormalsConfig.texture_power`;
+        `fraction`: its `textured_fraction` when already measured)."""
         cfg = self.config
         if cfg.texture_power == 0:
             return cfg.independent_regions
-        factor = max(textured_fraction(rgb) / cfg.texture_reference, MIN_TEXTURE_FACTOR) ** cfg.texture_power
+        fraction = textured_fraction(rgb) if fraction is None else fraction
+        factor = max(fraction / cfg.texture_reference, MIN_TEXTURE_FACTOR) ** cfg.texture_power
         return max(cfg.independent_regions * factor, 1.0)
 
     def infer(self, rgb: np.ndarray) -> np.ndarray:

@@ -126,7 +126,8 @@ class CueSolver:
         if visual is None:
             return None
         visual = self.offset.update(visual)
-        reason = no_evidence_reason(frame.rgb) if self.image_normals and normal_map is not None else ""
+        reason = (no_evidence_reason(frame.rgb, normal_map.textured_fraction)
+                  if self.image_normals and normal_map is not None else "")
         visual = without_evidence(visual, reason, self.solver.config.max_variance_rad2) if reason else visual
         return self._with_motion(frame, visual) if image_motion else visual
 

@@ -46,11 +46,12 @@ def textured_fraction(image: np.ndarray, width_px: int = EVIDENCE_WIDTH_PX) -> f
     return float(np.count_nonzero(gx * gx + gy * gy > (8.0 * MIN_GRADIENT_DN) ** 2) / gx.size)
 
 
-def no_evidence_reason(image: np.ndarray | None) -> str:
-    """Why `image` holds no evidence for image-based cues ("" when it does, or when there is no image)."""
+def no_evidence_reason(image: np.ndarray | None, fraction: float | None = None) -> str:
+    """Why `image` holds no evidence for image-based cues ("" when it does, or when there is no image);
+    `fraction`: its `textured_fraction` when already measured (`NormalMap.textured_fraction`)."""
     if image is None:
         return ""
-    fraction = textured_fraction(image)
+    fraction = textured_fraction(image) if fraction is None else fraction
     if fraction < NO_EVIDENCE_TEXTURED_FRACTION:
         return (f"no image evidence: {100 * fraction:.1f} % of the image is textured, under "
                 f"{100 * NO_EVIDENCE_TEXTURED_FRACTION:.0f} % (black, blank or blurred)")
