@@ -38,26 +38,17 @@ def single_errors(visual, info, normals: str) -> tuple[np.ndarray, np.ndarray]:
     return R, e
 
 
-def chained_image_rotation(visuals, start: int, stop: int) -> np.ndarray | None:
-    """R_wc(stop) relative to R_wc(start) from the image rotations alone, None where one is missing."""
-    chain = np.eye(3)
-    for v in visuals[start + 1:stop + 1]:
-        if v is None or v.R_cp is None:
-            return None
-        chain = chain @ v.R_cp.T  # R_wc_k = R_wc_k-1 R_cp^T
-    return chain
-
-
 def decorrelation(visual, R: np.ndarray, e: np.ndarray, lag: int) -> tuple[float, float]:
     """(1 - rho(lag) from the truth, the same read from the image rotations)."""
     from uareme_fusion.rotations import log_so3
+    from uareme_fusion.types import chained_image_rotation
 
     variance = np.nanmean(np.sum(e**2, axis=1))
     truth, image = [], []
     for k in range(lag, len(R)):
         if np.all(np.isfinite(e[k])) and np.all(np.isfinite(e[k - lag])):
             truth.append(np.sum((e[k] - e[k - lag]) ** 2))
-        chain = chained_image_rotation(visual.visuals, k - lag, k)
+        chain = chained_image_rotation(None if v is None else v.R_cp for v in visual.visuals[k - lag + 1:k + 1])
         if chain is not None:
             image.append(np.sum(log_so3(chain.T @ R[k - lag].T @ R[k]) ** 2))
     read = np.mean(image) / (2 * variance) if image else float("nan")

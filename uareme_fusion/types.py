@@ -232,6 +232,18 @@ def visual_R_wc_covariance(visual: VisualRotation) -> np.ndarray:
     return 0.5 * (cov + cov.T)
 
 
+def chained_image_rotation(R_cps) -> np.ndarray | None:
+    """The camera's rotation over consecutive frames from their image rotations (`VisualRotation.R_cp` of
+    each frame after the first, in order): `R_wc,first^T R_wc,last = prod R_cp^T` (3, 3); None where one
+    is missing."""
+    chain = np.eye(3)
+    for R_cp in R_cps:
+        if R_cp is None:
+            return None
+        chain = chain @ R_cp.T  # R_wc,k = R_wc,k-1 R_cp^T
+    return chain
+
+
 def visual_R_wc_steady(visual: VisualRotation) -> np.ndarray | None:
     """`visual.cov_steady` as one of `R_wc`'s right perturbation (as `visual_R_wc_covariance`), None without."""
     if visual.cov_steady is None:

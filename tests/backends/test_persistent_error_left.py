@@ -112,3 +112,15 @@ def test_the_smoother_reports_what_its_window_leaves_of_a_decorrelating_error():
     assert are < 0.9 * single_are
     assert whole_nees < 0.8 * single_nees
     assert 0.8 * single_nees < nees < 2.0 * single_nees
+
+
+def test_image_rotations_chain_into_the_cameras_rotation_over_the_frames():
+    """`types.chained_image_rotation`: R_wc,0^T R_wc,L from the frames' R_cp (R_wc,k = R_wc,k-1 R_cp^T);
+    None where one is missing."""
+    from uareme_fusion.types import chained_image_rotation
+
+    visuals, R_wc = _stream(0.0, 6, seed=2, image_std_rad=0.0)
+    chain = chained_image_rotation(v.R_cp for v in visuals[1:])
+    np.testing.assert_allclose(chain, R_wc[0].T @ R_wc[-1], atol=1e-12)
+    assert chained_image_rotation([visuals[1].R_cp, None]) is None
+    np.testing.assert_array_equal(chained_image_rotation([]), np.eye(3))

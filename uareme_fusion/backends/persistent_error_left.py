@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..rotations import log_so3
-from ..types import VisualRotation
+from ..types import VisualRotation, chained_image_rotation
 
 MAX_SAMPLE = 10.0
 """Cap on one sample's |D|^2 - drift as a multiple of its expected 2 c: a relabelled or wrong frame counts as
@@ -86,11 +86,9 @@ class PersistentErrorLeft:
     def _sample(self, share: float) -> None:
         """`phi` with the sample of the last `lag_frames` + 1 frames (none where an image rotation is missing)."""
         (R0, _, _, C0), *rest = self._history
-        if any(R_cp is None or not np.isfinite(var) for _, R_cp, var, _ in rest):
+        chain = chained_image_rotation(R_cp for _, R_cp, _, _ in rest)  # R_mc,0^T R_mc,L up to the errors
+        if chain is None or not all(np.isfinite(var) for _, _, var, _ in rest):
             return
-        chain = np.eye(3)
-        for _, R_cp, _, _ in rest:
-            chain = chain @ R_cp.T  # R_mc,k = R_mc,k-1 R_cp^T up to the error
         R1, C1 = rest[-1][0], rest[-1][3]
         drift = sum(var for _, _, var, _ in rest) * np.eye(3)
         M = chain.T @ C0 @ chain + C1 + drift  # D's covariance were the errors independent
