@@ -90,18 +90,32 @@ class PersistentErrorLeft:
         if chain is None or not all(np.isfinite(var) for _, _, var, _ in rest):
             return
         R1, C1 = rest[-1][0], rest[-1][3]
-        drift = sum(var for _, _, var, _ in rest) * np.eye(3)
-        M = chain.T @ C0 @ chain + C1 + drift  # D's covariance were the errors independent
-        try:
-            M_inv = np.linalg.inv(M)
-        except np.linalg.LinAlgError:
+        change = whitened_change(R0, C0, R1, C1, chain, sum(var for _, _, var, _ in rest))
+        if change is None:
             return
-        D = log_so3(chain.T @ R0.T @ R1)
-        sample = min(max(float(D @ M_inv @ D) - float(np.trace(M_inv @ drift)), 0.0), MAX_SAMPLE * 3.0)
+        sample, expected = change
         a = min(1.0 / self.frames, 1.0)
-        self._num = (1.0 - a) * self._num + a * sample
-        self._den = (1.0 - a) * self._den + a * (3.0 - float(np.trace(M_inv @ drift)))
+        self._num = (1.0 - a) * self._num + a * min(sample, MAX_SAMPLE * expected)
+        self._den = (1.0 - a) * self._den + a * expected
         rho_lag = 1.0 - self._num / self._den if self._den > 0 else 1.0  # (1 - lam) phi^L
         if share >= 1.0:
             return
         self.phi = float(np.clip(max(rho_lag, 0.0) / (1.0 - share), 0.0, 1.0) ** (1.0 / self.lag_frames))
+
+
+def whitened_change(R_mc0: np.ndarray, C0: np.ndarray, R_mc1: np.ndarray, C1: np.ndarray, chain: np.ndarray,
+                    drift_rad2: float) -> tuple[float, float] | None:
+    """How much two frames' errors differ, read against the image rotations between them: (D^T M^-1 D less the
+    chain's own share, its expectation were the errors independent), D = Log(chain^T R_mc0^T R_mc1) (rad),
+    M = chain^T C0 chain + C1 + drift I its covariance then; `C0`, `C1` the frames' per-frame covariances as ones
+    of `R_wc` (rad^2), `chain` the chained image rotations (`types.chained_image_rotation`), `drift_rad2` their
+    variance per axis. The ratio is 1 - rho for the errors' correlation rho (module docstring). None when M is
+    singular."""
+    drift = drift_rad2 * np.eye(3)
+    try:
+        M_inv = np.linalg.inv(chain.T @ C0 @ chain + C1 + drift)
+    except np.linalg.LinAlgError:
+        return None
+    D = log_so3(chain.T @ R_mc0.T @ R_mc1)
+    own = float(np.trace(M_inv @ drift))
+    return max(float(D @ M_inv @ D) - own, 0.0), max(3.0 - own, 1e-9)
