@@ -18,14 +18,15 @@ has the variance `fraction` a_k of Var p, with c_k = Cov(eps_k, p_k) / Var p:
 `phi` comes from the frames' rotations against the image rotations between them (`VisualRotation.R_cp`)
 over `lag_frames` frames, which cancel the motion but not the error:
 
-    D_k = Log((R_cp chain k-L..k)^T R_mc,k-L^T R_mc,k),    E |D|^2 = 2 c (1 - (1 - lam) phi^L) + drift,
+    D_k = Log((R_cp chain k-L..k)^T R_mc,k-L^T R_mc,k),    M = C_k-L + C_k + drift I,
+    E[D^T M^-1 D] - tr(M^-1 drift) = (1 - (1 - lam) phi^L) (3 - tr(M^-1 drift))        (`whitened_change`)
 
-c the frames' per-frame covariance traces (mean of the two), drift the chain's variance (3 x each image
-rotation's per-axis variance); averaged over the stream (ratio of exponential averages over `frames`). Where the
-image rotations drift more than the frames err, D reads more decorrelation than there is (real ICSL
-corridor_more at lag 10: 1.32 against 0.73 from the truth); the drift term takes their stated variance out.
-Each sample is whitened by the two frames' per-frame covariances (|D|^2 against their traces read next to no
-decorrelation on TUM: phi 0.99, NEES 0.84). Measured (REAL, the paper smoother, `tools/visual_only_replay.py`):
+C the frames' per-frame covariances, drift the chain's variance per axis (the sum of the image rotations'
+stated variances); averaged over the stream (ratio of exponential averages over `frames`). Where the image
+rotations drift more than the frames err, D reads more decorrelation than there is (real ICSL corridor_more at
+lag 10: 1.32 against 0.73 from the truth); the drift term takes their stated variance out. Whitened by M, not
+normalised by traces: |D|^2 against the covariances' traces read next to no decorrelation on TUM (phi 0.99,
+NEES 0.84). Measured (REAL, the paper smoother, `tools/visual_only_replay.py`):
 TUM fr1 rpy eval NEES 0.78 -> 1.11 (learned normals), 1.49 -> 1.59 (depth); every other sequence within 0.1.
 """
 
@@ -37,8 +38,8 @@ from ..rotations import log_so3
 from ..types import VisualRotation, chained_image_rotation
 
 MAX_SAMPLE = 10.0
-"""Cap on one sample's |D|^2 - drift as a multiple of its expected 2 c: a relabelled or wrong frame counts as
-a tenfold noisy one, not without bound (as `visual_noise_share.MAX_SAMPLE`)."""
+"""Cap on one sample as a multiple of its expectation were the errors independent: a relabelled or wrong frame
+counts as a tenfold noisy one, not without bound (as `visual_noise_share.MAX_SAMPLE`)."""
 
 
 class PersistentErrorLeft:
@@ -52,7 +53,8 @@ class PersistentErrorLeft:
         self.fraction = 1.0
         """a_k: the estimate's share of the persistent error's variance (1: all of it)."""
         self._c = 1.0
-        self._history: list[tuple[np.ndarray, np.ndarray | None, float, float]] = []  # (R_mc, R_cp, var, tr)
+        self._history: list[tuple[np.ndarray, np.ndarray | None, float, np.ndarray]] = []
+        """(R_mc, R_cp, its variance per axis rad^2, the per-frame covariance) of the last `lag_frames` + 1 frames."""
         self._num = self._den = 0.0
         self._fused_trace = float("nan")  # tr R of the frame not yet settled (NaN: none)
 

@@ -159,7 +159,9 @@ class VisualNoiseShare:
         return True
 
     def _update_share(self, t_s: float, visual: VisualRotation) -> None:
-        """`share` with the frame (a finite covariance) as the third of the last three."""
+        """`share` with the frame (a finite covariance) as the newest of the last three: its sample read against
+        the image rotation from the previous frame where the smoother's share has one, else from second
+        differences."""
         cov = visual.cov_frame() if self.of_frame_part else visual.cov
         self._history = (self._history + [(t_s, visual.R_cm.T, float(np.trace(cov)), visual)])[-3:]
         sample = self._image_rotation_sample() if self.of_frame_part else None
@@ -170,8 +172,8 @@ class VisualNoiseShare:
         self._average(min(sample, MAX_SAMPLE))
 
     def _image_rotation_sample(self) -> float | None:
-        """|D|^2 against its expectation were the errors independent, D the last two frames' rotation against
-        the image rotation between them (which cancels any motion; `persistent_error_left.py`'s whitened
+        """D^T M^-1 D against its expectation were the errors independent, D the last two frames' rotation
+        against the image rotation between them (which cancels any motion; `persistent_error_left.py`'s whitened
         sample at lag 1); None without an image rotation."""
         if len(self._history) < 2 or self._history[-1][3].R_cp is None:
             return None
