@@ -100,6 +100,7 @@ def test_segments_that_fit_no_better_than_chance_give_the_cap_and_say_why():
     cap = JointSolver().config.max_variance_rad2
     assert np.allclose(np.linalg.eigvalsh(visual.cov), cap)
     assert visual.reason.startswith("no information: the segments fit a Manhattan frame no better than chance")
+    assert visual.quality == 0.0  # as a frame without image evidence (`solver.evidence.without_evidence`)
     lines = visual.cues["lines"]
     assert lines["share"] == 0.0 and lines["inlier_fraction"] < lines["chance_inlier_fraction"]
     room = manhattan_segments(exp_so3([0.3, 0.2, 0.1]), K, W, H, noise_px=1.0, rng=rng)

@@ -289,7 +289,8 @@ class JointSolver:
             R_cm=R_cm, cov=cov, cost=cost, iterations=iterations,
             n_valid=normals.moments.n_valid if normals else 0,
             n_invalid=normals.moments.n_invalid if normals else 0,
-            quality=float(np.clip(1.0 - cost / main.random_cost, 0.0, 1.0)), converged=converged, t_s=t_s,
+            quality=0.0 if reasons else float(np.clip(1.0 - cost / main.random_cost, 0.0, 1.0)),  # as `evidence`
+            converged=converged, t_s=t_s,
             timing_ms=timing_ms, cues=summary, reason="no information: " + "; ".join(reasons) if reasons else "")
 
 
