@@ -44,6 +44,7 @@ import numpy as np
 from ..errors import InputError
 from ..rotations import log_so3, nearest_symmetric
 from ..types import NormalMap, VisualRotation
+from .evidence import without_evidence
 from .joint_cues import LineCueConfig, _Cue, _LineCue, _NormalCue
 from .lines import LineMoments
 from .manhattan import R_CM_UPRIGHT, ManhattanSolver, SolverConfig, _cell_candidates, _check_rotation
@@ -94,6 +95,9 @@ class JointSolver:
                                                                            "optimise": 1e3 * (t2 - t1)})
         for c, offset in zip(cues, disagreement[2] if disagreement is not None else ()):
             visual.cues[c.name]["own_offset_rad"] = [float(x) for x in offset]  # for `cue_offset.CueOffset`
+        reasons = [r for r in (c.no_information_reason() for c in cues) if r]
+        if reasons and not any(np.trace(c.info) > 0 for c in cues):  # the cap and why, as a frame without evidence
+            visual = without_evidence(visual, "no information: " + "; ".join(reasons), self.config.max_variance_rad2)
         return dataclasses.replace(visual, jump_deg=float(np.degrees(jump_rad)))
 
     def rotation(self, normal_map: NormalMap | None, lines: LineMoments | None, R_init=None,
@@ -281,7 +285,6 @@ class JointSolver:
         for c in cues:
             summary[c.name] = {"share": float(np.trace(c.info)) / total if total > 0 else 0.0,
                                "cost": float(c.cost(R_cm)), **c.summary()}
-        reasons = [r for r in (c.no_information_reason() for c in cues) if r] if total <= 0 else []
         main = cues[0]
         cost = float(main.cost(R_cm))
         normals = next((c for c in cues if isinstance(c, _NormalCue)), None)
@@ -289,9 +292,8 @@ class JointSolver:
             R_cm=R_cm, cov=cov, cost=cost, iterations=iterations,
             n_valid=normals.moments.n_valid if normals else 0,
             n_invalid=normals.moments.n_invalid if normals else 0,
-            quality=0.0 if reasons else float(np.clip(1.0 - cost / main.random_cost, 0.0, 1.0)),  # as `evidence`
-            converged=converged, t_s=t_s,
-            timing_ms=timing_ms, cues=summary, reason="no information: " + "; ".join(reasons) if reasons else "")
+            quality=float(np.clip(1.0 - cost / main.random_cost, 0.0, 1.0)), converged=converged, t_s=t_s,
+            timing_ms=timing_ms, cues=summary)
 
 
 def _labelled(cues: list[_Cue], R_cm: np.ndarray) -> np.ndarray:
